@@ -1,0 +1,3 @@
+from opalflow.cli import main
+
+raise SystemExit(main())

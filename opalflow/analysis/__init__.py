@@ -1,0 +1,1 @@
+"""Analysis of structures and LAMMPS output."""

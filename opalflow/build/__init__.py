@@ -1,0 +1,1 @@
+"""Structure generators: packing, pores, coating, substrate, bonds."""

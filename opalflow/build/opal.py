@@ -1,0 +1,219 @@
+"""Inverse-opal bonded-particle structures: spec -> Structure (Dosta et al., section 2.1).
+
+Order of operations, as in the paper: dense random packing (periodic in x and y),
+substrate = bottom particle layers, pores cut (eq. 1) with the optional coating
+(eq. 2, windows kept open), bonds between all pairs within the cutoff.
+"""
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from opalflow.build import pores as pore_geometry
+from opalflow.build.bonds import bond_types_by_material, find_bonds
+from opalflow.build.packing import dense_random_packing
+from opalflow.materials import material
+from opalflow.spec import WorkflowSpec, sample_box_nm
+from opalflow.structure import Structure
+from opalflow.units import NM3_PER_UM3, density_from_nano, density_to_nano
+
+#: positions are rounded to this many decimals (nm) so data files round-trip exactly
+POSITION_DECIMALS = 6
+RANDOM_PORE_TOLERANCE = 0.005
+RANDOM_PORE_ATTEMPTS = 8
+
+
+def quantize(x: np.ndarray, box: np.ndarray, periodic: np.ndarray) -> np.ndarray:
+    """Round to POSITION_DECIMALS (k / 10^n is the double nearest the decimal text) and wrap."""
+    scale = 10.0**POSITION_DECIMALS
+    q = np.round(x * scale) / scale
+    for k in np.flatnonzero(periodic):
+        q[:, k] = np.where(q[:, k] >= box[k], q[:, k] - box[k], q[:, k])
+        q[:, k] = np.where(q[:, k] < 0, q[:, k] + box[k], q[:, k])
+        q[:, k] = np.round(q[:, k] * scale) / scale
+    return q
+
+
+def _random_pores(spec: WorkflowSpec, packing, substrate, box_xy, z0, height, progress):
+    """Place random pores, adjusting their number until the macro-porosity hits the target."""
+    p = spec.pores
+    R = p.diameter_nm / 2
+    r_part = np.mean(packing.diameters) / 2
+    radii = packing.diameters / 2
+    sample_volume = box_xy[0] * box_xy[1] * height
+    n_sample = int(np.count_nonzero(~substrate))
+    n = max(1, round(p.porosity * sample_volume / (4 / 3 * math.pi * (R + r_part) ** 3)))
+    tried: dict[int, tuple] = {}
+    for _ in range(RANDOM_PORE_ATTEMPTS):
+        rng = np.random.default_rng([p.seed, n])
+        centres = pore_geometry.random_centres(n, p.diameter_nm, box_xy, (z0 + R, z0 + height - R), rng)
+        keep, coated = pore_geometry.carve(packing.positions, radii, centres, R,
+                                           spec.coating.thickness_nm, box_xy, substrate)
+        porosity = 1 - np.count_nonzero(keep & ~substrate) / n_sample
+        tried[n] = (abs(porosity - p.porosity), centres, keep, coated)
+        if progress:
+            progress(f"random pores: {n} pores give porosity {porosity:.4f} (target {p.porosity:.4f})")
+        if abs(porosity - p.porosity) <= RANDOM_PORE_TOLERANCE:
+            break
+        step = (p.porosity - porosity) / (porosity / n)
+        nxt = n + (int(round(step)) or (1 if step > 0 else -1))
+        if nxt in tried or nxt < 1:
+            break
+        n = nxt
+    _, centres, keep, coated = min(tried.values(), key=lambda t: t[0])
+    return centres, keep, coated
+
+
+def build_opal(spec: WorkflowSpec, progress=None) -> tuple[Structure, dict]:
+    """Build the inverse-opal Structure of ``spec``; returns it and its statistics."""
+    timings = {}
+    d = spec.packing.diameter_nm
+    lx, ly, height = sample_box_nm(spec)
+    z0 = spec.substrate.layers * d
+    box = np.array([lx, ly, z0 + height])
+    periodic = np.array([spec.boundary.sides == "periodic"] * 2 + [False])
+    fcc = spec.pores.arrangement == "fcc"
+
+    t = time.perf_counter()
+    k = spec.packing
+    packing = dense_random_packing(
+        box, d, k.solid_fraction, std=k.diameter_std_nm, size_bins=k.size_bins, seed=k.seed,
+        tile_nm=k.tile_nm, max_overlap=k.max_overlap,
+        coprime_with=(2 * spec.pores.cells_x, 6 * spec.pores.cells_y) if fcc else (1, 1),
+        progress=(lambda s, w: progress(f"packing: FIRE step {s}, largest overlap {100 * w:.2f} % d"))
+        if progress else None)
+    timings["packing"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    substrate = packing.positions[:, 2] < z0
+    box_xy = box[:2]
+    centres = np.zeros((0, 3))
+    keep = np.ones(len(packing.positions), bool)
+    coated = np.zeros(len(packing.positions), bool)
+    if fcc:
+        centres = pore_geometry.fcc_centres(spec.pores.spacing_nm, spec.pores.diameter_nm,
+                                            spec.pores.layers, spec.pores.cells_x, spec.pores.cells_y, z0)
+        keep, coated = pore_geometry.carve(packing.positions, packing.diameters / 2, centres,
+                                           spec.pores.diameter_nm / 2, spec.coating.thickness_nm,
+                                           box_xy, substrate)
+    elif spec.pores.arrangement == "random":
+        centres, keep, coated = _random_pores(spec, packing, substrate, box_xy, z0, height, progress)
+    timings["pores"] = time.perf_counter() - t
+
+    positions = quantize(packing.positions[keep], box, periodic)
+    diameters = packing.diameters[keep]
+    substrate_k, coated_k = substrate[keep], coated[keep]
+    type_names = [spec.material]
+    types = np.ones(len(positions), np.int32)
+    if substrate_k.any():
+        type_names.append("substrate")
+        types[substrate_k] = len(type_names)
+    if coated_k.any():
+        type_names.append(spec.coating.material)
+        types[coated_k] = len(type_names)
+    densities = np.full(len(positions), density_to_nano(material(spec.material)["density_kg_m3"]))
+    if coated_k.any():
+        densities[coated_k] = density_to_nano(material(spec.coating.material)["density_kg_m3"])
+
+    t = time.perf_counter()
+    bonds = find_bonds(positions, diameters, box, periodic, spec.bonds.cutoff_factor)
+    bond_types = bond_types_by_material(bonds, coated_k)
+    timings["bonds"] = time.perf_counter() - t
+
+    structure = Structure(
+        positions=positions, diameters=diameters, types=types, densities=densities,
+        box_lo=np.zeros(3), box_hi=box, periodic=periodic, bonds=bonds, bond_types=bond_types,
+        type_names=type_names,
+        bond_type_names=[spec.material] + ([spec.coating.material] if coated_k.any() else []),
+        groups={"substrate": substrate_k, "coating": coated_k},
+        meta={"pore_centres_nm": centres, "pore_arrangement": spec.pores.arrangement, "pore_diameter_nm": spec.pores.diameter_nm,
+              "substrate_top_nm": z0, "sample_height_nm": height,
+              "packing_solid_fraction": packing.solid_fraction,
+              "packing_particles_in_sample": int(np.count_nonzero(~substrate)),
+              "packing_max_overlap_fraction": packing.max_overlap_fraction,
+              "packing_tile_nm": packing.tile.tolist(), "packing_tile_particles": packing.tile_particles,
+              "packing_relax_steps": packing.relax_steps},
+    )
+    return structure, timings
+
+
+def bulk_slab(s: Structure) -> tuple[float, float]:
+    """The z-range that represents the bulk opal, away from the substrate and the top.
+
+    Between the centre planes of the lowest and the highest pore layer, each slab
+    between neighbouring centre planes holds half of each of its two pore layers and
+    nothing of the others (R_pore + R_part < layer spacing): the structure there is
+    the infinite FCC opal.  With fewer than two pore layers (or no pores) the whole
+    sample above the substrate is used.
+    """
+    z0 = s.meta["substrate_top_nm"]
+    top = z0 + s.meta["sample_height_nm"]
+    centres = np.asarray(s.meta["pore_centres_nm"]).reshape(-1, 3)
+    levels = np.unique(np.round(centres[:, 2], 6)) if len(centres) else np.zeros(0)
+    if s.meta.get("pore_arrangement") == "fcc" and len(levels) >= 2:
+        return float(levels[0]), float(levels[-1])
+    return float(z0), float(top)
+
+
+def structure_statistics(s: Structure) -> dict:
+    """The numbers the paper reports about a structure (section 2.1 and 4).
+
+    ``particles_per_um3`` and ``bonds_per_um3`` (particles, and bonds by their
+    midpoint) are counted in the bulk slab (:func:`bulk_slab`), the paper's "needed
+    to represent 1 um^3 of FCC-ordered inverse opal"; the substrate is not in them.
+    ``*_per_um3_sample`` count the whole sample above the substrate (particles in it,
+    bonds with at least one end in it) per its volume, faces included.
+    ``porosity`` is the macro-porosity, 1 - (particles left in the sample) / (particles
+    the packing had there), the paper's measure (density = (1 - porosity) x 1297
+    kg/m^3 for silica); ``total_porosity`` also counts the packing's own voids.
+    ``density_kg_m3`` weighs each particle's material by the solid it stands for,
+    V_p / phi (section 4: "volumetric amount and density of each component").
+    """
+    m = s.meta
+    sample = ~s.groups.get("substrate", np.zeros(s.n_particles, bool))
+    sample_volume = s.box_lengths[0] * s.box_lengths[1] * m["sample_height_nm"]
+    vp = s.particle_volumes()
+    phi = m["packing_solid_fraction"]
+    n_sample = int(np.count_nonzero(sample))
+    bonds_in_sample = int(np.count_nonzero(sample[s.bonds[:, 0]] | sample[s.bonds[:, 1]])) if s.n_bonds else 0
+    r0 = s.bond_lengths() if s.n_bonds else np.zeros(0)
+    contact = 0.5 * (s.diameters[s.bonds[:, 0]] + s.diameters[s.bonds[:, 1]]) if s.n_bonds else np.zeros(0)
+    overlap = float(max(0.0, np.max((contact - r0) / contact))) if s.n_bonds else 0.0
+    n_by_material = {name: int(np.count_nonzero(s.types == t + 1)) for t, name in enumerate(s.type_names)}
+    bonds_by_type = {name: int(np.count_nonzero(s.bond_types == t + 1))
+                     for t, name in enumerate(s.bond_type_names)}
+    mass = np.sum((s.densities * vp)[sample]) / phi
+    bulk_lo, bulk_hi = bulk_slab(s)
+    in_bulk = (s.positions[:, 2] >= bulk_lo) & (s.positions[:, 2] < bulk_hi)
+    bulk_volume = s.box_lengths[0] * s.box_lengths[1] * (bulk_hi - bulk_lo)
+    if s.n_bonds:
+        half = s.minimum_image(s.positions[s.bonds[:, 1]] - s.positions[s.bonds[:, 0]])[:, 2] / 2
+        zmid = s.positions[s.bonds[:, 0], 2] + half
+        bonds_in_bulk = int(np.count_nonzero((zmid >= bulk_lo) & (zmid < bulk_hi)))
+    else:
+        bonds_in_bulk = 0
+    return {
+        "n_particles": s.n_particles,
+        "n_bonds": s.n_bonds,
+        "box_nm": s.box_lengths.tolist(),
+        "sample_height_nm": m["sample_height_nm"],
+        "substrate_thickness_nm": m["substrate_top_nm"],
+        "packing_fraction": phi,
+        "porosity": 1 - n_sample / m["packing_particles_in_sample"],
+        "total_porosity": 1 - float(np.sum(vp[sample])) / sample_volume,
+        "bonds_per_particle": s.n_bonds / max(1, s.n_particles),
+        "particles_per_um3": int(np.count_nonzero(in_bulk)) / bulk_volume * NM3_PER_UM3,
+        "bonds_per_um3": bonds_in_bulk / bulk_volume * NM3_PER_UM3,
+        "bulk_slab_nm": [float(bulk_lo), float(bulk_hi)],
+        "particles_per_um3_sample": n_sample / sample_volume * NM3_PER_UM3,
+        "bonds_per_um3_sample": bonds_in_sample / sample_volume * NM3_PER_UM3,
+        "max_overlap_fraction": overlap,
+        "n_by_material": n_by_material,
+        "n_bonds_by_type": bonds_by_type,
+        "n_pores": int(len(m["pore_centres_nm"])),
+        "density_kg_m3": float(density_from_nano(mass / sample_volume)),
+        "bond_length_nm": {"min": float(r0.min()) if len(r0) else 0.0,
+                           "max": float(r0.max()) if len(r0) else 0.0},
+    }

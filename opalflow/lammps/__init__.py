@@ -1,0 +1,1 @@
+"""LAMMPS side: data files, decks from templates, the engine that runs them."""

@@ -1,0 +1,173 @@
+"""LAMMPS data files for ``atom_style bpm/sphere``: writer and reader.
+
+Atoms lines are ``id molecule type diameter density x y z`` (LAMMPS ``read_data``,
+atom style bpm/sphere; nm and attogram/nm^3 in ``units nano``, as the Structure
+holds them), Bonds lines ``id type atom1 atom2``.
+
+Writing tens of millions of lines with ``%``-formatting costs minutes in Python; here
+each column becomes fixed-width ASCII digits by integer arithmetic on numpy arrays
+(``_digits``), written in blocks of 1 M rows.  Coordinates are written with six
+decimals from their integer count of 1e-6 nm, so a Structure whose positions were
+rounded the same way (:func:`opalflow.build.opal.quantize`) reads back bit for bit.
+Diameters, densities and box bounds are written with ``repr`` (shortest round trip).
+"""
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+
+from opalflow.structure import Structure
+
+DECIMALS = 6
+BLOCK = 1 << 20
+
+
+def _digits(values: np.ndarray, width: int) -> np.ndarray:
+    """Non-negative integers as right-aligned ASCII digits, shape (n, width), uint8."""
+    v = values.astype(np.int64)
+    out = np.empty((len(v), width), np.uint8)
+    for col in range(width - 1, -1, -1):
+        out[:, col] = 48 + v % 10
+        v = v // 10
+    # blank the leading zeros (keep at least the last digit)
+    lead = np.cumprod(out[:, :-1] == 48, axis=1).astype(bool)
+    out[:, :-1][lead] = 32
+    return out
+
+
+def _width(maxval: int) -> int:
+    return max(1, len(str(int(maxval))))
+
+
+def _fixed(values: np.ndarray, decimals: int) -> np.ndarray:
+    """Reals as right-aligned fixed-point ASCII with a sign where needed, (n, width) uint8."""
+    k = np.round(values * 10.0**decimals).astype(np.int64)
+    neg = k < 0
+    k = np.abs(k)
+    scale = 10**decimals
+    ip, fp = k // scale, k % scale
+    wi = _width(ip.max()) + 1 if len(k) else 2
+    ints = _digits(ip, wi)
+    n_int = np.where(ip > 0, np.floor(np.log10(np.maximum(ip, 1))).astype(int) + 1, 1)
+    rows = np.flatnonzero(neg)
+    ints[rows, wi - n_int[rows] - 1] = ord("-")
+    fr = _digits(fp + scale, decimals + 1)[:, 1:]  # keep leading zeros of the fraction
+    dot = np.full((len(k), 1), ord("."), np.uint8)
+    return np.hstack([ints, dot, fr])
+
+
+def _lookup(values: np.ndarray) -> np.ndarray:
+    """Few distinct reals (diameters, densities) as right-aligned repr text, (n, width) uint8."""
+    uniq, inv = np.unique(values, return_inverse=True)
+    texts = [repr(float(u)) for u in uniq]
+    w = max(len(t) for t in texts)
+    table = np.array([list(t.rjust(w).encode()) for t in texts], dtype=np.uint8)
+    return table[inv]
+
+
+def _join(columns: list[np.ndarray]) -> bytes:
+    sep = np.full((len(columns[0]), 1), 32, np.uint8)
+    parts = []
+    for c in columns:
+        parts += [c, sep]
+    parts[-1] = np.full((len(columns[0]), 1), 10, np.uint8)
+    return np.hstack(parts).tobytes()
+
+
+def write_data(path: str | os.PathLike, s: Structure, title: str = "opalflow") -> None:
+    """Write ``s`` as a bpm/sphere data file (to ``path.tmp``, then renamed)."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp")
+    n, m = s.n_particles, s.n_bonds
+    lo, hi = s.box_lo, s.box_hi
+    head = [f"LAMMPS data file: {title}", "",
+            f"{n} atoms", f"{len(s.type_names) or int(s.types.max(initial=1))} atom types"]
+    if m:
+        head += [f"{m} bonds", f"{len(s.bond_type_names) or int(s.bond_types.max())} bond types"]
+    head += [""]
+    for k, ax in enumerate("xyz"):
+        head.append(f"{float(lo[k])!r} {float(hi[k])!r} {ax}lo {ax}hi")
+    head += ["", "Atoms # bpm/sphere", "", ""]
+    names = " ".join(f"{t + 1}={nm}" for t, nm in enumerate(s.type_names))
+    if names:
+        head.insert(1, f"# atom types: {names}")
+    with open(tmp, "wb") as f:
+        f.write("\n".join(head).encode())
+        wid = _width(n)
+        for a in range(0, n, BLOCK):
+            b = min(n, a + BLOCK)
+            cols = [_digits(np.arange(a + 1, b + 1), wid),
+                    _digits(s.molecules[a:b], _width(s.molecules.max(initial=1))),
+                    _digits(s.types[a:b], _width(s.types.max(initial=1))),
+                    _lookup(s.diameters[a:b]),
+                    _lookup(s.densities[a:b])]
+            cols += [_fixed(s.positions[a:b, k], DECIMALS) for k in range(3)]
+            f.write(_join(cols))
+        if m:
+            f.write(b"\nBonds\n\n")
+            wb = _width(m)
+            for a in range(0, m, BLOCK):
+                b = min(m, a + BLOCK)
+                f.write(_join([_digits(np.arange(a + 1, b + 1), wb),
+                               _digits(s.bond_types[a:b], _width(s.bond_types.max())),
+                               _digits(s.bonds[a:b, 0] + 1, wid), _digits(s.bonds[a:b, 1] + 1, wid)]))
+    os.replace(tmp, path)
+
+
+SECTION = re.compile(rb"^(Atoms|Velocities|Bonds|Masses|Pair Coeffs|PairIJ Coeffs|Bond Coeffs)\b.*$",
+                     re.MULTILINE)
+
+
+def _table(body: bytes, ncol: int) -> np.ndarray:
+    """Whitespace-separated numbers (comments stripped) as an (n, ncol) float64 array."""
+    if b"#" in body:
+        body = re.sub(rb"#[^\n]*", b"", body)
+    values = np.fromstring(body.decode("ascii"), sep=" ")  # C parser; exact strtod
+    if values.size % ncol:
+        raise ValueError(f"section has {values.size} numbers, not a multiple of {ncol}")
+    return values.reshape(-1, ncol)
+
+
+def read_data(path: str | os.PathLike, periodic=(True, True, False)) -> Structure:
+    """Read a bpm/sphere data file written by opalflow or LAMMPS (``write_data``).
+
+    ``periodic`` is not stored in data files; pass the boundary of the deck.
+    Sections other than Atoms and Bonds (Velocities, Coeffs) are skipped.
+    """
+    raw = Path(path).read_bytes()
+    marks = list(SECTION.finditer(raw))
+    if not marks or not any(m.group(1) == b"Atoms" for m in marks):
+        raise ValueError(f"{path}: no Atoms section")
+    header_text = raw[: marks[0].start()].decode()
+    box = np.zeros((3, 2))
+    type_names: list[str] = []
+    for line in header_text.splitlines()[1:]:
+        if line.startswith("# atom types:"):
+            type_names = [t.split("=", 1)[1] for t in line.split(":", 1)[1].split()]
+        parts = line.split("#")[0].split()
+        if len(parts) == 4 and parts[-1] in ("xhi", "yhi", "zhi"):
+            box["xyz".index(parts[-1][0])] = [float(parts[0]), float(parts[1])]
+    bodies = {}
+    for k, m in enumerate(marks):
+        end = marks[k + 1].start() if k + 1 < len(marks) else len(raw)
+        bodies[m.group(1).decode()] = raw[m.end():end]
+    atoms = _table(bodies["Atoms"], 8)
+    atoms = atoms[np.argsort(atoms[:, 0], kind="stable")]
+    bonds = np.zeros((0, 2), np.int64)
+    bond_types = np.zeros(0, np.int32)
+    if "Bonds" in bodies:
+        braw = _table(bodies["Bonds"], 4).astype(np.int64)
+        braw = braw[np.argsort(braw[:, 0], kind="stable")]
+        id_to_index = np.empty(int(atoms[:, 0].max()) + 1, np.int64)
+        id_to_index[atoms[:, 0].astype(np.int64)] = np.arange(len(atoms))
+        bonds = id_to_index[braw[:, 2:4]]
+        bond_types = braw[:, 1].astype(np.int32)
+    return Structure(
+        positions=atoms[:, 5:8], diameters=atoms[:, 3], types=atoms[:, 2].astype(np.int32),
+        densities=atoms[:, 4], box_lo=box[:, 0], box_hi=box[:, 1],
+        periodic=np.asarray(periodic), bonds=bonds, bond_types=bond_types,
+        molecules=atoms[:, 1].astype(np.int32), type_names=type_names,
+    )

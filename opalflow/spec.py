@@ -1,0 +1,304 @@
+"""Workflow specs: TOML -> validated dataclasses.
+
+Every error is a :class:`SpecError` whose message is one line naming the field, the
+value and what is allowed, raised before anything is written.  Names that reach a
+LAMMPS script must match ``[A-Za-z0-9_]+`` and numbers must be numbers, so a
+workflow file cannot smuggle LAMMPS commands (LAMMPS has ``shell``) into a deck.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, get_type_hints
+
+NAME_RE = re.compile(r"[A-Za-z0-9_]+")
+
+
+class SpecError(ValueError):
+    """A spec field holds a value that is not allowed (one-line message)."""
+
+    def __init__(self, field_name: str, value: Any, allowed: str):
+        self.field = field_name
+        self.value = value
+        self.allowed = allowed
+        super().__init__(f"{field_name} = {value!r}: {allowed}")
+
+
+@dataclass
+class PackingSpec:
+    """Dense random packing of spheres (the solid skeleton before pores are cut)."""
+
+    diameter_nm: float = 15.0
+    solid_fraction: float = 0.62
+    diameter_std_nm: float = 0.0
+    size_bins: int = 8
+    seed: int = 1
+    tile_nm: float = 380.0
+    max_overlap: float = 0.005
+
+
+@dataclass
+class PoresSpec:
+    """Macropores cut out of the packing (eq. 1 of Dosta et al.)."""
+
+    arrangement: str = "fcc"
+    diameter_nm: float = 762.0
+    spacing_nm: float = 762.0
+    layers: int = 3
+    cells_x: int = 4
+    cells_y: int = 2
+    porosity: float | None = None
+    seed: int = 1
+
+
+@dataclass
+class CoatingSpec:
+    """Coating of the pore walls (eq. 2); thickness 0 means uncoated."""
+
+    thickness_nm: float = 0.0
+    material: str = "titania"
+
+
+@dataclass
+class SubstrateSpec:
+    """Fixed bottom particle layers."""
+
+    layers: int = 2
+
+
+@dataclass
+class BondsSpec:
+    """Bonds between all particle pairs closer than cutoff_factor x diameter."""
+
+    cutoff_factor: float = 1.75
+
+
+@dataclass
+class BoundarySpec:
+    """Side boundaries (x and y): periodic, or open (no bonds across)."""
+
+    sides: str = "periodic"
+
+
+@dataclass
+class WorkflowSpec:
+    """A whole workflow file."""
+
+    name: str = "opal"
+    description: str = ""
+    kind: str = "opal"
+    material: str = "silica"
+    packing: PackingSpec = field(default_factory=PackingSpec)
+    pores: PoresSpec = field(default_factory=PoresSpec)
+    coating: CoatingSpec = field(default_factory=CoatingSpec)
+    substrate: SubstrateSpec = field(default_factory=SubstrateSpec)
+    bonds: BondsSpec = field(default_factory=BondsSpec)
+    boundary: BoundarySpec = field(default_factory=BoundarySpec)
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+KINDS = ("opal",)
+ARRANGEMENTS = ("fcc", "random", "none")
+SIDES = ("periodic", "open")
+
+
+# ----------------------------------------------------------------------------- loading
+def parse_value(text: str) -> Any:
+    """A ``--set`` value: TOML syntax (numbers, booleans, quoted strings, arrays), else a bare string."""
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
+
+
+def apply_overrides(raw: dict, overrides: list[str]) -> dict:
+    """Apply ``section.key=value`` overrides to the raw TOML dict (before validation)."""
+    for item in overrides:
+        if "=" not in item:
+            raise SpecError("--set", item, "expected section.key=value")
+        path, text = item.split("=", 1)
+        keys = path.strip().split(".")
+        if not all(NAME_RE.fullmatch(k) for k in keys):
+            raise SpecError("--set", item, "keys must match [A-Za-z0-9_]+ separated by dots")
+        node = raw
+        for k in keys[:-1]:
+            node = node.setdefault(k, {})
+            if not isinstance(node, dict):
+                raise SpecError(path, item, f"'{k}' is not a section")
+        node[keys[-1]] = parse_value(text.strip())
+    return raw
+
+
+def _convert(cls, raw: dict, prefix: str):
+    hints = get_type_hints(cls)
+    names = [f.name for f in dataclasses.fields(cls)]
+    for key in raw:
+        if key not in names:
+            where = f"{prefix}{key}"
+            raise SpecError(where, raw[key], f"unknown key; allowed in "
+                            f"{prefix.rstrip('.') or 'the top level'}: {', '.join(names)}")
+    kwargs = {}
+    for f in dataclasses.fields(cls):
+        if f.name not in raw:
+            continue
+        value, hint, where = raw[f.name], hints[f.name], f"{prefix}{f.name}"
+        if dataclasses.is_dataclass(hint):
+            if not isinstance(value, dict):
+                raise SpecError(where, value, "must be a table (section)")
+            kwargs[f.name] = _convert(hint, value, f"{where}.")
+        else:
+            kwargs[f.name] = _coerce(value, hint, where)
+    return cls(**kwargs)
+
+
+def _coerce(value, hint, where):
+    optional = "None" in str(hint)
+    base = str(hint).replace(" | None", "")
+    if value is None and optional:
+        return None
+    if base in ("float", "<class 'float'>"):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise SpecError(where, value, "must be a finite number")
+        return float(value)
+    if base in ("int", "<class 'int'>"):
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise SpecError(where, value, "must be an integer")
+        return value
+    if base in ("str", "<class 'str'>"):
+        if not isinstance(value, str):
+            raise SpecError(where, value, "must be a string")
+        return value
+    return value
+
+
+def load_spec(path: str | Path, overrides: list[str] | None = None) -> WorkflowSpec:
+    """Read, override and validate a workflow file."""
+    path = Path(path)
+    try:
+        raw = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise SpecError("workflow", str(path), "file not found") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise SpecError("workflow", str(path), f"not valid TOML ({exc})") from None
+    return spec_from_dict(apply_overrides(raw, overrides or []))
+
+
+def spec_from_dict(raw: dict) -> WorkflowSpec:
+    spec = _convert(WorkflowSpec, raw, "")
+    validate(spec)
+    return spec
+
+
+# ----------------------------------------------------------------------------- validation
+def _check(cond: bool, where: str, value, allowed: str):
+    if not cond:
+        raise SpecError(where, value, allowed)
+
+
+def check_name(where: str, value: str):
+    _check(bool(NAME_RE.fullmatch(value)), where, value,
+           "names may only contain letters, digits and '_' ([A-Za-z0-9_]+)")
+
+
+def sample_box_nm(spec: WorkflowSpec) -> tuple[float, float, float]:
+    """Lateral size and pore-region height of the sample (nm), from the FCC cell.
+
+    The cell is rectangular: spacing x spacing*sqrt(3) in plane (two pores per
+    (111) layer), layer spacing spacing*sqrt(2/3); the height holds ``layers``
+    pore layers touching the bottom and top faces: 2 R + (layers - 1) h.
+    """
+    p = spec.pores
+    a = p.spacing_nm
+    h = a * math.sqrt(2.0 / 3.0)
+    return p.cells_x * a, p.cells_y * a * math.sqrt(3.0), p.diameter_nm + (p.layers - 1) * h
+
+
+def max_coating_nm(spec: WorkflowSpec) -> float:
+    """Thickest coating that still leaves silica: radius of the largest solid region.
+
+    For the FCC pore lattice with nearest-neighbour spacing a that is the octahedral
+    hole, a / sqrt(2) - R_pore; random pores use the same bound for a = D_pore.
+    """
+    p = spec.pores
+    a = p.spacing_nm if p.arrangement == "fcc" else p.diameter_nm
+    return a / math.sqrt(2.0) - p.diameter_nm / 2.0
+
+
+def validate(spec: WorkflowSpec, known_materials: tuple[str, ...] | None = None) -> None:
+    """Check every field; raise SpecError naming the first bad one."""
+    from opalflow.materials import material_names
+
+    materials = known_materials or material_names()
+    check_name("name", spec.name)
+    _check(spec.kind in KINDS, "kind", spec.kind, f"must be one of {', '.join(KINDS)}")
+    check_name("material", spec.material)
+    _check(spec.material in materials, "material", spec.material,
+           f"unknown material; known: {', '.join(materials)}")
+
+    k = spec.packing
+    _check(k.diameter_nm > 0, "packing.diameter_nm", k.diameter_nm, "must be > 0")
+    _check(0.05 <= k.solid_fraction <= 0.64, "packing.solid_fraction", k.solid_fraction,
+           "must be in [0.05, 0.64] (random close packing of spheres is about 0.64)")
+    _check(0 <= k.diameter_std_nm <= k.diameter_nm / 4, "packing.diameter_std_nm", k.diameter_std_nm,
+           f"must be in [0, diameter_nm/4 = {k.diameter_nm / 4:g}]")
+    _check(1 <= k.size_bins <= 64, "packing.size_bins", k.size_bins, "must be in [1, 64]")
+    _check(k.seed >= 0, "packing.seed", k.seed, "must be >= 0")
+    _check(k.tile_nm == 0 or k.tile_nm >= 8 * k.diameter_nm, "packing.tile_nm", k.tile_nm,
+           f"must be 0 (pack the whole box) or >= 8 particle diameters ({8 * k.diameter_nm:g} nm)")
+    _check(0 < k.max_overlap <= 0.01, "packing.max_overlap", k.max_overlap,
+           "must be in (0, 0.01] (fraction of the diameter)")
+
+    p = spec.pores
+    _check(p.arrangement in ARRANGEMENTS, "pores.arrangement", p.arrangement,
+           f"must be one of {', '.join(ARRANGEMENTS)}")
+    _check(p.diameter_nm > 2 * k.diameter_nm, "pores.diameter_nm", p.diameter_nm,
+           f"must be > 2 particle diameters ({2 * k.diameter_nm:g} nm)")
+    _check(p.spacing_nm >= 0.75 * p.diameter_nm, "pores.spacing_nm", p.spacing_nm,
+           f"must be >= 0.75 x pores.diameter_nm ({0.75 * p.diameter_nm:g} nm)")
+    _check(p.layers >= 1, "pores.layers", p.layers, "must be >= 1")
+    _check(p.cells_x >= 1, "pores.cells_x", p.cells_x, "must be >= 1")
+    _check(p.cells_y >= 1, "pores.cells_y", p.cells_y, "must be >= 1")
+    _check(p.seed >= 0, "pores.seed", p.seed, "must be >= 0")
+    if p.arrangement == "random":
+        _check(p.porosity is not None, "pores.porosity", p.porosity,
+               "required for arrangement = 'random' (target macro-porosity)")
+        _check(0 < p.porosity < 1, "pores.porosity", p.porosity, "must be in (0, 1)")
+        _check(p.porosity <= 0.70, "pores.porosity", p.porosity,
+               "must be <= 0.70: denser random non-overlapping pores cannot be placed")
+    elif p.porosity is not None:
+        raise SpecError("pores.porosity", p.porosity,
+                        "only allowed with arrangement = 'random' (fcc porosity follows from the lattice)")
+    lx, ly, h = sample_box_nm(spec)
+    if p.arrangement != "none":
+        _check(p.diameter_nm <= min(lx, ly, h), "pores.diameter_nm", p.diameter_nm,
+               f"pores larger than the box ({lx:.0f} x {ly:.0f} x {h:.0f} nm); "
+               "add cells or layers, or make the pores smaller")
+
+    c = spec.coating
+    check_name("coating.material", c.material)
+    _check(c.material in materials, "coating.material", c.material,
+           f"unknown material; known: {', '.join(materials)}")
+    _check(c.thickness_nm >= 0, "coating.thickness_nm", c.thickness_nm, "must be >= 0")
+    if c.thickness_nm > 0:
+        _check(p.arrangement != "none", "coating.thickness_nm", c.thickness_nm,
+               "a coating needs pores (pores.arrangement = 'none')")
+        limit = max_coating_nm(spec)
+        _check(c.thickness_nm < limit, "coating.thickness_nm", c.thickness_nm,
+               f"coating thicker than the struts: must be < {limit:.1f} nm, the radius of the "
+               "largest solid region between pores")
+
+    _check(0 <= spec.substrate.layers <= 10, "substrate.layers", spec.substrate.layers,
+           "must be in [0, 10]")
+    _check(1.0 <= spec.bonds.cutoff_factor <= 3.0, "bonds.cutoff_factor", spec.bonds.cutoff_factor,
+           "must be in [1.0, 3.0] (bond cutoff in particle diameters)")
+    _check(spec.boundary.sides in SIDES, "boundary.sides", spec.boundary.sides,
+           f"must be one of {', '.join(SIDES)}")
+    if k.tile_nm:
+        _check(k.tile_nm <= max(lx, ly, h), "packing.tile_nm", k.tile_nm,
+               f"must be <= the largest box edge ({max(lx, ly, h):.0f} nm) or 0")

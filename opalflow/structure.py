@@ -1,0 +1,106 @@
+"""The Structure: what every generator returns and every deck is written from.
+
+Arrays are numpy in LAMMPS ``units nano``: lengths in nm, densities in attogram/nm^3.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class Structure:
+    """Bonded-particle structure in an orthogonal box.
+
+    Attributes
+    ----------
+    positions : (N, 3) float64, nm, inside ``[lo, hi)`` of the box.
+    diameters : (N,) float64, nm.
+    types : (N,) int32, LAMMPS atom types starting at 1 (see ``type_names``).
+    densities : (N,) float64, attogram/nm^3 (1 kg/m^3 = 1e-6 ag/nm^3, see units.py).
+    box_lo, box_hi : (3,) float64, nm.
+    periodic : (3,) bool, which directions are periodic.
+    bonds : (M, 2) int64, 0-based particle indices, i < j, sorted.
+    bond_types : (M,) int32, LAMMPS bond types starting at 1 (see ``bond_type_names``).
+    molecules : (N,) int32, LAMMPS molecule IDs.
+    type_names, bond_type_names : names of the types, index 0 = type 1.
+    groups : named boolean masks over particles (e.g. ``substrate``).
+    meta : free-form provenance and geometry (pore centres, heights ...).
+    """
+
+    positions: np.ndarray
+    diameters: np.ndarray
+    types: np.ndarray
+    densities: np.ndarray
+    box_lo: np.ndarray
+    box_hi: np.ndarray
+    periodic: np.ndarray
+    bonds: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int64))
+    bond_types: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    molecules: np.ndarray | None = None
+    type_names: list[str] = field(default_factory=list)
+    bond_type_names: list[str] = field(default_factory=list)
+    groups: dict[str, np.ndarray] = field(default_factory=dict)
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.positions = np.ascontiguousarray(self.positions, dtype=np.float64)
+        self.diameters = np.asarray(self.diameters, dtype=np.float64)
+        self.types = np.asarray(self.types, dtype=np.int32)
+        self.densities = np.asarray(self.densities, dtype=np.float64)
+        self.box_lo = np.asarray(self.box_lo, dtype=np.float64)
+        self.box_hi = np.asarray(self.box_hi, dtype=np.float64)
+        self.periodic = np.asarray(self.periodic, dtype=bool)
+        self.bonds = np.asarray(self.bonds, dtype=np.int64).reshape(-1, 2)
+        self.bond_types = np.asarray(self.bond_types, dtype=np.int32)
+        if self.molecules is None:
+            self.molecules = np.ones(len(self.positions), dtype=np.int32)
+        self.molecules = np.asarray(self.molecules, dtype=np.int32)
+
+    @property
+    def n_particles(self) -> int:
+        return len(self.positions)
+
+    @property
+    def n_bonds(self) -> int:
+        return len(self.bonds)
+
+    @property
+    def box_lengths(self) -> np.ndarray:
+        return self.box_hi - self.box_lo
+
+    def minimum_image(self, delta: np.ndarray) -> np.ndarray:
+        """Apply the minimum-image convention to separation vectors (in place)."""
+        L = self.box_lengths
+        for k in np.flatnonzero(self.periodic):
+            delta[:, k] -= L[k] * np.round(delta[:, k] / L[k])
+        return delta
+
+    def bond_lengths(self) -> np.ndarray:
+        """Current (initial, for a fresh build) bond lengths in nm, minimum image."""
+        i, j = self.bonds.T
+        d = self.minimum_image(self.positions[j] - self.positions[i])
+        return np.sqrt(np.einsum("ij,ij->i", d, d))
+
+    def particle_volumes(self) -> np.ndarray:
+        """Sphere volumes pi d^3 / 6 in nm^3."""
+        return np.pi / 6.0 * self.diameters**3
+
+    def select(self, keep: np.ndarray) -> "Structure":
+        """A new Structure with the particles where ``keep`` is True; bonds renumbered."""
+        keep = np.asarray(keep, dtype=bool)
+        new_index = np.full(self.n_particles, -1, dtype=np.int64)
+        new_index[keep] = np.arange(int(keep.sum()))
+        bonds, bond_types = self.bonds, self.bond_types
+        if len(bonds):
+            ok = keep[bonds[:, 0]] & keep[bonds[:, 1]]
+            bonds, bond_types = new_index[bonds[ok]], bond_types[ok]
+        return Structure(
+            positions=self.positions[keep], diameters=self.diameters[keep],
+            types=self.types[keep], densities=self.densities[keep],
+            box_lo=self.box_lo.copy(), box_hi=self.box_hi.copy(), periodic=self.periodic.copy(),
+            bonds=bonds, bond_types=bond_types, molecules=self.molecules[keep],
+            type_names=list(self.type_names), bond_type_names=list(self.bond_type_names),
+            groups={k: v[keep] for k, v in self.groups.items()}, meta=dict(self.meta),
+        )
