@@ -88,6 +88,22 @@ def periodic_images(centres: np.ndarray, box_xy: np.ndarray) -> np.ndarray:
     return (centres[None, :, :] + shifts[:, None, :]).reshape(-1, 3)
 
 
+def first_cutting_pore(positions: np.ndarray, radii: np.ndarray, centres: np.ndarray,
+                       pore_radius: float, box_xy: np.ndarray) -> np.ndarray:
+    """Index of the first pore (in the order given) that cuts each particle (eq. 1), or len(centres)."""
+    n = len(centres)
+    first = np.full(len(positions), n, dtype=np.int64)
+    tree = cKDTree(positions)
+    reach = pore_radius + float(radii.max())
+    for i in range(n - 1, -1, -1):
+        for c in periodic_images(centres[i:i + 1], box_xy):
+            idx = np.asarray(tree.query_ball_point(c, reach), dtype=np.int64)
+            if len(idx):
+                idx = idx[np.linalg.norm(positions[idx] - c, axis=1) <= pore_radius + radii[idx]]
+                first[idx] = i
+    return first
+
+
 def union_depth(points: np.ndarray, centres: np.ndarray, radius: float, reach: float) -> np.ndarray:
     """Distance from each point to the surface of the union of equal balls (positive inside).
 

@@ -1,0 +1,84 @@
+"""The opal build end to end: CLI outputs, bonds and statistics."""
+import json
+import tomllib
+
+import numpy as np
+import pytest
+
+from opalflow.build.opal import build_opal, structure_statistics
+from opalflow.cli import main
+from opalflow.resources import DATA, WORKFLOWS
+from opalflow.spec import load_spec
+
+from conftest import brute_force_pairs
+
+REF = tomllib.loads((DATA / "reference" / "dosta2022.toml").read_text())
+
+SUMMARY_KEYS = {"n_particles", "n_bonds", "box_nm", "packing_fraction", "porosity",
+                "bonds_per_particle", "particles_per_um3", "bonds_per_um3", "max_overlap_fraction",
+                "n_by_material", "density_kg_m3", "timings_s"}
+
+
+def test_info_lists_packages(capsys):
+    assert main(["info"]) == 0
+    out = capsys.readouterr().out
+    for pkg in ("BPM", "GRANULAR", "MANYBODY"):
+        assert any(line.split() == [pkg, "yes"] for line in out.splitlines())
+
+
+def test_list_shows_workflows(capsys):
+    assert main(["list"]) == 0
+    names = [line.split()[0] for line in capsys.readouterr().out.splitlines()]
+    assert {"opal_fcc", "opal_fcc_coated20", "opal_random", "opal_quick"} <= set(names)
+
+
+def test_build_writes_deck_and_summary(tmp_path):
+    out = tmp_path / "run"
+    assert main(["build", "opal_quick", "--out", str(out), "--set", "packing.seed=4"]) == 0
+    assert (out / "data.lmp").stat().st_size > 0
+    assert "read_data       data.lmp" in (out / "in.lmp").read_text()
+    summary = json.loads((out / "summary.json").read_text())
+    assert SUMMARY_KEYS <= set(summary)
+    assert set(summary["timings_s"]) >= {"packing", "pores", "bonds", "write"}
+    assert summary["spec"]["packing"]["seed"] == 4
+    assert not list(out.glob("*.tmp"))
+
+
+def test_bonds_are_all_pairs_within_cutoff(quick_structure, quick_spec):
+    s = quick_structure
+    cutoff = quick_spec.bonds.cutoff_factor * quick_spec.packing.diameter_nm
+    expected = brute_force_pairs(s.positions, cutoff, s.box_lengths, s.periodic)
+    assert np.array_equal(s.bonds, expected)
+    # some bonds cross the periodic x or y faces
+    dx = np.abs(s.positions[s.bonds[:, 0], :2] - s.positions[s.bonds[:, 1], :2])
+    assert (dx > s.box_lengths[:2] / 2).any()
+
+
+def test_bond_types_by_material(coated_quick):
+    _, s = coated_quick
+    titania = s.groups["coating"]
+    touches = titania[s.bonds[:, 0]] | titania[s.bonds[:, 1]]
+    assert np.all(s.bond_types[touches] == 2) and np.all(s.bond_types[~touches] == 1)
+    assert s.bond_type_names == ["silica", "titania"]
+
+
+def test_quick_statistics(quick_structure):
+    st = structure_statistics(quick_structure)
+    assert abs(st["packing_fraction"] - 0.62) <= REF["tolerance"]["solid_fraction"]
+    assert st["max_overlap_fraction"] <= REF["tolerance"]["max_overlap_fraction"]
+    assert 0.7 < st["porosity"] < 0.85
+    assert st["density_kg_m3"] == pytest.approx((1 - st["porosity"]) * 1297.0, rel=1e-9)
+
+
+@pytest.mark.slow
+def test_standard_fcc_sample_matches_paper():
+    """Acceptance 2: the paper's standard sample, d = 15 nm, 3 layers, 8.05 um^2 (~30 s)."""
+    s, _ = build_opal(load_spec(WORKFLOWS / "opal_fcc.toml"))
+    st = structure_statistics(s)
+    ref, tol = REF["structure"], REF["tolerance"]
+    assert abs(st["packing_fraction"] - ref["packing_solid_fraction"]) <= tol["solid_fraction"]
+    assert st["particles_per_um3"] == pytest.approx(ref["fcc_particles_per_um3"], rel=tol["per_um3_relative"])
+    assert st["bonds_per_um3"] == pytest.approx(ref["fcc_bonds_per_um3"], rel=tol["per_um3_relative"])
+    assert st["max_overlap_fraction"] <= tol["max_overlap_fraction"]
+    assert s.box_lengths[0] * s.box_lengths[1] / 1e6 == pytest.approx(ref["sample_area_um2"], rel=0.001)
+    assert st["sample_height_nm"] / 1e3 == pytest.approx(ref["sample_height_um"], rel=0.002)

@@ -1,0 +1,56 @@
+"""Dense random packing: solid fraction, overlaps, periodicity, reproducibility."""
+import math
+
+import numpy as np
+import pytest
+
+from opalflow.build.neighbors import pairs_within
+from opalflow.build.packing import dense_random_packing, max_pair_overlap, tile_count
+
+BOX = np.array([600.0, 520.0, 400.0])
+
+
+@pytest.fixture(scope="module")
+def tiled():
+    return dense_random_packing(BOX, 30.0, 0.62, seed=3, tile_nm=260.0, coprime_with=(2, 6))
+
+
+def test_solid_fraction_and_overlap(tiled):
+    assert abs(tiled.solid_fraction - 0.62) <= 0.005
+    # overlaps checked over the whole replicated box, periodic in x and y only
+    worst = max_pair_overlap(tiled.positions, tiled.diameters, BOX, periodic=(True, True, False))
+    assert worst <= 0.01
+    assert tiled.positions[:, 2].max() < BOX[2] and tiled.positions.min() >= 0
+
+
+def test_tile_counts_are_coprime_with_pore_columns(tiled):
+    nx, ny = round(BOX[0] / tiled.tile[0]), round(BOX[1] / tiled.tile[1])
+    assert math.gcd(nx, 2) == 1 and math.gcd(ny, 6) == 1
+    assert tile_count(3048.0, 380.0, 8) in (7, 9)
+
+
+def test_whole_box_packing_is_periodic_in_x_and_y():
+    p = dense_random_packing(BOX, 40.0, 0.62, seed=1, tile_nm=0.0)
+    # pairs across the x and y faces exist and do not overlap
+    pairs = pairs_within(p.positions, 40.0 * 1.05, BOX, (True, True, False))
+    dx = np.abs(p.positions[pairs[:, 0], 0] - p.positions[pairs[:, 1], 0])
+    assert (dx > BOX[0] / 2).sum() > 10
+    assert max_pair_overlap(p.positions, p.diameters, BOX, (True, True, False)) <= 0.01
+
+
+def test_same_seed_same_bytes_other_seed_other_packing():
+    a = dense_random_packing(BOX, 40.0, 0.62, seed=5, tile_nm=0.0)
+    b = dense_random_packing(BOX, 40.0, 0.62, seed=5, tile_nm=0.0)
+    c = dense_random_packing(BOX, 40.0, 0.62, seed=6, tile_nm=0.0)
+    assert a.positions.tobytes() == b.positions.tobytes()
+    assert len(a.positions) == len(c.positions)
+    assert not np.allclose(a.positions, c.positions)
+
+
+def test_size_distribution():
+    p = dense_random_packing(BOX, 40.0, 0.60, std=4.0, size_bins=6, seed=2, tile_nm=0.0)
+    assert len(np.unique(p.diameters)) == 6
+    assert abs(p.diameters.mean() - 40.0) < 1.0
+    assert 2.5 < p.diameters.std() < 4.5
+    assert abs(p.solid_fraction - 0.60) <= 0.005
+    assert max_pair_overlap(p.positions, p.diameters, BOX, (True, True, False)) <= 0.01
