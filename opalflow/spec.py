@@ -269,8 +269,8 @@ def validate(spec: WorkflowSpec, known_materials: tuple[str, ...] | None = None)
         _check(p.porosity is not None, "pores.porosity", p.porosity,
                "required for arrangement = 'random' (target macro-porosity)")
         _check(0 < p.porosity < 1, "pores.porosity", p.porosity, "must be in (0, 1)")
-        _check(p.porosity <= 0.70, "pores.porosity", p.porosity,
-               "must be <= 0.70: denser random non-overlapping pores cannot be placed")
+        _check(p.porosity <= 0.66, "pores.porosity", p.porosity,
+               "must be <= 0.66: denser random non-overlapping pores cannot be placed")
     elif p.porosity is not None:
         raise SpecError("pores.porosity", p.porosity,
                         "only allowed with arrangement = 'random' (fcc porosity follows from the lattice)")
