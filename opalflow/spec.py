@@ -11,6 +11,7 @@ import dataclasses
 import math
 import re
 import tomllib
+import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, get_type_hints
@@ -158,22 +159,20 @@ def _convert(cls, raw: dict, prefix: str):
 
 
 def _coerce(value, hint, where):
-    optional = "None" in str(hint)
-    base = str(hint).replace(" | None", "")
-    if value is None and optional:
-        return None
-    if base in ("float", "<class 'float'>"):
+    """Check a TOML value against a field's type (``X | None`` allows a missing value)."""
+    args = typing.get_args(hint)
+    if args:
+        if value is None:
+            return None
+        hint = next(a for a in args if a is not type(None))
+    if hint is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
             raise SpecError(where, value, "must be a finite number")
         return float(value)
-    if base in ("int", "<class 'int'>"):
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise SpecError(where, value, "must be an integer")
-        return value
-    if base in ("str", "<class 'str'>"):
-        if not isinstance(value, str):
-            raise SpecError(where, value, "must be a string")
-        return value
+    if hint is int and (isinstance(value, bool) or not isinstance(value, int)):
+        raise SpecError(where, value, "must be an integer")
+    if hint is str and not isinstance(value, str):
+        raise SpecError(where, value, "must be a string")
     return value
 
 

