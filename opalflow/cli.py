@@ -52,31 +52,82 @@ def cmd_list(args) -> int:
 
 
 def cmd_build(args) -> int:
-    from opalflow.build.opal import build_opal, structure_statistics
-    from opalflow.lammps.datafile import write_data
-    from opalflow.lammps.deck import check_deck
-    from opalflow.store import write_json_atomic, write_text_atomic
+    """Structure + full deck (data.lmp, in.lmp, resume.lmp, run.sh) + summary.json; no run."""
+    from opalflow.pipeline import prepare
+    from opalflow.store import write_json_atomic
 
     spec = load_spec(workflow_path(args.workflow), args.set)
-    out = Path(args.out)
+    out = _out_folder(args.out)
+    start = time.perf_counter()
+    _say(f"building {spec.name} ({spec.kind})")
+    deck = prepare(spec, out, progress=_say)
+    summary = {"workflow": spec.name, "opalflow_version": __version__}
+    if spec.kind == "opal":
+        from opalflow.build.opal import structure_statistics
+
+        stats = structure_statistics(deck.structure)
+        summary.update(stats)
+        _say(f"{stats['n_particles']} particles, {stats['n_bonds']} bonds, porosity {stats['porosity']:.3f}, "
+             f"{stats['particles_per_um3']:.0f} particles/um^3, {stats['bonds_per_um3']:.0f} bonds/um^3")
+    else:
+        summary.update({"n_particles": deck.structure.n_particles, "n_bonds": deck.structure.n_bonds})
+    summary["deck"] = deck.info()
+    summary["timings_s"] = {**deck.structure.meta.get("timings_s", {}),
+                            "total": round(time.perf_counter() - start, 3)}
+    summary["spec"] = spec.to_dict()
+    write_json_atomic(out / "summary.json", summary)
+    _say(f"wrote {out}/data.lmp, in.lmp, run.sh ({time.perf_counter() - start:.1f} s); "
+         f"'bash {out}/run.sh' runs it with LAMMPS alone")
+    return 0
+
+
+def _out_folder(path: str) -> Path:
+    out = Path(path)
     if out.exists() and not out.is_dir():
         raise SpecError("--out", str(out), "exists and is not a folder")
-    start = time.perf_counter()
-    _say(f"building {spec.name}: {spec.pores.arrangement} pores, d = {spec.packing.diameter_nm:g} nm")
-    structure, timings = build_opal(spec, progress=_say)
-    out.mkdir(parents=True, exist_ok=True)
-    t = time.perf_counter()
-    write_data(out / "data.lmp", structure, title=f"opalflow {__version__} {spec.name}")
-    write_text_atomic(out / "in.lmp", check_deck(structure, spec.name))
-    timings["write"] = time.perf_counter() - t
-    stats = structure_statistics(structure)
-    timings["total"] = time.perf_counter() - start
-    summary = {"workflow": spec.name, "opalflow_version": __version__, **stats,
-               "timings_s": {k: round(v, 3) for k, v in timings.items()}, "spec": spec.to_dict()}
-    write_json_atomic(out / "summary.json", summary)
-    _say(f"{stats['n_particles']} particles, {stats['n_bonds']} bonds, porosity {stats['porosity']:.3f}, "
-         f"{stats['particles_per_um3']:.0f} particles/um^3, {stats['bonds_per_um3']:.0f} bonds/um^3, "
-         f"{timings['total']:.1f} s -> {out}")
+    return out
+
+
+def cmd_run(args) -> int:
+    from opalflow.lammps.engine import EngineError
+    from opalflow.pipeline import run_workflow
+
+    out = _out_folder(args.out)
+    if args.resume:
+        import json as _json
+
+        run_json = out / "run.json"
+        if not run_json.exists():
+            raise SpecError("--resume", str(out), "no run.json: this folder holds no prepared run")
+        from opalflow.spec import spec_from_dict
+
+        spec = spec_from_dict(_json.loads(run_json.read_text())["spec"])
+    elif args.workflow is None:
+        raise SpecError("workflow", None, "give a workflow file or name (or --resume with --out)")
+    else:
+        spec = load_spec(workflow_path(args.workflow), args.set)
+    if args.np < 1:
+        raise SpecError("--np", args.np, "must be >= 1")
+    try:
+        summary = run_workflow(spec, out, np_=args.np, resume=args.resume, say=_say)
+    except EngineError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        print(f"run folder kept: {out}", file=sys.stderr)
+        return 1
+    print(f"E = {summary['youngs_modulus_GPa']:.4g} GPa, strength = {summary['strength_MPa']:.4g} MPa "
+          f"(strain at peak {summary['strain_at_peak']:.4f}), {summary['wall_s']:.1f} s -> {out}/report.md")
+    return 0
+
+
+def cmd_analyze(args) -> int:
+    from opalflow.pipeline import analyze
+
+    out = Path(args.folder)
+    if not (out / "run.json").exists() or not (out / "curve.txt").exists():
+        raise SpecError("folder", str(out), "needs run.json and curve.txt (a built folder after 'bash run.sh')")
+    summary = analyze(out)
+    print(f"E = {summary['youngs_modulus_GPa']:.4g} GPa, strength = {summary['strength_MPa']:.4g} MPa "
+          f"(strain at peak {summary['strain_at_peak']:.4f}) -> {out}/report.md")
     return 0
 
 
@@ -86,12 +137,22 @@ def parser() -> argparse.ArgumentParser:
     sub = ap.add_subparsers(dest="command", required=True)
     sub.add_parser("info", help="opalflow and LAMMPS versions, packages, accelerators").set_defaults(func=cmd_info)
     sub.add_parser("list", help="workflows with one-line descriptions").set_defaults(func=cmd_list)
-    b = sub.add_parser("build", help="write data.lmp, in.lmp and summary.json for a workflow")
+    b = sub.add_parser("build", help="write the structure and the full deck (data.lmp, in.lmp, run.sh)")
     b.add_argument("workflow", help="workflow file or name in workflows/")
     b.add_argument("--out", required=True, help="output folder")
     b.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                    help="override a spec field (repeatable)")
     b.set_defaults(func=cmd_build)
+    r = sub.add_parser("run", help="build, run LAMMPS, analyze: results.h5, summary.json, report.md, plots")
+    r.add_argument("workflow", nargs="?", default=None, help="workflow file or name (not with --resume)")
+    r.add_argument("--out", required=True, help="run folder")
+    r.add_argument("--np", type=int, default=1, help="MPI processes (runs 'lmp' under mpiexec)")
+    r.add_argument("--resume", action="store_true", help="continue from the newest restart file in --out")
+    r.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
+    r.set_defaults(func=cmd_run)
+    a = sub.add_parser("analyze", help="analyze a run folder's LAMMPS output (e.g. after bash run.sh)")
+    a.add_argument("folder")
+    a.set_defaults(func=cmd_analyze)
     return ap
 
 

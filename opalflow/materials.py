@@ -1,7 +1,9 @@
 """Materials: properties from ``data/materials.toml`` (with their sources)."""
 from __future__ import annotations
 
+import math
 import tomllib
+from dataclasses import dataclass
 from functools import lru_cache
 
 from opalflow.resources import DATA, resource
@@ -16,8 +18,114 @@ def material_names() -> tuple[str, ...]:
     return tuple(load_materials())
 
 
-def material(name: str) -> dict:
+#: properties a workflow may override per material (``[materials.<name>]``)
+OVERRIDABLE = ("density_kg_m3", "bond_youngs_modulus_GPa", "bond_poisson_ratio", "bond_strength_MPa")
+
+
+def material(name: str, overrides: dict | None = None) -> dict:
+    """Properties of a material, with a workflow's ``[materials.<name>]`` overrides applied."""
     try:
-        return load_materials()[name]
+        base = load_materials()[name]
     except KeyError:
         raise KeyError(f"unknown material {name!r}; known: {', '.join(material_names())}") from None
+    return {**base, **(overrides or {}).get(name, {})}
+
+
+@dataclass
+class BondCoefficients:
+    """Coefficients of one ``bond_style bpm/rotational normalize yes`` bond type (nano units).
+
+    Mapping from the paper's ideally elastic bond (Dosta et al. eq. 11) with bond
+    radius r_b, area A = pi r_b^2, second moments I = pi r_b^4 / 4, J = 2 I and
+    G = E / (2 (1 + nu)):
+
+    ======  ============  =========================================================
+    kr      E A           normal force kr (r - r0) / r0 (normalize yes), pN
+    ks      G A           shear force ks xi_t / r0 (eq. 11), pN
+    kt      G J / L0      twisting torque per radian, pN nm
+    kb      E I / L0      bending torque per radian, pN nm
+    fr_c    sigma A       critical normal force
+    fs_c    tau A         critical shear force (tau = sigma, as the paper assumes)
+    tb_c    sigma I / r_b critical bending torque (the M R / I term of eq. 16)
+    tt_c    tau J / r_b   critical twisting torque (the M R / J term of eq. 17)
+    ======  ============  =========================================================
+
+    LAMMPS breaks a bond when B = max(0, f_r/fr_c + |f_s|/fs_c + |tau_b|/tb_c +
+    |tau_t|/tt_c) >= 1: one sum of all four ratios, with the signed normal force
+    (compression lowers B).  The paper breaks a bond when either the normal stress
+    (eq. 16, |F_n|: compression too) or the shear stress (eq. 17) reaches the
+    strength.  With the mapping above LAMMPS's B is the sum of the two ratios of
+    eqs. 16 and 17 for a bond in tension, so a bond loaded in tension and shear
+    breaks earlier than in the paper (by up to a factor 2 in load when both ratios
+    are equal), and a bond in pure compression never breaks by its normal force.
+    Bonds that break fade out with w = 1 - B^4 (``smooth yes``) instead of the
+    paper's 1 ns of stiffness decaying by 1 % per 1e-11 s; both avoid a jump in
+    force, LAMMPS's within the step the bond breaks.
+
+    Damping (gamma_n, gamma_s, gamma_r, gamma_t) is the fraction ``zeta`` of
+    critical damping of each two-particle mode, c = 2 zeta sqrt(m_red k).  LAMMPS
+    applies the normal and sliding coefficients as force per relative velocity, the
+    twisting one as 0.5 gamma_t per relative angular velocity and the rolling one as
+    0.5 gamma_r r per relative angular velocity (BondBPMRotational::damping_forces),
+    so gamma_t = 2 c_t and gamma_r = 2 c_r / L0.
+    """
+
+    kr: float
+    ks: float
+    kt: float
+    kb: float
+    fr_c: float
+    fs_c: float
+    tb_c: float
+    tt_c: float
+    gn: float
+    gs: float
+    gr: float
+    gt: float
+
+    def values(self) -> list[float]:
+        """In the order BondBPMRotational::coeff() reads them: kr ks kt kb Fr_c Fs_c
+        Tt_c Tb_c gamma_n gamma_s gamma_roll gamma_twist (twist before bend)."""
+        return [self.kr, self.ks, self.kt, self.kb, self.fr_c, self.fs_c, self.tt_c, self.tb_c,
+                self.gn, self.gs, self.gr, self.gt]
+
+
+def bond_coefficients(material_name: str, bond_radius: float, length: float, mass: float,
+                      inertia: float, damping_ratio: float, overrides: dict | None = None) -> BondCoefficients:
+    """bpm/rotational coefficients for a bond of ``material_name`` (see BondCoefficients).
+
+    bond_radius and length in nm, mass in ag, inertia (of one particle) in ag nm^2.
+    """
+    m = material(material_name, overrides)
+    E = m["bond_youngs_modulus_GPa"] * 1.0e3          # MPa = pN/nm^2
+    nu = m["bond_poisson_ratio"]
+    sigma = m["bond_strength_MPa"]
+    G = E / (2.0 * (1.0 + nu))
+    A = math.pi * bond_radius**2
+    I = math.pi * bond_radius**4 / 4.0
+    J = 2.0 * I
+    kr, ks, kt, kb = E * A, G * A, G * J / length, E * I / length
+    m_red, i_red = mass / 2.0, inertia / 2.0
+    z = damping_ratio
+    return BondCoefficients(
+        kr=kr, ks=ks, kt=kt, kb=kb,
+        fr_c=sigma * A, fs_c=sigma * A, tb_c=sigma * I / bond_radius, tt_c=sigma * J / bond_radius,
+        gn=2 * z * math.sqrt(m_red * kr / length), gs=2 * z * math.sqrt(m_red * ks / length),
+        gr=2 * (2 * z * math.sqrt(i_red * kb)) / length, gt=2 * (2 * z * math.sqrt(i_red * kt)),
+    )
+
+
+@dataclass
+class ContactProperties:
+    """Hertz-Mindlin contact of one material (pair_style granular hertz/material)."""
+
+    youngs_modulus_MPa: float
+    poisson_ratio: float
+    restitution: float
+    friction: float
+
+
+def contact_properties(material_name: str) -> ContactProperties:
+    c = material(material_name)["contact"]
+    return ContactProperties(c["youngs_modulus_GPa"] * 1.0e3, c["poisson_ratio"], c["restitution"],
+                             c["friction"])

@@ -73,9 +73,55 @@ class SubstrateSpec:
 
 @dataclass
 class BondsSpec:
-    """Bonds between all particle pairs closer than cutoff_factor x diameter."""
+    """Bonds: who is bonded (cutoff) and how they respond (bpm/rotational)."""
 
     cutoff_factor: float = 1.75
+    radius_factor: float = 1.0
+    length_bins: int = 8
+    breakable: bool = True
+    damping_ratio: float = 0.2
+
+
+@dataclass
+class ContactsSpec:
+    """Hertz-Mindlin contacts between unbonded particles (pair_style granular)."""
+
+    enabled: bool = True
+
+
+@dataclass
+class CompressionSpec:
+    """Uniaxial compression by a rigid plate moving down at constant speed."""
+
+    strain_max: float = 0.04
+    plate_speed_m_s: float = 2.0
+    timestep_s: float = 0.0
+    timestep_safety: float = 0.5
+    global_damping: float = 0.5
+    output_every_strain: float = 2.0e-4
+    snapshot_strains: list[float] = field(default_factory=lambda: [0.01, 0.02])
+    restart_every_strain: float = 0.005
+    check_rate: bool = False
+
+
+@dataclass
+class LatticeSpec:
+    """Regular arrays of bonded spheres (kind = "lattice") for analytic checks."""
+
+    arrangement: str = "sc"
+    spacing_nm: float = 20.0
+    cells_x: int = 4
+    cells_y: int = 4
+    cells_z: int = 8
+
+
+@dataclass
+class DatafileSpec:
+    """A user's bpm/sphere data file (kind = "datafile"); materials name its atom types in order."""
+
+    path: str = ""
+    materials: list[str] = field(default_factory=list)
+    periodic_sides: bool = True
 
 
 @dataclass
@@ -99,12 +145,18 @@ class WorkflowSpec:
     substrate: SubstrateSpec = field(default_factory=SubstrateSpec)
     bonds: BondsSpec = field(default_factory=BondsSpec)
     boundary: BoundarySpec = field(default_factory=BoundarySpec)
+    contacts: ContactsSpec = field(default_factory=ContactsSpec)
+    compression: CompressionSpec = field(default_factory=CompressionSpec)
+    lattice: LatticeSpec = field(default_factory=LatticeSpec)
+    datafile: DatafileSpec = field(default_factory=DatafileSpec)
+    materials: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
 
 
-KINDS = ("opal",)
+KINDS = ("opal", "lattice", "datafile")
+LATTICES = ("sc", "fcc")
 ARRANGEMENTS = ("fcc", "random", "none")
 SIDES = ("periodic", "open")
 
@@ -160,6 +212,11 @@ def _convert(cls, raw: dict, prefix: str):
 
 def _coerce(value, hint, where):
     """Check a TOML value against a field's type (``X | None`` allows a missing value)."""
+    if typing.get_origin(hint) is list:
+        if not isinstance(value, list):
+            raise SpecError(where, value, "must be a list")
+        item = typing.get_args(hint)[0]
+        return [_coerce(v, item, f"{where}[{k}]") for k, v in enumerate(value)]
     args = typing.get_args(hint)
     if args:
         if value is None:
@@ -173,6 +230,10 @@ def _coerce(value, hint, where):
         raise SpecError(where, value, "must be an integer")
     if hint is str and not isinstance(value, str):
         raise SpecError(where, value, "must be a string")
+    if hint is dict and not isinstance(value, dict):
+        raise SpecError(where, value, "must be a table")
+    if hint is bool and not isinstance(value, bool):
+        raise SpecError(where, value, "must be true or false")
     return value
 
 
@@ -236,6 +297,17 @@ def validate(spec: WorkflowSpec, known_materials: tuple[str, ...] | None = None)
     materials = known_materials or material_names()
     check_name("name", spec.name)
     _check(spec.kind in KINDS, "kind", spec.kind, f"must be one of {', '.join(KINDS)}")
+    from opalflow.materials import OVERRIDABLE
+
+    for mname, props in spec.materials.items():
+        check_name("materials", mname)
+        _check(mname in materials, f"materials.{mname}", props, f"unknown material; known: {', '.join(materials)}")
+        _check(isinstance(props, dict), f"materials.{mname}", props, "must be a table of properties")
+        for key, value in props.items():
+            _check(key in OVERRIDABLE, f"materials.{mname}.{key}", value,
+                   f"unknown key; allowed: {', '.join(OVERRIDABLE)}")
+            _check(not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
+                   and value > 0, f"materials.{mname}.{key}", value, "must be a number > 0")
     check_name("material", spec.material)
     _check(spec.material in materials, "material", spec.material,
            f"unknown material; known: {', '.join(materials)}")
@@ -294,8 +366,45 @@ def validate(spec: WorkflowSpec, known_materials: tuple[str, ...] | None = None)
 
     _check(0 <= spec.substrate.layers <= 10, "substrate.layers", spec.substrate.layers,
            "must be in [0, 10]")
-    _check(1.0 <= spec.bonds.cutoff_factor <= 3.0, "bonds.cutoff_factor", spec.bonds.cutoff_factor,
+    b = spec.bonds
+    _check(1.0 <= b.cutoff_factor <= 3.0, "bonds.cutoff_factor", b.cutoff_factor,
            "must be in [1.0, 3.0] (bond cutoff in particle diameters)")
+    _check(0 < b.radius_factor <= 2.0, "bonds.radius_factor", b.radius_factor,
+           "must be in (0, 2] (bond radius / particle radius)")
+    _check(1 <= b.length_bins <= 100, "bonds.length_bins", b.length_bins, "must be in [1, 100]")
+    _check(0 <= b.damping_ratio <= 2.0, "bonds.damping_ratio", b.damping_ratio, "must be in [0, 2]")
+    c = spec.compression
+    _check(0 < c.strain_max <= 0.5, "compression.strain_max", c.strain_max, "must be in (0, 0.5]")
+    _check(0 < c.plate_speed_m_s <= 100, "compression.plate_speed_m_s", c.plate_speed_m_s,
+           "must be in (0, 100] m/s (quasi-static loading)")
+    _check(c.timestep_s >= 0, "compression.timestep_s", c.timestep_s, "must be >= 0 (0: estimated)")
+    _check(0 < c.timestep_safety <= 1, "compression.timestep_safety", c.timestep_safety, "must be in (0, 1]")
+    _check(0 <= c.global_damping <= 2, "compression.global_damping", c.global_damping,
+           "must be in [0, 2] (fraction of critical damping of the sample's fundamental mode)")
+    _check(0 < c.output_every_strain <= c.strain_max / 10, "compression.output_every_strain",
+           c.output_every_strain, f"must be in (0, strain_max/10 = {c.strain_max / 10:g}]")
+    for i, e in enumerate(c.snapshot_strains):
+        _check(0 < e <= c.strain_max, f"compression.snapshot_strains[{i}]", e,
+               f"must be in (0, strain_max = {c.strain_max:g}]")
+    _check(c.restart_every_strain > 0, "compression.restart_every_strain", c.restart_every_strain,
+           "must be > 0 (restart files every this much strain)")
+    if spec.kind == "lattice":
+        lat = spec.lattice
+        _check(lat.arrangement in LATTICES, "lattice.arrangement", lat.arrangement,
+               f"must be one of {', '.join(LATTICES)}")
+        _check(lat.spacing_nm > 0, "lattice.spacing_nm", lat.spacing_nm, "must be > 0")
+        for axis in "xyz":
+            n = getattr(lat, f"cells_{axis}")
+            _check(2 <= n <= 200, f"lattice.cells_{axis}", n, "must be in [2, 200]")
+    if spec.kind == "datafile":
+        d = spec.datafile
+        _check(bool(d.path) and Path(d.path).is_file(), "datafile.path", d.path, "must name an existing file")
+        _check(len(d.materials) >= 1, "datafile.materials", d.materials,
+               "must name the material of each atom type, in type order ('substrate' = fixed)")
+        for i, mname in enumerate(d.materials):
+            check_name(f"datafile.materials[{i}]", mname)
+            _check(mname in materials or mname == "substrate", f"datafile.materials[{i}]", mname,
+                   f"unknown material; known: {', '.join(materials)}, substrate")
     _check(spec.boundary.sides in SIDES, "boundary.sides", spec.boundary.sides,
            f"must be one of {', '.join(SIDES)}")
     if k.tile_nm:

@@ -37,6 +37,7 @@ def test_build_writes_deck_and_summary(tmp_path):
     assert main(["build", "opal_quick", "--out", str(out), "--set", "packing.seed=4"]) == 0
     assert (out / "data.lmp").stat().st_size > 0
     assert "read_data       data.lmp" in (out / "in.lmp").read_text()
+    assert (out / "run.sh").stat().st_mode & 0o100 and (out / "resume.lmp").exists()
     summary = json.loads((out / "summary.json").read_text())
     assert SUMMARY_KEYS <= set(summary)
     assert set(summary["timings_s"]) >= {"packing", "pores", "bonds", "write"}
@@ -92,5 +93,5 @@ def test_open_sides_have_no_bonds_across(tmp_path):
     assert dx.max() <= spec.bonds.cutoff_factor * spec.packing.diameter_nm
     periodic = build_opal(load_spec(WORKFLOWS / "opal_quick.toml"))[0]
     assert s.n_bonds < periodic.n_bonds and s.n_particles == periodic.n_particles
-    from opalflow.lammps.deck import check_deck
-    assert "boundary        f f f" in check_deck(s, "open")
+    from opalflow.lammps.deck import compression_deck
+    assert "boundary        m m f" in compression_deck(spec, s).in_lmp

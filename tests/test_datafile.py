@@ -3,7 +3,7 @@ import numpy as np
 
 from opalflow.build.opal import build_opal
 from opalflow.lammps.datafile import read_data, write_data
-from opalflow.lammps.deck import check_deck
+from opalflow.lammps.deck import compression_deck
 from opalflow.lammps.engine import new_lammps
 from opalflow.resources import WORKFLOWS
 from opalflow.spec import load_spec
@@ -33,9 +33,13 @@ def test_negative_coordinates_round_trip(tmp_path, quick_structure):
 
 
 def test_lammps_reads_data_and_runs_zero_steps(tmp_path, coated_quick):
+    """The real compression deck, its run replaced by 'run 0', reads the file with its bonds."""
     spec, s = coated_quick
-    write_data(tmp_path / "data.lmp", s)
-    (tmp_path / "in.lmp").write_text(check_deck(s, spec.name))
+    deck = compression_deck(spec, s)
+    write_data(tmp_path / "data.lmp", deck.structure)
+    (tmp_path / "snapshots").mkdir()
+    lines = [ln for ln in deck.in_lmp.splitlines() if not ln.startswith(("run ", "restart "))]
+    (tmp_path / "in.lmp").write_text("\n".join(lines + ["run 0"]) + "\n")
     lmp = new_lammps(log=tmp_path / "log.lammps")
     try:
         import os
@@ -47,7 +51,7 @@ def test_lammps_reads_data_and_runs_zero_steps(tmp_path, coated_quick):
             os.chdir(cwd)
         assert lmp.get_natoms() == s.n_particles
         assert lmp.extract_global("nbonds") == s.n_bonds
-        assert lmp.extract_setting("nbondtypes") == 2
+        assert lmp.extract_setting("nbondtypes") == len(deck.bins.lengths) > 2
         assert lmp.extract_setting("ntypes") == 3
         # LAMMPS keeps what we wrote: positions and diameters of every atom
         x = np.array(lmp.gather_atoms("x", 1, 3)).reshape(-1, 3)

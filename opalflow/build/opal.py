@@ -129,9 +129,9 @@ def build_opal(spec: WorkflowSpec, progress=None) -> tuple[Structure, dict]:
     if coated_k.any():
         type_names.append(spec.coating.material)
         types[coated_k] = len(type_names)
-    densities = np.full(len(positions), density_to_nano(material(spec.material)["density_kg_m3"]))
+    densities = np.full(len(positions), density_to_nano(material(spec.material, spec.materials)["density_kg_m3"]))
     if coated_k.any():
-        densities[coated_k] = density_to_nano(material(spec.coating.material)["density_kg_m3"])
+        densities[coated_k] = density_to_nano(material(spec.coating.material, spec.materials)["density_kg_m3"])
 
     t = time.perf_counter()
     bonds = find_bonds(positions, diameters, box, periodic, spec.bonds.cutoff_factor)
@@ -154,6 +154,7 @@ def build_opal(spec: WorkflowSpec, progress=None) -> tuple[Structure, dict]:
               "packing_tile_nm": packing.tile.tolist(), "packing_tile_particles": packing.tile_particles,
               "packing_relax_steps": packing.relax_steps},
     )
+    structure.meta["timings_s"] = timings
     return structure, timings
 
 

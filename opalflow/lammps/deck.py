@@ -1,18 +1,31 @@
 """Decks: LAMMPS input scripts assembled from the blocks in ``templates/``.
 
 A block is a text file with ``${name}`` placeholders.  Every value is passed through
-:func:`opalflow.lammps.syntax.num` or :func:`~opalflow.lammps.syntax.name` (or is
-one of the fixed keyword strings below), so nothing unchecked reaches LAMMPS.
-A deck holds only the blocks its scene needs.
+:func:`opalflow.lammps.syntax.num` or :func:`~opalflow.lammps.syntax.name` (or is a
+fixed keyword chosen here), so nothing unchecked reaches LAMMPS.  A deck holds only
+the blocks its scene needs: no granular pair without contacts, no snapshot computes
+without snapshots, ``break no`` for unbreakable bonds, bond and atom types only for
+the materials present.
 """
 from __future__ import annotations
 
+import math
 import string
+from dataclasses import dataclass, field
+
+import numpy as np
 
 from opalflow import __version__
 from opalflow.lammps.syntax import name, num
+from opalflow.lammps.timestep import TimestepEstimate, estimate_timestep
+from opalflow.materials import (BondCoefficients, ContactProperties, bond_coefficients,
+                                contact_properties)
 from opalflow.resources import TEMPLATES, resource
+from opalflow.spec import SpecError, WorkflowSpec
 from opalflow.structure import Structure
+
+DIAMOND = "diamond"
+
 
 def render(block: str, **values) -> str:
     """Fill ``templates/<block>.lmp``; every placeholder must be given."""
@@ -20,21 +33,239 @@ def render(block: str, **values) -> str:
     return string.Template(text).substitute(values)
 
 
-def boundary_of(s: Structure) -> str:
-    """LAMMPS boundary string for a structure: periodic sides or fixed, z fixed."""
-    return "p p f" if s.periodic[0] and s.periodic[1] else "f f f"
+@dataclass
+class BondBins:
+    """Bond types binned by material and initial length (kt, kb scale with 1/L0)."""
+
+    bond_types: np.ndarray                 # (M,) new type per bond, 1-based
+    materials: list[str]                   # per new type
+    lengths: list[float]                   # representative L0 per new type (harmonic mean)
+    counts: list[int]
+    stiffness_error_max: float             # max |kb(L_rep)/kb(L0) - 1| over bonds
+    stiffness_error_rms: float
 
 
-def check_deck(s: Structure, title: str, data_file: str = "data.lmp") -> str:
-    """in.lmp that reads the structure and runs 0 steps (``opalflow build``)."""
-    header = f"# opalflow {__version__}: {name(title)} - reads the structure and runs 0 steps\n"
-    return header + "\n".join([
-        render("system", boundary=boundary_of(s), data_file=name_file(data_file)),
-        render("check_run0", pair_cutoff=num(float(s.diameters.max()))),
-    ])
+def bin_bonds(s: Structure, n_bins: int) -> BondBins:
+    """Split each material's bonds into ``n_bins`` equal-width bins of initial length.
+
+    Each bin's representative length is the harmonic mean of its bonds' lengths, so
+    the bin's summed bending and twisting stiffness (proportional to 1/L0) is exact;
+    each bond's own kb, kt are off by L0 / L_rep - 1, reported as the stiffness error.
+    kr and ks use every bond's own r0 (``normalize yes``) and carry no binning error.
+    """
+    r0 = s.bond_lengths()
+    new = np.zeros(s.n_bonds, np.int32)
+    materials, lengths, counts, errors = [], [], [], np.zeros(s.n_bonds)
+    for t, mat in enumerate(s.bond_type_names):
+        sel = np.flatnonzero(s.bond_types == t + 1)
+        if not len(sel):
+            continue
+        lo, hi = r0[sel].min(), r0[sel].max()
+        edges = np.linspace(lo, hi, n_bins + 1)
+        which = np.clip(np.searchsorted(edges, r0[sel], side="right") - 1, 0, n_bins - 1)
+        for b in range(n_bins):
+            members = sel[which == b]
+            if not len(members):
+                continue
+            rep = 1.0 / np.mean(1.0 / r0[members])
+            materials.append(mat)
+            lengths.append(float(rep))
+            counts.append(int(len(members)))
+            new[members] = len(materials)
+            errors[members] = r0[members] / rep - 1.0
+    return BondBins(new, materials, lengths, counts, float(np.max(np.abs(errors), initial=0.0)),
+                    float(np.sqrt(np.mean(errors**2))) if len(errors) else 0.0)
 
 
-def name_file(filename: str) -> str:
-    """A data/restart file name: a name plus an optional extension of [A-Za-z0-9_]."""
-    stem, _, ext = filename.partition(".")
-    return name(stem) + (("." + name(ext)) if ext else "")
+def particle_material(type_name: str, matrix: str) -> str:
+    return matrix if type_name == "substrate" else type_name
+
+
+def plate_contact_E(particle: ContactProperties, plate: ContactProperties) -> float:
+    """Young's modulus to give ``fix wall/gran`` so that its contact E* is particle-on-diamond.
+
+    LAMMPS gives the wall the particle's properties: E* = E / (2 (1 - nu^2)).  The
+    wanted E* is 1 / ((1 - nu_p^2)/E_p + (1 - nu_d^2)/E_d) (Hertz, eq. 5).
+    """
+    e_star = 1.0 / ((1 - particle.poisson_ratio**2) / particle.youngs_modulus_MPa
+                    + (1 - plate.poisson_ratio**2) / plate.youngs_modulus_MPa)
+    return 2.0 * (1.0 - particle.poisson_ratio**2) * e_star
+
+
+def contact_args(c: ContactProperties, E: float | None = None) -> str:
+    return (f"hertz/material {num(E if E is not None else c.youngs_modulus_MPa)} {num(c.restitution)} "
+            f"{num(c.poisson_ratio)} tangential mindlin NULL 1.0 {num(c.friction)} "
+            "damping coeff_restitution")
+
+
+@dataclass
+class CompressionDeck:
+    """Everything a compression run needs: the data, the decks and the numbers behind them."""
+
+    structure: Structure                    # with length-binned bond types
+    in_lmp: str
+    resume_lmp: str
+    bins: BondBins
+    coefficients: list[BondCoefficients]
+    timestep: TimestepEstimate
+    dt_ns: float
+    steps: int
+    every: int
+    restart_every: int
+    snapshot_steps: list[int]
+    height_nm: float
+    area_nm2: float
+    plate_z0_nm: float
+    plate_speed_nm_ns: float
+    blocks: list[str] = field(default_factory=list)
+    modulus_affine_MPa: float = 0.0
+    omega1_per_ns: float = 0.0
+    viscous_gamma: float = 0.0
+    top_z0_nm: float = 0.0
+
+    def info(self) -> dict:
+        return {
+            "timestep_s": self.dt_ns * 1e-9, "steps": self.steps, "output_every_steps": self.every,
+            "restart_every_steps": self.restart_every, "snapshot_steps": self.snapshot_steps,
+            "height_nm": self.height_nm, "area_nm2": self.area_nm2, "plate_z0_nm": self.plate_z0_nm,
+            "plate_speed_m_s": self.plate_speed_nm_ns, "blocks": self.blocks,
+            "modulus_affine_GPa": self.modulus_affine_MPa / 1e3, "omega1_per_ns": self.omega1_per_ns,
+            "viscous_gamma": self.viscous_gamma, "top_z0_nm": self.top_z0_nm,
+            "timestep_estimate_s": self.timestep.as_seconds(),
+            "bond_types": [{"material": m, "length_nm": L, "count": c}
+                           for m, L, c in zip(self.bins.materials, self.bins.lengths, self.bins.counts)],
+            "bond_stiffness_error_max": self.bins.stiffness_error_max,
+            "bond_stiffness_error_rms": self.bins.stiffness_error_rms,
+        }
+
+
+def compression_deck(spec: WorkflowSpec, s: Structure) -> CompressionDeck:
+    """Decks (fresh and resume) for the uniaxial compression of ``s`` by a plate."""
+    c = spec.compression
+    d_mean = float(np.mean(s.diameters))
+    bins = bin_bonds(s, spec.bonds.length_bins)
+    data = Structure(positions=s.positions, diameters=s.diameters, types=s.types, densities=s.densities,
+                     box_lo=s.box_lo, box_hi=s.box_hi, periodic=s.periodic, bonds=s.bonds,
+                     bond_types=bins.bond_types, molecules=s.molecules, type_names=s.type_names,
+                     bond_type_names=[f"{m}_{i + 1}" for i, m in enumerate(bins.materials)],
+                     groups=s.groups, meta=s.meta)
+    masses = s.densities * np.pi / 6 * s.diameters**3
+    coeffs = []
+    for mat, L in zip(bins.materials, bins.lengths):
+        on = np.isin(s.types, [k + 1 for k, n in enumerate(s.type_names)
+                               if particle_material(n, spec.material) == mat])
+        m = float(np.mean(masses[on]))
+        r = float(np.mean(s.diameters[on])) / 2
+        coeffs.append(bond_coefficients(mat, spec.bonds.radius_factor * r, L, m, 0.4 * m * r * r,
+                                        spec.bonds.damping_ratio, spec.materials))
+    plate = contact_properties(DIAMOND)
+    contacts = {k + 1: contact_properties(particle_material(n, spec.material))
+                for k, n in enumerate(s.type_names)}
+    plate_E = {t: plate_contact_E(cp, plate) for t, cp in contacts.items()}
+    estimate = estimate_timestep(data, coeffs, contacts if spec.contacts.enabled else {},
+                                 plate_E, contacts, spec.bonds.damping_ratio)
+    limit_ns = estimate.limit_ns
+    if c.timestep_s:
+        dt = c.timestep_s * 1e9
+        if dt > limit_ns:
+            raise SpecError("compression.timestep_s", c.timestep_s,
+                            f"above the stability limit {limit_ns * 1e-9:.3g} s estimated from the "
+                            f"stiffest mode ({estimate.stiffest}); use <= that or 0 for the estimate")
+    else:
+        dt = c.timestep_safety * limit_ns
+
+    substrate = s.groups.get("substrate", np.zeros(s.n_particles, bool))
+    if not substrate.any():
+        raise SpecError("substrate.layers", 0, "the compression needs a fixed substrate (layers >= 1)")
+    top = float(np.max(s.positions[:, 2] + s.diameters / 2))
+    base = float(np.max(s.positions[substrate, 2] + s.diameters[substrate] / 2))
+    height = top - base
+    # the top particle layer: centres within 3/4 of a diameter of the top surface
+    top_group = (s.positions[:, 2] >= top - 0.75 * d_mean) & ~substrate
+    top_z0 = float(np.mean(s.positions[top_group, 2]))
+    area = float(s.box_lengths[0] * s.box_lengths[1])
+    v = c.plate_speed_m_s                       # m/s = nm/ns
+    steps_per_strain = height / v / dt
+    steps = int(math.ceil(c.strain_max * steps_per_strain))
+    every = max(1, int(round(c.output_every_strain * steps_per_strain)))
+    restart_every = max(every, int(round(c.restart_every_strain * steps_per_strain)))
+    snaps = sorted({max(1, int(round(e * steps_per_strain))) for e in c.snapshot_strains})
+
+    omega1, modulus_affine = fundamental_mode(data, coeffs, height, area, masses)
+    gamma = 2 * c.global_damping * omega1 * float(np.mean(masses[~substrate]))
+
+    substrate_type = s.type_names.index("substrate") + 1
+    bond_lines = "\n".join(f"bond_coeff      {t + 1} " + " ".join(num(x) for x in cf.values())
+                           for t, cf in enumerate(coeffs))
+    common = dict(ghost_cutoff=num(1.25 * float(np.max(s.bond_lengths(), initial=d_mean)) + 0.2 * d_mean),
+                  data_file="data.lmp", boundary="p p f" if s.periodic[0] else "m m f")
+    blocks = {
+        "system": render("system", **common),
+        "groups": render("groups", substrate_type=num(substrate_type), top_layer_z=num(top - 0.75 * d_mean)),
+        "bonds": render("bonds", breakable="yes" if spec.bonds.breakable else "no", bond_coeffs=bond_lines),
+        "contacts": render("contacts", pair_coeffs="\n".join(
+            f"pair_coeff      {t} {t} {contact_args(cp)}" for t, cp in contacts.items())),
+        "integrate": render("integrate", skin=num(0.2 * d_mean), timestep=num(dt)),
+        "damping": render("damping", zeta=num(c.global_damping), gamma=num(gamma), plate_speed=num(v),
+                          base=num(base), height=num(height)),
+        "plate": render("plate", plate_speed=num(v), plate_z0=num(top),
+                        plate_contact=contact_args(contacts[1], plate_E[1])),
+        "snapshots": render("snapshots", next_snapshot=_next_snapshot(snaps)),
+        "run": render("run", restart_every=num(restart_every), steps=num(steps)),
+    }
+    wanted = ["system", "groups", "bonds"] + (["contacts"] if spec.contacts.enabled else []) + \
+             ["integrate"] + (["damping"] if c.global_damping > 0 else []) + \
+             ["plate", "output"] + (["snapshots"] if snaps else []) + ["run"]
+    title = f"# opalflow {__version__}: {name(spec.name)} - uniaxial compression by a plate\n"
+
+    def deck(fresh: bool) -> str:
+        parts = []
+        for b in wanted:
+            if b == "output":
+                parts.append(render("output", height=num(height), every=num(every),
+                                    curve_file="file" if fresh else "append"))
+            elif fresh:
+                parts.append(blocks[b])
+            elif b == "system":
+                parts.append(render("system_restart", ghost_cutoff=common["ghost_cutoff"],
+                                    restart_file="restart.*.bin"))
+            elif b not in ("groups", "bonds", "contacts"):  # stored in restart files
+                parts.append(blocks[b])
+        return title + "\n".join(parts)
+
+    return CompressionDeck(structure=data, in_lmp=deck(True), resume_lmp=deck(False), bins=bins,
+                           coefficients=coeffs, timestep=estimate, dt_ns=dt, steps=steps, every=every,
+                           restart_every=restart_every, snapshot_steps=snaps, height_nm=height,
+                           area_nm2=area, plate_z0_nm=top, plate_speed_nm_ns=v, blocks=wanted,
+                           modulus_affine_MPa=modulus_affine, omega1_per_ns=omega1, viscous_gamma=gamma,
+                           top_z0_nm=top_z0)
+
+
+def fundamental_mode(s: Structure, coeffs: list[BondCoefficients], height: float, area: float,
+                     masses: np.ndarray) -> tuple[float, float]:
+    """Lowest axial frequency omega_1 = pi c / (2 H) of the sample on its fixed substrate.
+
+    c = sqrt(C / rho) with the affine (Voigt) uniaxial-strain modulus of the bond
+    network, C = sum_bonds (kr / L0) L0^2 n_z^4 / V, an upper bound of the real one,
+    so omega_1 and the damping built on it are on the high side.
+    """
+    L0 = s.bond_lengths()
+    d = s.minimum_image(s.positions[s.bonds[:, 1]] - s.positions[s.bonds[:, 0]])
+    nz = d[:, 2] / L0
+    kr = np.array([c.kr for c in coeffs])[s.bond_types - 1] / L0
+    volume = area * height
+    modulus = float(np.sum(kr * L0**2 * nz**4) / volume)
+    substrate = s.groups.get("substrate", np.zeros(s.n_particles, bool))
+    rho = float(np.sum(masses[~substrate]) / volume)
+    return math.pi * math.sqrt(modulus / rho) / (2 * height), modulus
+
+
+def _next_snapshot(steps: list[int]) -> str:
+    """Equal-style expression giving the next snapshot step after the current one."""
+    if not steps:
+        return "0"
+    terms = [f"(step<{steps[0]})*{steps[0]}"]
+    for prev, nxt in zip(steps, steps[1:]):
+        terms.append(f"(step>={prev}&&step<{nxt})*{nxt}")
+    terms.append(f"(step>={steps[-1]})*{10**12}")
+    return '"' + "+".join(terms) + '"'

@@ -111,3 +111,147 @@ def lammps_info() -> dict:
         "lmp": executable("lmp"),
         "liggghts": shutil.which("liggghts") or shutil.which("lmp_auto"),
     }
+
+
+class EngineError(RuntimeError):
+    """LAMMPS stopped with an error; the message carries the log tail and the run folder."""
+
+
+def log_tail(log: Path, lines: int = 20) -> str:
+    if not log.exists():
+        return "(no log written)"
+    return "\n".join(log.read_text(errors="replace").splitlines()[-lines:])
+
+
+def script_commands(text: str) -> list[str]:
+    """LAMMPS input lines with '&' continuations joined; comment lines and blanks dropped."""
+    out, buf = [], ""
+    for line in text.splitlines():
+        body = line.strip()
+        if not buf and (not body or body.startswith("#")):
+            continue
+        if body.endswith("&"):
+            buf += body[:-1] + " "
+            continue
+        out.append(buf + body)
+        buf = ""
+    return out
+
+
+class Progress:
+    """Prints step, strain, rate and time left (to stderr) at most every ``interval`` seconds."""
+
+    def __init__(self, total_steps: int, start_step: int = 0, label: str = "", interval: float = 5.0,
+                 out=None):
+        import time as _time
+
+        self.total, self.start, self.label, self.interval = total_steps, start_step, label, interval
+        self.t0 = self.last = _time.perf_counter()
+        self._time = _time
+        self.out = out or sys.stderr
+
+    def update(self, step: int, strain: float | None = None, force: bool = False) -> None:
+        now = self._time.perf_counter()
+        if not force and now - self.last < self.interval:
+            return
+        self.last = now
+        done = max(step - self.start, 0)
+        rate = done / max(now - self.t0, 1e-9)
+        left = (self.total - step) / rate if rate > 0 else float("inf")
+        strain_txt = f", strain {strain:.4f}" if strain is not None else ""
+        print(f"{self.label}step {step}/{self.total} ({100 * step / max(self.total, 1):.0f} %)"
+              f"{strain_txt}, {rate:.0f} steps/s, {left:.0f} s left", file=self.out, flush=True)
+
+
+def run_in_process(folder: Path, script: str, *, every: int, strain_per_step: float,
+                   suffix: str | None = None, label: str = "") -> float:
+    """Run ``script`` (text of in.lmp or resume.lmp) in ``folder`` with the LAMMPS module.
+
+    The final ``run N upto`` is split into chunks (multiples of ``every`` steps) so
+    that progress can be printed; the result is the same run.  Returns LAMMPS seconds.
+    """
+    import time
+
+    folder = Path(folder)
+    cwd = os.getcwd()
+    lmp = new_lammps(log=folder / "log.lammps", suffix=suffix)
+    t = time.perf_counter()
+    try:
+        os.chdir(folder)
+        for cmd in script_commands(script):
+            words = cmd.split()
+            if words[0] == "run" and "upto" in words:
+                target = int(words[1])
+                step = int(lmp.get_thermo("step"))
+                chunk = every * max(1, (target // 50) // every)
+                progress = Progress(target, step, label)
+                first = True
+                while step < target:
+                    nxt = min(target, (step // chunk + 1) * chunk)
+                    lmp.command(f"run {nxt} upto pre {'yes' if first else 'no'} post no")
+                    first = False
+                    step = int(lmp.get_thermo("step"))
+                    progress.update(step, step * strain_per_step)
+                progress.update(step, step * strain_per_step, force=True)
+            else:
+                lmp.command(cmd)
+    except Exception as exc:  # LAMMPS raises plain Exception with its ERROR line
+        raise EngineError(f"LAMMPS failed in {folder}: {str(exc).splitlines()[0]}\n"
+                          f"--- log tail ({folder / 'log.lammps'}) ---\n{log_tail(folder / 'log.lammps')}"
+                          ) from None
+    finally:
+        os.chdir(cwd)
+        lmp.close()
+    return time.perf_counter() - t
+
+
+def run_script_sh(lmp_args: str = "-in in.lmp") -> str:
+    """run.sh: runs the deck with the lmp executable alone (NP=4 bash run.sh for MPI)."""
+    folder = mpi_library_dir()
+    lmp = executable("lmp") or "lmp"
+    mpiexec = executable("mpiexec") or "mpiexec"
+    return f"""#!/usr/bin/env bash
+# Runs this deck with LAMMPS alone (no opalflow needed): bash run.sh [resume]
+# NP=4 bash run.sh runs it under MPI.  Written by opalflow {_version()}.
+set -euo pipefail
+cd "$(dirname "$0")"
+export LD_LIBRARY_PATH="{folder or ''}${{LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}}"
+mkdir -p snapshots
+input=in.lmp
+[ "${{1:-}}" = resume ] && input=resume.lmp
+if [ "${{NP:-1}}" -gt 1 ]; then
+  exec "{mpiexec}" -n "$NP" "{lmp}" -nocite -in "$input" -log log.lammps
+else
+  exec "{lmp}" -nocite -in "$input" -log log.lammps
+fi
+"""
+
+
+def _version() -> str:
+    from opalflow import __version__
+
+    return __version__
+
+
+def run_subprocess(folder: Path, *, np: int, total_steps: int, resume: bool, label: str = "") -> float:
+    """Run ``bash run.sh`` (``NP`` processes); progress from the thermo lines on its output."""
+    import subprocess
+    import time
+
+    env = dict(os.environ, NP=str(np))
+    t = time.perf_counter()
+    cmd = ["bash", str(Path(folder) / "run.sh")] + (["resume"] if resume else [])
+    progress = Progress(total_steps, 0, label)
+    with subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env) as p:
+        for line in p.stdout:
+            words = line.split()
+            if len(words) == 7 and words[0].isdigit():
+                try:
+                    progress.update(int(words[0]), float(words[2]))
+                except ValueError:
+                    pass
+        code = p.wait()
+    if code:
+        raise EngineError(f"LAMMPS failed in {folder} (exit {code})\n--- log tail ---\n"
+                          f"{log_tail(Path(folder) / 'log.lammps')}")
+    return time.perf_counter() - t

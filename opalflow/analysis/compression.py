@@ -1,0 +1,129 @@
+"""Compression output -> stress-strain curve, Young's modulus, strength, particle stresses.
+
+Readers for the files the deck writes (``curve.txt`` from fix ave/time, the
+``snapshots/stress.*.txt`` custom dumps and ``snapshots/bonds.*.txt`` local dumps)
+and the mechanics computed from them.
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+CURVE_COLUMNS = ["step", "plate_dz_nm", "plate_fz_pN", "substrate_fz_pN", "intact_bonds", "ke_zJ", "top_z_nm"]
+
+
+def read_curve(path: Path) -> dict[str, np.ndarray]:
+    """curve.txt as columns; rows repeated by a resumed run keep their last value."""
+    rows = np.loadtxt(path, comments="#", ndmin=2)
+    if rows.size == 0:
+        raise ValueError(f"{path} holds no data rows")
+    steps = rows[:, 0]
+    # the last occurrence of each step wins (a resumed run appends rows it re-computed)
+    _, last = np.unique(steps[::-1], return_index=True)
+    rows = rows[::-1][last]
+    return {name: rows[:, k] for k, name in enumerate(CURVE_COLUMNS)}
+
+
+@dataclass
+class ElasticFit:
+    """Linear fit of stress on strain over the elastic window."""
+
+    modulus_MPa: float
+    intercept_MPa: float
+    window: tuple[float, float]
+    r2: float
+    points: int
+
+
+def fit_elastic(strain: np.ndarray, stress: np.ndarray, window_fraction: float = 0.3,
+                min_points: int = 6, r2_min: float = 0.995) -> ElasticFit:
+    """Young's modulus from the steepest linear stretch before the peak.
+
+    Windows spanning ``window_fraction`` of the points up to the peak slide along the
+    curve; among those whose fit has R^2 >= r2_min the steepest is taken (the initial
+    contact region is flatter, failure bends the curve down), else the best R^2.
+    """
+    peak = int(np.argmax(stress))
+    n = max(peak + 1, min_points)
+    x, y = strain[:n], stress[:n]
+    w = max(min_points, int(round(window_fraction * n)))
+    best, best_r2 = None, None
+    for a in range(0, max(1, n - w + 1)):
+        xs, ys = x[a:a + w], y[a:a + w]
+        if len(xs) < min_points or np.ptp(xs) == 0:
+            continue
+        slope, icpt = np.polyfit(xs, ys, 1)
+        resid = ys - (slope * xs + icpt)
+        ss = np.sum((ys - ys.mean()) ** 2)
+        r2 = 1 - np.sum(resid**2) / ss if ss > 0 else 0.0
+        fit = ElasticFit(float(slope), float(icpt), (float(xs[0]), float(xs[-1])), float(r2), len(xs))
+        if r2 >= r2_min and (best is None or best_r2 < r2_min or slope > best.modulus_MPa):
+            best, best_r2 = fit, r2
+        elif best is None or (best_r2 < r2_min and r2 > best_r2):
+            best, best_r2 = fit, r2
+    if best is None:
+        raise ValueError("too few points before the peak to fit a modulus")
+    return best
+
+
+def read_dump_custom(path: Path) -> dict[str, np.ndarray]:
+    """A LAMMPS custom dump (one snapshot) as columns keyed by the ITEM: ATOMS names."""
+    text = Path(path).read_text()
+    head, body = text.split("ITEM: ATOMS", 1)
+    names, _, data = body.partition("\n")
+    cols = names.split()
+    values = np.array(data.split(), dtype=float).reshape(-1, len(cols))
+    return {c: values[:, k] for k, c in enumerate(cols)}
+
+
+def read_dump_local(path: Path) -> np.ndarray:
+    text = Path(path).read_text()
+    _, body = text.split("ITEM: ENTRIES", 1)
+    names, _, data = body.partition("\n")
+    return np.array(data.split(), dtype=float).reshape(-1, len(names.split()))
+
+
+def snapshot_files(folder: Path, kind: str) -> dict[int, Path]:
+    out = {}
+    for p in (Path(folder) / "snapshots").glob(f"{kind}.*.txt"):
+        m = re.match(rf"{kind}\.(\d+)\.txt$", p.name)
+        if m:
+            out[int(m.group(1))] = p
+    return dict(sorted(out.items()))
+
+
+def particle_stress(dump: dict[str, np.ndarray]) -> np.ndarray:
+    """Cauchy stress per particle (MPa, tension positive), eq. 21 with V_p = 4/3 pi r^3.
+
+    ``compute stress/atom`` gives -(1/2 sum_K l F) per atom in pressure x volume (the
+    negative virial; bonds tally the full bond force along the centre-centre vector,
+    contacts likewise), so sigma = stress/atom / V_p.  Columns xx yy zz xy xz yz.
+    """
+    vol = 4.0 / 3.0 * np.pi * dump["radius"] ** 3
+    return np.column_stack([dump[f"c_stress[{k}]"] for k in range(1, 7)]) / vol[:, None]
+
+
+def stress_by_material(sigma: np.ndarray, types: np.ndarray, type_names: list[str],
+                       exclude: tuple[str, ...] = ("substrate",)) -> dict[str, dict[str, float]]:
+    """Mean and std of sigma_xx and sigma_zz per material (Table 2 of Dosta et al.)."""
+    out = {}
+    for t, name in enumerate(type_names):
+        if name in exclude:
+            continue
+        sel = types == t + 1
+        if not sel.any():
+            continue
+        out[name] = {"sigma_xx_mean_MPa": float(sigma[sel, 0].mean()), "sigma_xx_std_MPa": float(sigma[sel, 0].std()),
+                     "sigma_zz_mean_MPa": float(sigma[sel, 2].mean()), "sigma_zz_std_MPa": float(sigma[sel, 2].std()),
+                     "particles": int(sel.sum())}
+    return out
+
+
+def bond_strain_histogram(local: np.ndarray, bins: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Fraction of intact bonds per strain bin (Fig. 7 format); strain = r / r0 - 1."""
+    strain = local[:, 0] / local[:, 1] - 1.0
+    counts, edges = np.histogram(np.clip(strain, bins[0], bins[-1]), bins=bins)
+    return counts / max(1, len(strain)), edges

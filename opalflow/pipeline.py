@@ -1,0 +1,331 @@
+"""The one flow of a compression run: spec -> structure -> deck -> LAMMPS -> analysis -> results.
+
+A run folder holds everything: data.lmp, in.lmp, resume.lmp, run.sh (LAMMPS alone),
+run.json (what analysis needs to know about the deck), the raw LAMMPS output
+(log.lammps, curve.txt, snapshots/, restart files) and the results (results.h5,
+summary.json, report.md, PNG plots).  Results are written under temporary names and
+renamed, so a failed run never replaces earlier results.
+"""
+from __future__ import annotations
+
+import json
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+
+from opalflow import __version__
+from opalflow.analysis import compression as mech
+from opalflow.build.bonds import bond_types_by_material
+from opalflow.lammps.datafile import read_data, write_data
+from opalflow.lammps.deck import CompressionDeck, compression_deck
+from opalflow.lammps.engine import lammps_info, run_in_process, run_script_sh, run_subprocess
+from opalflow.resources import ROOT
+from opalflow.spec import SpecError, WorkflowSpec
+from opalflow.store import write_json_atomic, write_text_atomic
+from opalflow.structure import Structure
+
+#: paper values that a run's results are compared with (Dosta et al.; do Rosario et al. experiments)
+REFERENCES = {
+    "opal_fcc": {"youngs_modulus_GPa": (1.7, "experiment [57] via Dosta et al. 3.1.2"),
+                 "strength_MPa": (41.3, "experiment [57] via Dosta et al. 3.1.2")},
+}
+
+
+def build_structure(spec: WorkflowSpec, progress=None) -> Structure:
+    """The scene of a spec: an opal, a lattice, or a user's data file."""
+    if spec.kind == "lattice":
+        from opalflow.build.lattice import build_lattice
+
+        return build_lattice(spec)
+    if spec.kind == "datafile":
+        d = spec.datafile
+        s = read_data(d.path, periodic=(d.periodic_sides, d.periodic_sides, False))
+        n_types = int(s.types.max())
+        if len(d.materials) != n_types:
+            raise SpecError("datafile.materials", d.materials, f"must name all {n_types} atom types of {d.path}")
+        s.type_names = list(d.materials)
+        s.groups["substrate"] = np.isin(s.types, [k + 1 for k, m in enumerate(d.materials) if m == "substrate"])
+        coat = np.isin(s.types, [k + 1 for k, m in enumerate(d.materials) if m not in (spec.material, "substrate")])
+        others = sorted({m for m in d.materials if m not in (spec.material, "substrate")})
+        if len(others) > 1:
+            raise SpecError("datafile.materials", d.materials, "at most one material besides the matrix")
+        s.bond_types = bond_types_by_material(s.bonds, coat)
+        s.bond_type_names = [spec.material] + others
+        s.meta["solid_fraction"] = float(np.sum(s.particle_volumes()) / np.prod(s.box_lengths))
+        return s
+    from opalflow.build.opal import build_opal
+
+    s, _ = build_opal(spec, progress=progress)
+    return s
+
+
+def solid_fraction(s: Structure) -> float:
+    return float(s.meta.get("packing_solid_fraction", s.meta.get("solid_fraction", 1.0)))
+
+
+def prepare(spec: WorkflowSpec, out: Path, progress=None) -> CompressionDeck:
+    """Build the scene and write the run folder's inputs (data.lmp, decks, run.sh, run.json)."""
+    t = time.perf_counter()
+    s = build_structure(spec, progress)
+    deck = compression_deck(spec, s)
+    build_s = time.perf_counter() - t
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "snapshots").mkdir(exist_ok=True)
+    t = time.perf_counter()
+    write_data(out / "data.lmp", deck.structure, title=f"opalflow {__version__} {spec.name}")
+    deck.structure.meta.setdefault("timings_s", {})["write"] = time.perf_counter() - t
+    write_text_atomic(out / "in.lmp", deck.in_lmp)
+    write_text_atomic(out / "resume.lmp", deck.resume_lmp)
+    write_text_atomic(out / "run.sh", run_script_sh())
+    (out / "run.sh").chmod(0o755)
+    info = {"workflow": spec.name, "spec": spec.to_dict(), "opalflow_version": __version__,
+            "type_names": deck.structure.type_names, "n_particles": s.n_particles, "n_bonds": s.n_bonds,
+            "solid_fraction": solid_fraction(s), "build_s": build_s, **deck.info()}
+    write_json_atomic(out / "run.json", info)
+    return deck
+
+
+def execute(out: Path, *, np_: int = 1, resume: bool = False, label: str = "") -> float:
+    """Run the deck of a prepared folder; returns LAMMPS wall seconds."""
+    info = json.loads((out / "run.json").read_text())
+    if resume and not list(out.glob("restart.*.bin")):
+        raise SpecError("--resume", str(out), "no restart file in the folder; run without --resume")
+    if np_ > 1:
+        return run_subprocess(out, np=np_, total_steps=info["steps"], resume=resume, label=label)
+    script = (out / ("resume.lmp" if resume else "in.lmp")).read_text()
+    suffix = None
+    return run_in_process(out, script, every=info["output_every_steps"],
+                          strain_per_step=info["plate_speed_m_s"] * info["timestep_s"] * 1e9 / info["height_nm"],
+                          suffix=suffix, label=label)
+
+
+def boundary_stresses(curve: dict, area: float) -> tuple[np.ndarray, np.ndarray]:
+    """Compressive stress (MPa, positive) on the plate and on the substrate.
+
+    fix wall/gran/region reports the force on the particles in its 'contacts' array
+    (negative z: the plate pushes down); the substrate's reaction is the force on its
+    particles (negative: pulled down).  The sample stress is their mean, the stress at
+    mid-height, which also cancels what inertia and damping add at one end.  pN/nm^2 = MPa.
+    """
+    return -curve["plate_fz_pN"] / area, -curve["substrate_fz_pN"] / area
+
+
+def git_commit() -> str:
+    try:
+        return subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True,
+                              text=True, timeout=5).stdout.strip() or "unknown"
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+def analyze(out: Path, wall_s: float | None = None, lammps_s: float | None = None,
+            extra: dict | None = None) -> dict:
+    """Curves, modulus, strength, particle stresses -> results.h5, summary.json, report.md, plots."""
+    info = json.loads((out / "run.json").read_text())
+    curve = mech.read_curve(out / "curve.txt")
+    height, area = info["height_nm"], info["area_nm2"]
+    strain = -curve["plate_dz_nm"] / height
+    stress_plate, stress_substrate = boundary_stresses(curve, area)
+    stress = 0.5 * (stress_plate + stress_substrate)
+    fit = mech.fit_elastic(strain, stress)
+    # specimen strain: mean displacement of the top particle layer (no plate indentation)
+    strain_top = (info["top_z0_nm"] - curve["top_z_nm"]) / height
+    fit_top = mech.fit_elastic(strain_top, stress)
+    peak = int(np.argmax(stress))
+    n_bonds0 = info["n_bonds"]
+    broken = n_bonds0 - curve["intact_bonds"]
+
+    snapshots = {}
+    phi = info["solid_fraction"]
+    for step, path in mech.snapshot_files(out, "stress").items():
+        dump = mech.read_dump_custom(path)
+        sigma = mech.particle_stress(dump)
+        snap_strain = float(np.interp(step, curve["step"], strain))
+        snapshots[step] = {"strain": snap_strain, "id": dump["id"].astype(np.int64),
+                           "position_nm": np.column_stack([dump["x"], dump["y"], dump["z"]]),
+                           "type": dump["type"].astype(np.int32), "sigma_MPa": sigma,
+                           "by_material": mech.stress_by_material(sigma, dump["type"].astype(int),
+                                                                  info["type_names"])}
+    histograms = {}
+    bins = np.linspace(-0.02, 0.02, 81)
+    for step, path in mech.snapshot_files(out, "bonds").items():
+        frac, edges = mech.bond_strain_histogram(mech.read_dump_local(path), bins)
+        histograms[step] = {"strain": float(np.interp(step, curve["step"], strain)),
+                            "fraction": frac, "edges": edges}
+
+    E_GPa = fit.modulus_MPa / 1e3
+    summary = {
+        "workflow": info["workflow"],
+        "youngs_modulus_GPa": E_GPa,
+        "elastic_window_strain": list(fit.window), "elastic_fit_r2": fit.r2,
+        "youngs_modulus_specimen_GPa": fit_top.modulus_MPa / 1e3,
+        "strength_MPa": float(stress[peak]), "strain_at_peak": float(strain[peak]),
+        "timestep_s": info["timestep_s"], "steps": int(curve["step"][-1]),
+        "wall_s": wall_s, "lammps_s": lammps_s,
+        "broken_bonds": int(broken[-1]), "n_particles": info["n_particles"], "n_bonds": n_bonds0,
+        "stress_by_material": {f"{v['strain']:.4f}": v["by_material"] for v in snapshots.values()},
+        "solid_fraction": phi,
+        "bond_stiffness_error_max": info["bond_stiffness_error_max"],
+        "timestep_estimate_s": info["timestep_estimate_s"],
+    }
+    refs = REFERENCES.get(info["workflow"], {})
+    summary["reference"] = {k: {"value": v, "source": src,
+                                "error": (summary[k] - v) / v} for k, (v, src) in refs.items()}
+    if extra:
+        summary.update(extra)
+
+    _write_h5(out, info, curve, strain, stress, stress_plate, stress_substrate, broken, snapshots,
+              histograms, summary)
+    write_json_atomic(out / "summary.json", summary)
+    _plots(out, strain, stress, stress_plate, stress_substrate, fit, snapshots, histograms, info["type_names"])
+    write_text_atomic(out / "report.md", _report(info, summary, fit))
+    return summary
+
+
+def _write_h5(out, info, curve, strain, stress, stress_plate, stress_substrate, broken, snapshots,
+              histograms, summary):
+    import h5py
+
+    tmp = out / "results.h5.tmp"
+    with h5py.File(tmp, "w") as h:
+        c = h.create_group("curve")
+        for k, v in curve.items():
+            c[k] = v
+        c["strain"], c["stress_MPa"], c["stress_substrate_MPa"], c["broken_bonds"] = \
+            strain, stress, stress_substrate, broken
+        c["stress_plate_MPa"] = stress_plate
+        c["strain_specimen"] = (info["top_z0_nm"] - curve["top_z_nm"]) / info["height_nm"]
+        for step, snap in snapshots.items():
+            g = h.create_group(f"snapshots/{step}")
+            g.attrs["strain"] = snap["strain"]
+            g["id"], g["type"], g["sigma_MPa"] = snap["id"], snap["type"], snap["sigma_MPa"]
+            g["position_nm"] = snap["position_nm"]
+        for step, hist in histograms.items():
+            g = h.create_group(f"bond_strain_histograms/{step}")
+            g.attrs["strain"] = hist["strain"]
+            g["fraction"], g["edges"] = hist["fraction"], hist["edges"]
+        p = h.create_group("provenance")
+        p.attrs["spec"] = json.dumps(info["spec"])
+        p.attrs["opalflow_version"] = __version__
+        p.attrs["lammps_version"] = lammps_info()["version"]
+        p.attrs["git_commit"] = git_commit()
+        p.attrs["seeds"] = json.dumps({"packing": info["spec"]["packing"]["seed"],
+                                       "pores": info["spec"]["pores"]["seed"]})
+        p.attrs["run"] = json.dumps({k: v for k, v in info.items() if k != "spec"})
+        h.attrs["summary"] = json.dumps(summary, default=float)
+    tmp.replace(out / "results.h5")
+
+
+def _plots(out, strain, stress, stress_plate, stress_substrate, fit, snapshots, histograms, type_names):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5, 3.6))
+    ax.plot(100 * strain, stress_plate, lw=0.6, color="0.6", label="plate")
+    ax.plot(100 * strain, stress_substrate, lw=0.6, color="0.8", label="substrate")
+    ax.plot(100 * strain, stress, lw=1.4, label="sample (mean)")
+    xs = np.array(fit.window)
+    ax.plot(100 * xs, fit.modulus_MPa * xs + fit.intercept_MPa, "--", label=f"E = {fit.modulus_MPa / 1e3:.3g} GPa")
+    ax.set_xlabel("strain (%)")
+    ax.set_ylabel("stress (MPa)")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(out / "stress_strain.png.tmp.png", dpi=120)
+    (out / "stress_strain.png.tmp.png").replace(out / "stress_strain.png")
+    plt.close(fig)
+    if snapshots:
+        step, snap = list(snapshots.items())[-1]
+        fig, axes = plt.subplots(1, 2, figsize=(8, 3.4))
+        for col, ax, label in ((0, axes[0], "sigma_xx"), (2, axes[1], "sigma_zz")):
+            for t, name in enumerate(type_names):
+                sel = snap["type"] == t + 1
+                if name != "substrate" and sel.any():
+                    ax.hist(snap["sigma_MPa"][sel, col], bins=60, histtype="step",
+                            weights=np.full(sel.sum(), 1 / len(sel)), label=name)
+            ax.set_xlabel(f"{label} (MPa) at strain {100 * snap['strain']:.2f} %")
+            ax.set_ylabel("fraction")
+        axes[0].legend()
+        fig.tight_layout()
+        fig.savefig(out / "stress_hist.png.tmp.png", dpi=120)
+        (out / "stress_hist.png.tmp.png").replace(out / "stress_hist.png")
+        plt.close(fig)
+    if histograms:
+        fig, ax = plt.subplots(figsize=(5, 3.4))
+        for hist in histograms.values():
+            mids = 0.5 * (hist["edges"][1:] + hist["edges"][:-1])
+            ax.step(100 * mids, hist["fraction"], where="mid", label=f"strain {100 * hist['strain']:.2f} %")
+        ax.set_xlabel("bond strain (%)")
+        ax.set_ylabel("fraction of bonds")
+        ax.legend()
+        fig.tight_layout()
+        fig.savefig(out / "bond_strain.png.tmp.png", dpi=120)
+        (out / "bond_strain.png.tmp.png").replace(out / "bond_strain.png")
+        plt.close(fig)
+
+
+def _report(info, summary, fit) -> str:
+    lines = [f"# {info['workflow']}: uniaxial compression", "",
+             f"{info['n_particles']} particles, {info['n_bonds']} bonds; time step {summary['timestep_s']:.3g} s "
+             f"({summary['steps']} steps); plate {info['plate_speed_m_s']:g} m/s; "
+             f"wall {summary['wall_s'] or 0:.1f} s (LAMMPS {summary['lammps_s'] or 0:.1f} s).", "",
+             "| quantity | value | reference | error |", "|---|---|---|---|"]
+    for key, label, fmt in (("youngs_modulus_GPa", "Young's modulus (GPa)", "{:.4g}"),
+                            ("strength_MPa", "compressive strength (MPa)", "{:.4g}"),
+                            ("strain_at_peak", "strain at peak", "{:.4f}"),
+                            ("broken_bonds", "broken bonds at the end", "{}")):
+        ref = summary["reference"].get(key)
+        ref_txt = f"{ref['value']:g} ({ref['source']})" if ref else "-"
+        err_txt = f"{100 * ref['error']:+.1f} %" if ref else "-"
+        lines.append(f"| {label} | {fmt.format(summary[key])} | {ref_txt} | {err_txt} |")
+    lines += ["", f"Elastic window: strain {fit.window[0]:.4f} - {fit.window[1]:.4f}, R^2 = {fit.r2:.5f} "
+              f"({fit.points} points).",
+              f"Bond stiffness error from {info['spec']['bonds']['length_bins']} length bins: "
+              f"max {100 * summary['bond_stiffness_error_max']:.2f} %.", ""]
+    if summary["stress_by_material"]:
+        lines += ["Particle stresses (eq. 21, V_p = particle volume; tension positive):", "",
+                  "| strain | material | sigma_xx (MPa) | sigma_zz (MPa) |", "|---|---|---|---|"]
+        for strain_txt, mats in summary["stress_by_material"].items():
+            for mat, v in mats.items():
+                lines.append(f"| {strain_txt} | {mat} | {v['sigma_xx_mean_MPa']:.1f} +- {v['sigma_xx_std_MPa']:.1f} | "
+                             f"{v['sigma_zz_mean_MPa']:.1f} +- {v['sigma_zz_std_MPa']:.1f} |")
+    if "rate_check" in summary:
+        rc = summary["rate_check"]
+        lines += ["", f"Rate check (half plate speed): E changes by {100 * rc['youngs_modulus_change']:+.2f} %, "
+                  f"strength by {100 * rc['strength_change']:+.2f} % (limits 2 % and 5 %)."]
+    lines += ["", "Plots: stress_strain.png, stress_hist.png, bond_strain.png. Data: results.h5, summary.json."]
+    return "\n".join(lines) + "\n"
+
+
+def run_workflow(spec: WorkflowSpec, out: Path, *, np_: int = 1, resume: bool = False, say=print) -> dict:
+    """prepare (unless resuming) -> execute -> analyze; the rate check runs a half-speed twin."""
+    t = time.perf_counter()
+    if not resume:
+        deck = prepare(spec, out, progress=say)
+        say(f"deck: {len(deck.bins.lengths)} bond types, dt = {deck.dt_ns * 1e-9:.3g} s "
+            f"(limit {deck.timestep.limit_ns * 1e-9:.3g} s, stiffest: {deck.timestep.stiffest}), {deck.steps} steps")
+    lammps_s = execute(out, np_=np_, resume=resume, label=f"{spec.name}: ")
+    extra = {}
+    if spec.compression.check_rate and not resume:
+        import dataclasses
+
+        half = dataclasses.replace(spec, compression=dataclasses.replace(
+            spec.compression, plate_speed_m_s=spec.compression.plate_speed_m_s / 2, check_rate=False))
+        sub = out / "rate_half"
+        prepare(half, sub)
+        lammps_s += execute(sub, np_=np_, label=f"{spec.name} (half speed): ")
+        slow = analyze(sub)
+        fast_curve = mech.read_curve(out / "curve.txt")
+        info = json.loads((out / "run.json").read_text())
+        fast_stress = np.mean(boundary_stresses(fast_curve, info["area_nm2"]), axis=0)
+        fast_fit = mech.fit_elastic(-fast_curve["plate_dz_nm"] / info["height_nm"], fast_stress)
+        fast_strength = float(np.max(fast_stress))
+        extra["rate_check"] = {
+            "youngs_modulus_change": slow["youngs_modulus_GPa"] / (fast_fit.modulus_MPa / 1e3) - 1,
+            "strength_change": slow["strength_MPa"] / fast_strength - 1,
+            "half_speed_youngs_modulus_GPa": slow["youngs_modulus_GPa"],
+            "half_speed_strength_MPa": slow["strength_MPa"]}
+    return analyze(out, wall_s=time.perf_counter() - t, lammps_s=lammps_s, extra=extra)
