@@ -108,8 +108,14 @@ def cmd_run(args) -> int:
         spec = load_spec(workflow_path(args.workflow), args.set)
     if args.np < 1:
         raise SpecError("--np", args.np, "must be >= 1")
+    if args.suffix:
+        from opalflow.lammps.engine import lammps_info
+
+        usable = lammps_info()["accelerators"]
+        if args.suffix not in usable:
+            raise SpecError("--suffix", args.suffix, f"this LAMMPS build offers {', '.join(usable) or 'none'}")
     try:
-        summary = run_workflow(spec, out, np_=args.np, resume=args.resume, say=_say)
+        summary = run_workflow(spec, out, np_=args.np, resume=args.resume, say=_say, suffix=args.suffix)
     except EngineError as exc:
         print(f"error: {exc}", file=sys.stderr)
         print(f"run folder kept: {out}", file=sys.stderr)
@@ -148,6 +154,8 @@ def parser() -> argparse.ArgumentParser:
     r.add_argument("--out", required=True, help="run folder")
     r.add_argument("--np", type=int, default=1, help="MPI processes (runs 'lmp' under mpiexec)")
     r.add_argument("--resume", action="store_true", help="continue from the newest restart file in --out")
+    r.add_argument("--suffix", choices=["omp", "kk", "gpu"], default=None,
+                   help="accelerator styles (-sf) where the LAMMPS build has them; bpm bonds have none")
     r.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
     r.set_defaults(func=cmd_run)
     a = sub.add_parser("analyze", help="analyze a run folder's LAMMPS output (e.g. after bash run.sh)")

@@ -87,15 +87,14 @@ def prepare(spec: WorkflowSpec, out: Path, progress=None) -> CompressionDeck:
     return deck
 
 
-def execute(out: Path, *, np_: int = 1, resume: bool = False, label: str = "") -> float:
+def execute(out: Path, *, np_: int = 1, resume: bool = False, label: str = "", suffix: str | None = None) -> float:
     """Run the deck of a prepared folder; returns LAMMPS wall seconds."""
     info = json.loads((out / "run.json").read_text())
     if resume and not list(out.glob("restart.*.bin")):
         raise SpecError("--resume", str(out), "no restart file in the folder; run without --resume")
     if np_ > 1:
-        return run_subprocess(out, np=np_, total_steps=info["steps"], resume=resume, label=label)
+        return run_subprocess(out, np=np_, total_steps=info["steps"], resume=resume, label=label, suffix=suffix)
     script = (out / ("resume.lmp" if resume else "in.lmp")).read_text()
-    suffix = None
     return run_in_process(out, script, every=info["output_every_steps"],
                           strain_per_step=info["plate_speed_m_s"] * info["timestep_s"] * 1e9 / info["height_nm"],
                           suffix=suffix, label=label)
@@ -300,14 +299,15 @@ def _report(info, summary, fit) -> str:
     return "\n".join(lines) + "\n"
 
 
-def run_workflow(spec: WorkflowSpec, out: Path, *, np_: int = 1, resume: bool = False, say=print) -> dict:
+def run_workflow(spec: WorkflowSpec, out: Path, *, np_: int = 1, resume: bool = False, say=print,
+                 suffix: str | None = None) -> dict:
     """prepare (unless resuming) -> execute -> analyze; the rate check runs a half-speed twin."""
     t = time.perf_counter()
     if not resume:
         deck = prepare(spec, out, progress=say)
         say(f"deck: {len(deck.bins.lengths)} bond types, dt = {deck.dt_ns * 1e-9:.3g} s "
             f"(limit {deck.timestep.limit_ns * 1e-9:.3g} s, stiffest: {deck.timestep.stiffest}), {deck.steps} steps")
-    lammps_s = execute(out, np_=np_, resume=resume, label=f"{spec.name}: ")
+    lammps_s = execute(out, np_=np_, resume=resume, label=f"{spec.name}: ", suffix=suffix)
     extra = {}
     if spec.compression.check_rate and not resume:
         import dataclasses
@@ -316,7 +316,7 @@ def run_workflow(spec: WorkflowSpec, out: Path, *, np_: int = 1, resume: bool = 
             spec.compression, plate_speed_m_s=spec.compression.plate_speed_m_s / 2, check_rate=False))
         sub = out / "rate_half"
         prepare(half, sub)
-        lammps_s += execute(sub, np_=np_, label=f"{spec.name} (half speed): ")
+        lammps_s += execute(sub, np_=np_, label=f"{spec.name} (half speed): ", suffix=suffix)
         slow = analyze(sub)
         fast_curve = mech.read_curve(out / "curve.txt")
         info = json.loads((out / "run.json").read_text())

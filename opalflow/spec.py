@@ -79,7 +79,7 @@ class BondsSpec:
     radius_factor: float = 1.0
     length_bins: int = 8
     breakable: bool = True
-    damping_ratio: float = 0.2
+    damping_ratio: float = 0.05
 
 
 @dataclass
@@ -96,7 +96,7 @@ class CompressionSpec:
     strain_max: float = 0.04
     plate_speed_m_s: float = 2.0
     timestep_s: float = 0.0
-    timestep_safety: float = 0.5
+    timestep_safety: float = 0.8
     global_damping: float = 0.5
     output_every_strain: float = 2.0e-4
     snapshot_strains: list[float] = field(default_factory=lambda: [0.01, 0.02])

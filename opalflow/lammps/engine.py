@@ -212,17 +212,20 @@ def run_script_sh(lmp_args: str = "-in in.lmp") -> str:
     mpiexec = executable("mpiexec") or "mpiexec"
     return f"""#!/usr/bin/env bash
 # Runs this deck with LAMMPS alone (no opalflow needed): bash run.sh [resume]
-# NP=4 bash run.sh runs it under MPI.  Written by opalflow {_version()}.
+# NP=4 bash run.sh runs it under MPI; SUFFIX=omp (kk, gpu) uses accelerated styles where
+# the LAMMPS build has them.  Written by opalflow {_version()}.
 set -euo pipefail
 cd "$(dirname "$0")"
 export LD_LIBRARY_PATH="{folder or ''}${{LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}}"
 mkdir -p snapshots
 input=in.lmp
 [ "${{1:-}}" = resume ] && input=resume.lmp
+args=(-nocite -in "$input" -log log.lammps)
+[ -n "${{SUFFIX:-}}" ] && args+=(-sf "$SUFFIX")
 if [ "${{NP:-1}}" -gt 1 ]; then
-  exec "{mpiexec}" -n "$NP" "{lmp}" -nocite -in "$input" -log log.lammps
+  exec "{mpiexec}" -n "$NP" "{lmp}" "${{args[@]}}"
 else
-  exec "{lmp}" -nocite -in "$input" -log log.lammps
+  exec "{lmp}" "${{args[@]}}"
 fi
 """
 
@@ -233,12 +236,13 @@ def _version() -> str:
     return __version__
 
 
-def run_subprocess(folder: Path, *, np: int, total_steps: int, resume: bool, label: str = "") -> float:
+def run_subprocess(folder: Path, *, np: int, total_steps: int, resume: bool, label: str = "",
+                   suffix: str | None = None) -> float:
     """Run ``bash run.sh`` (``NP`` processes); progress from the thermo lines on its output."""
     import subprocess
     import time
 
-    env = dict(os.environ, NP=str(np))
+    env = dict(os.environ, NP=str(np), SUFFIX=suffix or "")
     t = time.perf_counter()
     cmd = ["bash", str(Path(folder) / "run.sh")] + (["resume"] if resume else [])
     progress = Progress(total_steps, 0, label)

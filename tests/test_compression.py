@@ -1,0 +1,204 @@
+"""Compression runs with real LAMMPS: analytic lattice, deck contents, run.sh, resume, failure."""
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import h5py
+import numpy as np
+import pytest
+
+from opalflow.cli import main
+from opalflow.lammps.deck import compression_deck
+from opalflow.materials import material
+from opalflow.pipeline import build_structure, run_workflow
+from opalflow.resources import WORKFLOWS
+from opalflow.spec import load_spec
+
+
+def lattice_spec(*sets):
+    return load_spec(WORKFLOWS / "lattice_sc.toml", list(sets))
+
+
+@pytest.fixture(scope="module")
+def lattice_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("lattice")
+    spec = lattice_spec()
+    summary = run_workflow(spec, out, say=lambda *_: None)
+    return spec, out, summary
+
+
+def test_simple_cubic_modulus_matches_bond_stiffness(lattice_run):
+    """Acceptance 3: E = k_axial L0 / a^2 = E_b pi r_b^2 / a^2 = pi/4 E_b for r_b = a/2."""
+    spec, out, summary = lattice_run
+    E_b = material("silica")["bond_youngs_modulus_GPa"]
+    analytic = math.pi / 4 * E_b
+    assert summary["youngs_modulus_specimen_GPa"] == pytest.approx(analytic, rel=0.02)
+    assert summary["elastic_fit_r2"] > 0.999
+
+
+def test_simple_cubic_particle_stress_equals_applied(lattice_run):
+    """Bulk particles' sigma_zz (eq. 21 with V_p, times the solid fraction pi/6) = applied stress."""
+    spec, out, summary = lattice_run
+    with h5py.File(out / "results.h5") as h:
+        (step, snap), = h["snapshots"].items()
+        z = snap["position_nm"][:, 2]
+        sigma_zz = snap["sigma_MPa"][:, 2]
+        strain = snap.attrs["strain"]
+        applied = np.interp(strain, h["curve/strain"][:], h["curve/stress_MPa"][:])
+    a = spec.lattice.spacing_nm
+    bulk = (z > z.min() + 1.5 * a) & (z < z.max() - 1.5 * a)
+    phi = math.pi / 6
+    assert bulk.sum() > 50
+    assert -phi * sigma_zz[bulk].mean() == pytest.approx(applied, rel=0.02)
+
+
+def test_outputs_of_a_run(lattice_run):
+    spec, out, summary = lattice_run
+    for f in ("results.h5", "summary.json", "report.md", "stress_strain.png", "stress_hist.png",
+              "bond_strain.png", "run.sh", "in.lmp", "data.lmp"):
+        assert (out / f).stat().st_size > 0, f
+    keys = {"youngs_modulus_GPa", "strength_MPa", "strain_at_peak", "timestep_s", "steps", "wall_s",
+            "lammps_s", "broken_bonds", "stress_by_material"}
+    assert keys <= set(json.loads((out / "summary.json").read_text()))
+    with h5py.File(out / "results.h5") as h:
+        assert json.loads(h["provenance"].attrs["spec"])["name"] == "lattice_sc"
+        assert h["provenance"].attrs["git_commit"]
+    assert summary["broken_bonds"] == 0
+
+
+# --- acceptance 4: which scene options add which LAMMPS commands
+DECK_TABLE = [
+    # (sets, commands that must appear, commands that must not)
+    ([], ["bond_style      bpm/rotational normalize yes smooth no break no", "fix             damping"],
+     ["pair_style", "granular ${", "titania"]),
+    (["contacts.enabled=true"], ["pair_style      granular", "hertz/material"], []),
+    (["bonds.breakable=true"], ["smooth yes break yes"], ["break no"]),
+    (["compression.snapshot_strains=[]"], [], ["compute         stress", "dump"]),
+    (["compression.global_damping=0.0"], [], ["fix             damping"]),
+]
+
+
+@pytest.mark.parametrize("sets,present,absent", DECK_TABLE)
+def test_deck_holds_what_the_scene_needs(sets, present, absent):
+    spec = lattice_spec(*sets)
+    text = compression_deck(spec, build_structure(spec)).in_lmp
+    for cmd in present:
+        assert cmd in text, cmd
+    for cmd in absent:
+        assert cmd not in text, cmd
+
+
+def test_uncoated_unbreakable_contact_free_opal_deck(quick_spec):
+    spec = load_spec(WORKFLOWS / "opal_quick.toml", ["contacts.enabled=false", "bonds.breakable=false"])
+    deck = compression_deck(spec, build_structure(spec))
+    text = deck.in_lmp
+    assert "pair_style" not in text and "break no" in text and "titania" not in text
+    assert deck.structure.type_names == ["silica", "substrate"]
+    assert set(deck.bins.materials) == {"silica"}
+    coated = load_spec(WORKFLOWS / "opal_quick.toml", ["coating.thickness_nm=60.0"])
+    deck = compression_deck(coated, build_structure(coated))
+    assert set(deck.bins.materials) == {"silica", "titania"} and "titania" in deck.structure.type_names
+
+
+def test_timestep_above_limit_is_refused():
+    spec = lattice_spec("compression.timestep_s=1e-9")
+    with pytest.raises(Exception, match=r"compression.timestep_s = 1e-09: above the stability limit"):
+        compression_deck(spec, build_structure(spec))
+
+
+def test_run_sh_gives_the_same_modulus_as_in_process(tmp_path, lattice_run):
+    """Acceptance 6: bash run.sh (LAMMPS alone) + analyze == the in-process run."""
+    _, _, summary = lattice_run
+    out = tmp_path / "alone"
+    assert main(["build", "lattice_sc", "--out", str(out)]) == 0
+    env = {k: v for k, v in os.environ.items() if k != "LD_LIBRARY_PATH"}
+    proc = subprocess.run(["bash", str(out / "run.sh")], capture_output=True, text=True, env=env)
+    assert proc.returncode == 0, proc.stdout[-2000:]
+    assert main(["analyze", str(out)]) == 0
+    alone = json.loads((out / "summary.json").read_text())
+    assert alone["youngs_modulus_GPa"] == pytest.approx(summary["youngs_modulus_GPa"], rel=1e-6)
+    assert alone["strength_MPa"] == pytest.approx(summary["strength_MPa"], rel=1e-6)
+
+
+def test_killed_run_resumes(tmp_path, lattice_run):
+    """Acceptance 7: a run killed halfway finishes with --resume within 1 % of an uninterrupted one."""
+    _, _, summary = lattice_run
+    out = tmp_path / "killed"
+    assert main(["build", "lattice_sc", "--out", str(out), "--set", "compression.restart_every_strain=0.0005"]) == 0
+    proc = subprocess.Popen(["bash", str(out / "run.sh")], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, start_new_session=True)
+    deadline = time.time() + 60
+    while time.time() < deadline and len(list(out.glob("restart.*.bin"))) < 2:
+        time.sleep(0.02)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    steps_done = max(int(p.name.split(".")[1]) for p in out.glob("restart.*.bin"))
+    info = json.loads((out / "run.json").read_text())
+    assert 0 < steps_done < info["steps"]
+    assert main(["run", "--out", str(out), "--resume"]) == 0
+    resumed = json.loads((out / "summary.json").read_text())
+    assert resumed["youngs_modulus_GPa"] == pytest.approx(summary["youngs_modulus_GPa"], rel=0.01)
+    assert resumed["strength_MPa"] == pytest.approx(summary["strength_MPa"], rel=0.01)
+    assert resumed["steps"] == summary["steps"]
+
+
+def test_failed_run_keeps_earlier_results(tmp_path, capsys):
+    """Acceptance 7: a LAMMPS failure exits with the error and log tail, results.h5 stays."""
+    out = tmp_path / "run"
+    assert main(["run", "lattice_sc", "--out", str(out)]) == 0
+    before = (out / "results.h5").read_bytes()
+    # a scene that loses an atom: one particle lies outside the (fixed-z) box, so LAMMPS
+    # cannot assign it to any process and stops
+    from opalflow.lammps.datafile import write_data
+
+    spec = lattice_spec()
+    s = build_structure(spec)
+    s.positions[-1, 2] = 3 * s.box_hi[2]
+    write_data(tmp_path / "bad.lmp", s)
+    capsys.readouterr()
+    code = main(["run", "lattice_sc", "--out", str(out), "--set", "kind=datafile",
+                 "--set", f'datafile.path="{tmp_path / "bad.lmp"}"',
+                 "--set", 'datafile.materials=["silica","substrate"]', "--set", "contacts.enabled=true"])
+    err = capsys.readouterr().err
+    assert code == 1
+    assert "LAMMPS failed" in err and "ERROR" in err and "log tail" in err
+    assert f"run folder kept: {out}" in err
+    assert (out / "results.h5").read_bytes() == before
+
+
+def test_rate_check_switch_reports_the_half_speed_run(tmp_path):
+    """Acceptance 2 (mechanics of the switch; the quickstart figures are in the closing note)."""
+    out = tmp_path / "rate"
+    summary = run_workflow(lattice_spec("compression.check_rate=true"), out, say=lambda *_: None)
+    rc = summary["rate_check"]
+    assert (out / "rate_half" / "summary.json").exists()
+    assert abs(rc["youngs_modulus_change"]) < 0.02 and abs(rc["strength_change"]) < 0.05
+    assert "Rate check (half plate speed)" in (out / "report.md").read_text()
+
+
+def test_datafile_scene_runs_a_users_file(tmp_path, lattice_run):
+    """kind = "datafile": a bpm/sphere file from elsewhere goes through the same deck and analysis."""
+    from opalflow.lammps.datafile import write_data
+
+    _, _, summary = lattice_run
+    s = build_structure(lattice_spec())
+    write_data(tmp_path / "mine.lmp", s)
+    out = tmp_path / "run"
+    assert main(["run", "lattice_sc", "--out", str(out), "--set", "kind=datafile",
+                 "--set", f'datafile.path="{tmp_path / "mine.lmp"}"',
+                 "--set", 'datafile.materials=["silica","substrate"]']) == 0
+    mine = json.loads((out / "summary.json").read_text())
+    assert mine["youngs_modulus_GPa"] == pytest.approx(summary["youngs_modulus_GPa"], rel=1e-6)
+
+
+def test_mpi_run_matches(tmp_path, lattice_run):
+    """--np 2 runs lmp under mpiexec (the mpich wheel) and gives the same modulus."""
+    _, _, summary = lattice_run
+    out = tmp_path / "mpi"
+    assert main(["run", "lattice_sc", "--out", str(out), "--np", "2"]) == 0
+    mpi = json.loads((out / "summary.json").read_text())
+    assert mpi["youngs_modulus_GPa"] == pytest.approx(summary["youngs_modulus_GPa"], rel=1e-3)
