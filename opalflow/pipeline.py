@@ -9,6 +9,7 @@ renamed, so a failed run never replaces earlier results.
 from __future__ import annotations
 
 import json
+import math
 import subprocess
 import time
 from pathlib import Path
@@ -26,11 +27,23 @@ from opalflow.spec import SpecError, WorkflowSpec
 from opalflow.store import write_json_atomic, write_text_atomic
 from opalflow.structure import Structure
 
-#: paper values that a run's results are compared with (Dosta et al.; do Rosario et al. experiments)
-REFERENCES = {
-    "opal_fcc": {"youngs_modulus_GPa": (1.7, "experiment [57] via Dosta et al. 3.1.2"),
-                 "strength_MPa": (41.3, "experiment [57] via Dosta et al. 3.1.2")},
-}
+#: the uncoated silica opal's experiment (do Rosario et al. [57], Dosta et al. 3.1.2)
+EXPERIMENT_SILICA_OPAL = {"youngs_modulus_GPa": (1.7, "experiment, do Rosario et al. via Dosta et al. 3.1.2"),
+                          "strength_MPa": (41.3, "experiment, do Rosario et al. via Dosta et al. 3.1.2")}
+
+
+def references(spec: dict) -> dict[str, tuple[float, str]]:
+    """Reference values a run is compared with: experiment, paper or analytic value."""
+    if spec["kind"] == "lattice" and spec["lattice"]["arrangement"] == "sc" and not spec["contacts"]["enabled"]:
+        from opalflow.materials import material
+
+        E_b = material(spec["material"], spec["materials"])["bond_youngs_modulus_GPa"]
+        r = spec["bonds"]["radius_factor"] / 2
+        return {"youngs_modulus_specimen_GPa": (math.pi * r**2 * E_b,
+                                                "analytic: E_b pi r_b^2 / a^2 (simple-cubic lattice)")}
+    uncoated_fcc_silica = (spec["kind"] == "opal" and spec["pores"]["arrangement"] == "fcc"
+                           and spec["coating"]["thickness_nm"] == 0 and spec["material"] == "silica")
+    return dict(EXPERIMENT_SILICA_OPAL) if uncoated_fcc_silica else {}
 
 
 def build_structure(spec: WorkflowSpec, progress=None) -> Structure:
@@ -169,7 +182,7 @@ def analyze(out: Path, wall_s: float | None = None, lammps_s: float | None = Non
         "bond_stiffness_error_max": info["bond_stiffness_error_max"],
         "timestep_estimate_s": info["timestep_estimate_s"],
     }
-    refs = REFERENCES.get(info["workflow"], {})
+    refs = references(info["spec"])
     summary["reference"] = {k: {"value": v, "source": src,
                                 "error": (summary[k] - v) / v} for k, (v, src) in refs.items()}
     if extra:
@@ -232,10 +245,7 @@ def _plots(out, strain, stress, stress_plate, stress_substrate, fit, snapshots, 
     ax.set_xlabel("strain (%)")
     ax.set_ylabel("stress (MPa)")
     ax.legend()
-    fig.tight_layout()
-    fig.savefig(out / "stress_strain.png.tmp.png", dpi=120)
-    (out / "stress_strain.png.tmp.png").replace(out / "stress_strain.png")
-    plt.close(fig)
+    _save(fig, out / "stress_strain.png")
     if snapshots:
         step, snap = list(snapshots.items())[-1]
         fig, axes = plt.subplots(1, 2, figsize=(8, 3.4))
@@ -248,10 +258,7 @@ def _plots(out, strain, stress, stress_plate, stress_substrate, fit, snapshots, 
             ax.set_xlabel(f"{label} (MPa) at strain {100 * snap['strain']:.2f} %")
             ax.set_ylabel("fraction")
         axes[0].legend()
-        fig.tight_layout()
-        fig.savefig(out / "stress_hist.png.tmp.png", dpi=120)
-        (out / "stress_hist.png.tmp.png").replace(out / "stress_hist.png")
-        plt.close(fig)
+        _save(fig, out / "stress_hist.png")
     if histograms:
         fig, ax = plt.subplots(figsize=(5, 3.4))
         for hist in histograms.values():
@@ -260,19 +267,29 @@ def _plots(out, strain, stress, stress_plate, stress_substrate, fit, snapshots, 
         ax.set_xlabel("bond strain (%)")
         ax.set_ylabel("fraction of bonds")
         ax.legend()
-        fig.tight_layout()
-        fig.savefig(out / "bond_strain.png.tmp.png", dpi=120)
-        (out / "bond_strain.png.tmp.png").replace(out / "bond_strain.png")
-        plt.close(fig)
+        _save(fig, out / "bond_strain.png")
+
+
+def _save(fig, path: Path) -> None:
+    """Write a figure under a temporary name, then rename it."""
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    tmp = path.with_name(path.stem + ".tmp.png")
+    fig.savefig(tmp, dpi=120)
+    tmp.replace(path)
+    plt.close(fig)
 
 
 def _report(info, summary, fit) -> str:
     lines = [f"# {info['workflow']}: uniaxial compression", "",
              f"{info['n_particles']} particles, {info['n_bonds']} bonds; time step {summary['timestep_s']:.3g} s "
              f"({summary['steps']} steps); plate {info['plate_speed_m_s']:g} m/s; "
-             f"wall {summary['wall_s'] or 0:.1f} s (LAMMPS {summary['lammps_s'] or 0:.1f} s).", "",
+             + (f"wall {summary['wall_s']:.1f} s (LAMMPS {summary['lammps_s']:.1f} s)."
+                if summary["wall_s"] is not None else "run outside opalflow (analyze only)."), "",
              "| quantity | value | reference | error |", "|---|---|---|---|"]
     for key, label, fmt in (("youngs_modulus_GPa", "Young's modulus (GPa)", "{:.4g}"),
+                            ("youngs_modulus_specimen_GPa", "Young's modulus, top-layer strain (GPa)", "{:.4g}"),
                             ("strength_MPa", "compressive strength (MPa)", "{:.4g}"),
                             ("strain_at_peak", "strain at peak", "{:.4f}"),
                             ("broken_bonds", "broken bonds at the end", "{}")):
