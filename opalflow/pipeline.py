@@ -151,10 +151,12 @@ def analyze(out: Path, wall_s: float | None = None, lammps_s: float | None = Non
 
     snapshots = {}
     phi = info["solid_fraction"]
+    # curve rows are averages over the preceding `every` steps: they belong to the middle step
+    mid_step = curve["step"] - (info["output_every_steps"] - 1) / 2
     for step, path in mech.snapshot_files(out, "stress").items():
         dump = mech.read_dump_custom(path)
         sigma = mech.particle_stress(dump)
-        snap_strain = float(np.interp(step, curve["step"], strain))
+        snap_strain = float(np.interp(step, mid_step, strain))
         snapshots[step] = {"strain": snap_strain, "id": dump["id"].astype(np.int64),
                            "position_nm": np.column_stack([dump["x"], dump["y"], dump["z"]]),
                            "type": dump["type"].astype(np.int32), "sigma_MPa": sigma,
@@ -164,7 +166,7 @@ def analyze(out: Path, wall_s: float | None = None, lammps_s: float | None = Non
     bins = np.linspace(-0.02, 0.02, 81)
     for step, path in mech.snapshot_files(out, "bonds").items():
         frac, edges = mech.bond_strain_histogram(mech.read_dump_local(path), bins)
-        histograms[step] = {"strain": float(np.interp(step, curve["step"], strain)),
+        histograms[step] = {"strain": float(np.interp(step, mid_step, strain)),
                             "fraction": frac, "edges": edges}
 
     E_GPa = fit.modulus_MPa / 1e3
