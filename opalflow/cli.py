@@ -65,7 +65,7 @@ def cmd_build(args) -> int:
     if spec.kind == "opal":
         from opalflow.build.opal import structure_statistics
 
-        stats = structure_statistics(deck.structure)
+        stats = structure_statistics(deck.source)
         summary.update(stats)
         _say(f"{stats['n_particles']} particles, {stats['n_bonds']} bonds, porosity {stats['porosity']:.3f}, "
              f"{stats['particles_per_um3']:.0f} particles/um^3, {stats['bonds_per_um3']:.0f} bonds/um^3")

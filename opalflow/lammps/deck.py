@@ -103,6 +103,7 @@ class CompressionDeck:
     """Everything a compression run needs: the data, the decks and the numbers behind them."""
 
     structure: Structure                    # with length-binned bond types
+    source: Structure                       # as built, bonds typed by material
     in_lmp: str
     resume_lmp: str
     bins: BondBins
@@ -233,7 +234,7 @@ def compression_deck(spec: WorkflowSpec, s: Structure) -> CompressionDeck:
                 parts.append(blocks[b])
         return title + "\n".join(parts)
 
-    return CompressionDeck(structure=data, in_lmp=deck(True), resume_lmp=deck(False), bins=bins,
+    return CompressionDeck(structure=data, source=s, in_lmp=deck(True), resume_lmp=deck(False), bins=bins,
                            coefficients=coeffs, timestep=estimate, dt_ns=dt, steps=steps, every=every,
                            restart_every=restart_every, snapshot_steps=snaps, height_nm=height,
                            area_nm2=area, plate_z0_nm=top, plate_speed_nm_ns=v, blocks=wanted,
