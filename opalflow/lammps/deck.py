@@ -45,7 +45,7 @@ class BondBins:
     stiffness_error_rms: float
 
 
-def bin_bonds(s: Structure, n_bins: int) -> BondBins:
+def bin_bonds(s: Structure, n_bins: int, r0: np.ndarray | None = None) -> BondBins:
     """Split each material's bonds into ``n_bins`` equal-width bins of initial length.
 
     Each bin's representative length is the harmonic mean of its bonds' lengths, so
@@ -53,7 +53,7 @@ def bin_bonds(s: Structure, n_bins: int) -> BondBins:
     each bond's own kb, kt are off by L0 / L_rep - 1, reported as the stiffness error.
     kr and ks use every bond's own r0 (``normalize yes``) and carry no binning error.
     """
-    r0 = s.bond_lengths()
+    r0 = s.bond_lengths() if r0 is None else r0
     new = np.zeros(s.n_bonds, np.int32)
     materials, lengths, counts, errors = [], [], [], np.zeros(s.n_bonds)
     for t, mat in enumerate(s.bond_type_names):
@@ -144,7 +144,8 @@ def compression_deck(spec: WorkflowSpec, s: Structure) -> CompressionDeck:
     """Decks (fresh and resume) for the uniaxial compression of ``s`` by a plate."""
     c = spec.compression
     d_mean = float(np.mean(s.diameters))
-    bins = bin_bonds(s, spec.bonds.length_bins)
+    r0 = s.bond_lengths()
+    bins = bin_bonds(s, spec.bonds.length_bins, r0)
     data = Structure(positions=s.positions, diameters=s.diameters, types=s.types, densities=s.densities,
                      box_lo=s.box_lo, box_hi=s.box_hi, periodic=s.periodic, bonds=s.bonds,
                      bond_types=bins.bond_types, molecules=s.molecules, type_names=s.type_names,
@@ -164,7 +165,7 @@ def compression_deck(spec: WorkflowSpec, s: Structure) -> CompressionDeck:
                 for k, n in enumerate(s.type_names)}
     plate_E = {t: plate_contact_E(cp, plate) for t, cp in contacts.items()}
     estimate = estimate_timestep(data, coeffs, contacts if spec.contacts.enabled else {},
-                                 plate_E, contacts, spec.bonds.damping_ratio)
+                                 plate_E, contacts, r0)
     limit_ns = estimate.limit_ns
     if c.timestep_s:
         dt = c.timestep_s * 1e9
@@ -192,13 +193,13 @@ def compression_deck(spec: WorkflowSpec, s: Structure) -> CompressionDeck:
     restart_every = max(every, int(round(c.restart_every_strain * steps_per_strain)))
     snaps = sorted({max(1, int(round(e * steps_per_strain))) for e in c.snapshot_strains})
 
-    omega1, modulus_affine = fundamental_mode(data, coeffs, height, area, masses)
+    omega1, modulus_affine = fundamental_mode(data, coeffs, height, area, masses, r0)
     gamma = 2 * c.global_damping * omega1 * float(np.mean(masses[~substrate]))
 
     substrate_type = s.type_names.index("substrate") + 1
     bond_lines = "\n".join(f"bond_coeff      {t + 1} " + " ".join(num(x) for x in cf.values())
                            for t, cf in enumerate(coeffs))
-    common = dict(ghost_cutoff=num(1.25 * float(np.max(s.bond_lengths(), initial=d_mean)) + 0.2 * d_mean),
+    common = dict(ghost_cutoff=num(1.25 * float(np.max(r0, initial=d_mean)) + 0.2 * d_mean),
                   data_file="data.lmp", boundary="p p f" if s.periodic[0] else "m m f")
     blocks = {
         "system": render("system", **common),
@@ -243,14 +244,13 @@ def compression_deck(spec: WorkflowSpec, s: Structure) -> CompressionDeck:
 
 
 def fundamental_mode(s: Structure, coeffs: list[BondCoefficients], height: float, area: float,
-                     masses: np.ndarray) -> tuple[float, float]:
+                     masses: np.ndarray, L0: np.ndarray) -> tuple[float, float]:
     """Lowest axial frequency omega_1 = pi c / (2 H) of the sample on its fixed substrate.
 
     c = sqrt(C / rho) with the affine (Voigt) uniaxial-strain modulus of the bond
     network, C = sum_bonds (kr / L0) L0^2 n_z^4 / V, an upper bound of the real one,
     so omega_1 and the damping built on it are on the high side.
     """
-    L0 = s.bond_lengths()
     d = s.minimum_image(s.positions[s.bonds[:, 1]] - s.positions[s.bonds[:, 0]])
     nz = d[:, 2] / L0
     kr = np.array([c.kr for c in coeffs])[s.bond_types - 1] / L0

@@ -42,16 +42,16 @@ class TimestepEstimate:
                 **{k: v * 1e-9 for k, v in self.by_mode_ns.items()}}
 
 
-def _dt(omega2: np.ndarray, zeta: float = 0.0) -> float:
-    """Verlet limit of a damped oscillator: omega dt <= 2 (sqrt(1 + zeta^2) - zeta)."""
+def _dt(omega2: np.ndarray) -> float:
+    """Verlet limit of an undamped oscillator: omega dt <= 2."""
     w2 = float(np.max(omega2, initial=0.0))
-    return 2.0 * (math.sqrt(1 + zeta**2) - zeta) / math.sqrt(w2) if w2 > 0 else math.inf
+    return 2.0 / math.sqrt(w2) if w2 > 0 else math.inf
 
 
 def estimate_timestep(s: Structure, coeffs: list[BondCoefficients],
                       contacts: dict[int, ContactProperties], plate_E: dict[int, float],
-                      plate_props: dict[int, ContactProperties], damping_ratio: float = 0.0
-                      ) -> TimestepEstimate:
+                      plate_props: dict[int, ContactProperties],
+                      L0: np.ndarray | None = None) -> TimestepEstimate:
     """Critical time step of ``s`` with bond types ``coeffs`` (1-based types of s.bond_types).
 
     ``contacts`` maps atom type -> contact properties (empty: no particle contacts);
@@ -62,7 +62,7 @@ def estimate_timestep(s: Structure, coeffs: list[BondCoefficients],
     R = s.diameters / 2
     inertia = 0.4 * m * R**2
     i, j = s.bonds[:, 0], s.bonds[:, 1]
-    L0 = s.bond_lengths()
+    L0 = s.bond_lengths() if L0 is None else L0
     t = s.bond_types - 1
     kr = np.array([c.kr for c in coeffs])[t] / L0
     ks = np.array([c.ks for c in coeffs])[t] / L0
@@ -121,7 +121,7 @@ def estimate_timestep(s: Structure, coeffs: list[BondCoefficients],
         + gs * L0**2 / 4
     g_tr = gn + gs
     rate = np.maximum(both(g_tr / m[i], g_tr / m[j]), both(c_rot / inertia[i], c_rot / inertia[j]))
-    by_mode = {k: _dt(v) for k, v in modes.items() if k != "damping"}
+    by_mode = {k: _dt(v) for k, v in modes.items()}
     by_mode["damping"] = 2.0 / float(np.max(rate)) if np.max(rate, initial=0) > 0 else math.inf
     # all together, per particle: a damped oscillator with omega^2 = total and rate c,
     # stable for dt <= 2 (sqrt(1 + zeta^2) - zeta) / omega with zeta = c / (2 omega)
