@@ -11,6 +11,7 @@ import ctypes
 import os
 import shutil
 import sys
+import time
 from functools import lru_cache
 from importlib import metadata
 from pathlib import Path
@@ -143,15 +144,12 @@ class Progress:
 
     def __init__(self, total_steps: int, start_step: int = 0, label: str = "", interval: float = 5.0,
                  out=None):
-        import time as _time
-
         self.total, self.start, self.label, self.interval = total_steps, start_step, label, interval
-        self.t0 = self.last = _time.perf_counter()
-        self._time = _time
+        self.t0 = self.last = time.perf_counter()
         self.out = out or sys.stderr
 
     def update(self, step: int, strain: float | None = None, force: bool = False) -> None:
-        now = self._time.perf_counter()
+        now = time.perf_counter()
         if not force and now - self.last < self.interval:
             return
         self.last = now
@@ -170,8 +168,6 @@ def run_in_process(folder: Path, script: str, *, every: int, strain_per_step: fl
     The final ``run N upto`` is split into chunks (multiples of ``every`` steps) so
     that progress can be printed; the result is the same run.  Returns LAMMPS seconds.
     """
-    import time
-
     folder = Path(folder)
     cwd = os.getcwd()
     lmp = new_lammps(log=folder / "log.lammps", suffix=suffix)
@@ -240,7 +236,6 @@ def run_subprocess(folder: Path, *, np: int, total_steps: int, resume: bool, lab
                    suffix: str | None = None) -> float:
     """Run ``bash run.sh`` (``NP`` processes); progress from the thermo lines on its output."""
     import subprocess
-    import time
 
     env = dict(os.environ, NP=str(np), SUFFIX=suffix or "")
     t = time.perf_counter()
