@@ -12,6 +12,7 @@ import os
 import shutil
 import sys
 import time
+from contextlib import contextmanager
 from functools import lru_cache
 from importlib import metadata
 from pathlib import Path
@@ -161,6 +162,26 @@ class Progress:
               f"{strain_txt}, {rate:.0f} steps/s, {left:.0f} s left", file=self.out, flush=True)
 
 
+@contextmanager
+def session(folder: Path, *, log: str = "log.lammps", suffix: str | None = None):
+    """An in-process LAMMPS instance working in ``folder`` (log there); errors become EngineError.
+
+    Scripts name files relative to the folder, so no user path ever enters a LAMMPS command.
+    """
+    folder = Path(folder)
+    cwd = os.getcwd()
+    lmp = new_lammps(log=folder / log, suffix=suffix)
+    try:
+        os.chdir(folder)
+        yield lmp
+    except Exception as exc:  # LAMMPS raises plain Exception with its ERROR line
+        raise EngineError(f"LAMMPS failed in {folder}: {str(exc).splitlines()[0]}\n"
+                          f"--- log tail ({folder / log}) ---\n{log_tail(folder / log)}") from None
+    finally:
+        os.chdir(cwd)
+        lmp.close()
+
+
 def run_in_process(folder: Path, script: str, *, every: int, strain_per_step: float,
                    suffix: str | None = None, label: str = "") -> float:
     """Run ``script`` (text of in.lmp or resume.lmp) in ``folder`` with the LAMMPS module.
@@ -168,12 +189,8 @@ def run_in_process(folder: Path, script: str, *, every: int, strain_per_step: fl
     The final ``run N upto`` is split into chunks (multiples of ``every`` steps) so
     that progress can be printed; the result is the same run.  Returns LAMMPS seconds.
     """
-    folder = Path(folder)
-    cwd = os.getcwd()
-    lmp = new_lammps(log=folder / "log.lammps", suffix=suffix)
     t = time.perf_counter()
-    try:
-        os.chdir(folder)
+    with session(folder, suffix=suffix) as lmp:
         for cmd in script_commands(script):
             words = cmd.split()
             if words[0] == "run" and "upto" in words:
@@ -191,13 +208,6 @@ def run_in_process(folder: Path, script: str, *, every: int, strain_per_step: fl
                 progress.update(step, step * strain_per_step, force=True)
             else:
                 lmp.command(cmd)
-    except Exception as exc:  # LAMMPS raises plain Exception with its ERROR line
-        raise EngineError(f"LAMMPS failed in {folder}: {str(exc).splitlines()[0]}\n"
-                          f"--- log tail ({folder / 'log.lammps'}) ---\n{log_tail(folder / 'log.lammps')}"
-                          ) from None
-    finally:
-        os.chdir(cwd)
-        lmp.close()
     return time.perf_counter() - t
 
 

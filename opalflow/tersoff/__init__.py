@@ -1,0 +1,1 @@
+"""Atomistic track (seed 003): Tersoff potentials for silicon - parameters, properties, fit, stability."""
