@@ -57,6 +57,8 @@ def cmd_build(args) -> int:
     from opalflow.store import write_json_atomic
 
     spec = load_spec(workflow_path(args.workflow), args.set)
+    if spec.kind.startswith("tersoff"):
+        raise SpecError("kind", spec.kind, "atomistic workflows have no deck to build: use 'run'")
     out = _out_folder(args.out)
     start = time.perf_counter()
     _say(f"building {spec.name} ({spec.kind})")
@@ -120,8 +122,7 @@ def cmd_run(args) -> int:
         print(f"error: {exc}", file=sys.stderr)
         print(f"run folder kept: {out}", file=sys.stderr)
         return 1
-    print(f"E = {summary['youngs_modulus_GPa']:.4g} GPa, strength = {summary['strength_MPa']:.4g} MPa "
-          f"(strain at peak {summary['strain_at_peak']:.4f}), {summary['wall_s']:.1f} s -> {out}/report.md")
+    print(f"{summary['headline']}, {summary['wall_s']:.1f} s -> {out}/report.md")
     return 0
 
 
@@ -132,8 +133,7 @@ def cmd_analyze(args) -> int:
     if not (out / "run.json").exists() or not (out / "curve.txt").exists():
         raise SpecError("folder", str(out), "needs run.json and curve.txt (a built folder after 'bash run.sh')")
     summary = analyze(out)
-    print(f"E = {summary['youngs_modulus_GPa']:.4g} GPa, strength = {summary['strength_MPa']:.4g} MPa "
-          f"(strain at peak {summary['strain_at_peak']:.4f}) -> {out}/report.md")
+    print(f"{summary['headline']} -> {out}/report.md")
     return 0
 
 

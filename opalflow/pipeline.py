@@ -183,6 +183,8 @@ def analyze(out: Path, wall_s: float | None = None, lammps_s: float | None = Non
         "solid_fraction": phi,
         "bond_stiffness_error_max": info["bond_stiffness_error_max"],
         "timestep_estimate_s": info["timestep_estimate_s"],
+        "headline": f"E = {E_GPa:.4g} GPa, strength = {float(stress[peak]):.4g} MPa "
+                    f"(strain at peak {float(strain[peak]):.4f})",
     }
     refs = references(info["spec"])
     summary["reference"] = {k: {"value": v, "source": src,
@@ -320,7 +322,14 @@ def _report(info, summary, fit) -> str:
 
 def run_workflow(spec: WorkflowSpec, out: Path, *, np_: int = 1, resume: bool = False, say=print,
                  suffix: str | None = None) -> dict:
-    """prepare (unless resuming) -> execute -> analyze; the rate check runs a half-speed twin."""
+    """prepare (unless resuming) -> execute -> analyze; the rate check runs a half-speed twin.
+
+    Atomistic kinds (``tersoff_*``) run in :mod:`opalflow.tersoff.workflow`.
+    """
+    if spec.kind.startswith("tersoff"):
+        from opalflow.tersoff.workflow import run
+
+        return run(spec, out, say=say)
     t = time.perf_counter()
     if not resume:
         deck = prepare(spec, out, progress=say)

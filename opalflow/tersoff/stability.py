@@ -20,7 +20,10 @@ A boundary passes when
 from __future__ import annotations
 
 import math
+import multiprocessing
+import os
 import time
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -139,3 +142,35 @@ run 0 post no
                           fourfold_interior=fourfold, rms_interior_A=rms, atoms_lost=int(lost),
                           mean_temperature_K=float(np.mean(temps)) if temps else math.nan,
                           seconds=time.perf_counter() - t0)
+
+
+def _run_job(job) -> BoundaryResult:
+    params, folder, boundary, temperature, kwargs = job
+    return run_boundary(params, folder, boundary, temperature_K=temperature, **kwargs)
+
+
+def check(params: TersoffParameters, folder: str | Path, *, boundaries=BOUNDARIES, temperatures_K=(300.0,),
+          workers: int = 0, say=None, **kwargs) -> list[BoundaryResult]:
+    """Every boundary at every temperature, each in its own subfolder, ``workers`` processes at once.
+
+    ``kwargs`` go to :func:`run_boundary` (cells, time_ps, timestep_fs, seed, criteria).
+    """
+    folder = Path(folder)
+    jobs = [(params, folder / f"{b}_{t:g}K", b, t, kwargs) for t in temperatures_K for b in boundaries]
+    workers = max(1, min(workers or os.cpu_count() or 1, len(jobs)))
+    results = []
+    pool = None
+    if workers > 1:   # spawn, not fork: the caller may hold JAX's threads (python -m opalflow is safe;
+        # scripts that call this need the usual ``if __name__ == "__main__":`` guard)
+        pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
+    try:
+        for r in (pool.map if pool else map)(_run_job, jobs):
+            results.append(r)
+            if say:
+                say(f"stability {r.boundary} at {r.temperature_K:g} K: {'pass' if r.passed else 'FAIL'} "
+                    f"({r.reason}; drift {r.drift_eV_per_atom:.2g} eV/atom, 4-fold {r.fourfold_interior:.3f}, "
+                    f"RMS {r.rms_interior_A:.3f} A, {r.seconds:.1f} s)")
+    finally:
+        if pool:
+            pool.shutdown()
+    return results

@@ -1,0 +1,345 @@
+"""The atomistic workflows: ``tersoff_properties``, ``tersoff_fit``, ``tersoff_stability``.
+
+Each writes into its run folder: ``summary.json`` (keys a0_A, Ec_eV, B_GPa, Cprime_GPa,
+C11_GPa, C12_GPa, C44_GPa, C44_0_GPa, loss, reference_loss, fit_s, stability, ...),
+``report.md`` with every property's error against Table 1 of seed 003, the plots, and
+the LAMMPS logs.  The potential is parsed and rewritten into the folder, so no user path
+reaches a LAMMPS script.
+"""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from opalflow import __version__
+from opalflow.resources import DATA
+from opalflow.spec import SpecError, TersoffSpec, WorkflowSpec
+from opalflow.store import write_json_atomic, write_text_atomic
+from opalflow.tersoff import fit as fitting
+from opalflow.tersoff import stability as stab
+from opalflow.tersoff.model import DiamondModel
+from opalflow.tersoff.parameters import COLUMNS, TersoffParameters, read_tersoff, write_tersoff
+from opalflow.tersoff.properties import PROPERTY_KEYS as MODULI, evaluate
+
+POTENTIALS = DATA / "potentials"
+REFERENCE_POTENTIAL = POTENTIALS / "Si_zhuravlev2021.tersoff"
+LABELS = {"Ec_eV": ("E_c", "eV"), "B_GPa": ("B", "GPa"), "Cprime_GPa": ("C'", "GPa"), "C11_GPa": ("C11", "GPa"),
+          "C12_GPa": ("C12", "GPa"), "C44_0_GPa": ("C44^0", "GPa"), "C44_GPa": ("C44", "GPa")}
+
+
+def potential_path(name: str) -> Path:
+    """A path to a ``.tersoff`` file, or the name of one in data/potentials/."""
+    path = Path(name)
+    if path.is_file():
+        return path
+    if (POTENTIALS / name).is_file():
+        return POTENTIALS / name
+    have = ", ".join(sorted(p.name for p in POTENTIALS.glob("*.tersoff")))
+    raise SpecError("tersoff.potential", name, f"no such file, nor a potential in data/potentials ({have})")
+
+
+def load_parameters(t: TersoffSpec) -> TersoffParameters:
+    return read_tersoff(potential_path(t.potential), t.element)
+
+
+def model_for(cutoff: float, a: float) -> DiamondModel:
+    """A diamond model whose neighbour list reaches past the cutoff R + D (10 % margin for strain)."""
+    return DiamondModel(a=a, neighbor_radius_over_a=max(0.5, 1.1 * cutoff / a))
+
+
+def loss_settings(spec: WorkflowSpec, start: TersoffParameters) -> dict:
+    """Keyword arguments of :class:`fit.Loss`: targets and weights (Table 1, weight 1 unless set),
+    bounds (defaults updated by the spec), fixed parameters at the values of ``start``."""
+    t = spec.tersoff
+    ref = fitting.zhuravlev2021()
+    fixed = {k: getattr(start, k) for k in t.fixed}
+    bounds = {**fitting.DEFAULT_BOUNDS, **{k: tuple(v) for k, v in t.bounds.items()}}
+    bounds = {k: v for k, v in bounds.items() if k not in fixed}
+    r_max = fixed.get("R", bounds.get("R", (0, 0))[1]) + fixed.get("D", bounds.get("D", (0, 0))[1])
+    return {"targets": {**ref["targets"], **t.targets}, "weights": {**fitting.default_weights(), **t.weights},
+            "bounds": bounds, "fixed": fixed, "a_target": t.lattice_target_A,
+            "neighbor_radius_over_a": max(0.5, 1.1 * r_max / t.lattice_target_A)}
+
+
+def _errors(values: dict, ref: dict) -> dict:
+    """Error of each property: absolute (same unit) and relative, against targets and the paper's column."""
+    out = {}
+    for key in LABELS:
+        v, target, calc = values[key], ref["targets"][key], ref["calculated"][key]
+        out[key] = {"value": v, "target": target, "error_vs_target": v - target,
+                    "relative_error_vs_target": (v - target) / abs(target),
+                    "paper_calculated": calc, "difference_vs_paper": v - calc}
+    return out
+
+
+def _property_rows(values: dict, ref: dict, model: dict | None = None) -> list[str]:
+    head = "| property | LAMMPS | target (Table 1) | error | paper's calculated | difference |"
+    rule = "|---|---|---|---|---|---|"
+    if model is not None:
+        head += " fit model | LAMMPS - model |"
+        rule += "---|---|"
+    rows = [head, rule]
+    for key, (label, unit) in LABELS.items():
+        v, tg, calc = values[key], ref["targets"][key], ref["calculated"][key]
+        row = (f"| {label} ({unit}) | {v:.3f} | {tg:g} | {v - tg:+.3f} ({100 * (v - tg) / abs(tg):+.1f} %) | "
+               f"{calc:g} | {v - calc:+.3f} |")
+        if model is not None:
+            row += f" {model[key]:.3f} | {v - model[key]:+.2e} |"
+        rows.append(row)
+    return rows
+
+
+def _lammps_properties(params: TersoffParameters, spec: WorkflowSpec, folder: Path, scan: bool):
+    t = spec.tersoff
+    ev = evaluate(params, folder, strain=t.strain, scan=tuple(t.strain_scan) if scan else (), cells=t.cells,
+                  a_guess=t.lattice_target_A)
+    values = {"a0_A": ev.a0_A, "Ec_eV": ev.Ec_eV, **ev.values}
+    exact = model_for(params.cutoff(), t.lattice_target_A).evaluate(params, a=ev.a0_A)
+    return ev, values, exact
+
+
+def _scan_table(ev, exact: dict) -> list[dict]:
+    """Strain size -> error of each modulus against the exact (AD) second derivative, and time."""
+    rows = []
+    for h, props in ev.scan.items():
+        err = {k: props[k] - exact[k] for k in MODULI}
+        rows.append({"strain": h, "errors_GPa": err, "max_abs_error_GPa": max(abs(e) for e in err.values()),
+                     "seconds": ev.scan_s[h]})
+    return rows
+
+
+def _plot_scan(rows: list[dict], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    h = [r["strain"] for r in rows]
+    for key in MODULI:
+        ax.loglog(h, [max(abs(r["errors_GPa"][key]), 1e-12) for r in rows], "o-", label=LABELS[key][0])
+    ax.set_xlabel("strain size e of the central difference (eq. 16)")
+    ax.set_ylabel("|LAMMPS - exact| (GPa)")
+    ax.set_title("Finite-difference moduli against the AD second derivative")
+    ax.legend(fontsize=8)
+    ax.grid(True, which="both", alpha=0.3)
+    _save(fig, path)
+
+
+def _save(fig, path: Path) -> None:
+    tmp = path.with_name(path.stem + ".tmp.png")
+    fig.tight_layout()
+    fig.savefig(tmp, dpi=120)
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
+    tmp.replace(path)
+
+
+def _stability_summary(results: list[stab.BoundaryResult], temperature: float) -> dict:
+    at = [r for r in results if r.temperature_K == temperature]
+    return {"passed": all(r.passed for r in at), "temperature_K": temperature,
+            "runs": [r.as_dict() for r in results]}
+
+
+def _stability_rows(results: list[stab.BoundaryResult]) -> list[str]:
+    rows = ["| boundary | T (K) | result | NVE drift (eV/atom) | 4-fold interior | interior RMS (A) | lost | "
+            "mean T (K) | time (s) |", "|---|---|---|---|---|---|---|---|---|"]
+    for r in results:
+        rows.append(f"| {r.boundary} | {r.temperature_K:g} | {'pass' if r.passed else 'FAIL: ' + r.reason} | "
+                    f"{r.drift_eV_per_atom:.2e} | {r.fourfold_interior:.3f} | {r.rms_interior_A:.3f} | "
+                    f"{r.atoms_lost} | {r.mean_temperature_K:.0f} | {r.seconds:.1f} |")
+    return rows
+
+
+def _stability_kwargs(spec: WorkflowSpec) -> dict:
+    s = spec.stability
+    return {"boundaries": tuple(s.boundaries), "workers": s.workers, "cells": s.cells,
+            "time_ps": s.time_ps, "timestep_fs": s.timestep_fs, "seed": s.seed,
+            "criteria": stab.Criteria(s.max_drift_eV, s.min_fourfold, s.max_rms_A)}
+
+
+def _finish(out: Path, spec: WorkflowSpec, summary: dict, report: list[str], t0: float) -> dict:
+    summary["wall_s"] = time.perf_counter() - t0
+    summary["opalflow_version"] = __version__
+    summary["spec"] = spec.to_dict()
+    report.append("")
+    report.append(f"Wall time {summary['wall_s']:.1f} s on this machine. opalflow {__version__}.")
+    write_text_atomic(out / "report.md", "\n".join(report) + "\n")
+    write_json_atomic(out / "summary.json", summary)
+    return summary
+
+
+def _base_summary(values: dict, loss: float, reference_loss: float) -> dict:
+    return {**{k: values[k] for k in ("a0_A", *LABELS)}, "loss": loss, "reference_loss": reference_loss,
+            "fit_s": None, "stability": None}
+
+
+def run_properties(spec: WorkflowSpec, out: Path, say=print) -> dict:
+    t0 = time.perf_counter()
+    params = load_parameters(spec.tersoff)
+    ref = fitting.zhuravlev2021()
+    say(f"properties of {spec.tersoff.potential} ({params.element}) by LAMMPS, strain scan "
+        f"{len(spec.tersoff.strain_scan)} sizes")
+    ev, values, exact = _lammps_properties(params, spec, out, scan=True)
+    loss = fitting.Loss(**loss_settings(spec, params))
+    rows = _scan_table(ev, exact)
+    _plot_scan(rows, out / "strain_scan.png")
+    summary = _base_summary(values, loss(params), loss(read_tersoff(REFERENCE_POTENTIAL)))
+    summary.update({"strain": ev.strain, "spread_GPa": ev.spread, "model": exact,
+                    "lammps_minus_model": {k: values[k] - exact[k] for k in LABELS},
+                    "reference": _errors(values, ref), "strain_scan": rows, "lammps_s": ev.seconds,
+                    "headline": (f"a0 = {values['a0_A']:.5f} A, Ec = {values['Ec_eV']:.4f} eV, "
+                                 f"B = {values['B_GPa']:.2f}, C' = {values['Cprime_GPa']:.2f}, "
+                                 f"C11 = {values['C11_GPa']:.2f}, C12 = {values['C12_GPa']:.2f}, "
+                                 f"C44^0 = {values['C44_0_GPa']:.2f}, C44 = {values['C44_GPa']:.2f} GPa")})
+    report = [f"# Tersoff properties: {spec.tersoff.potential}", "",
+              f"LAMMPS `pair_style tersoff`, `units metal`, {spec.tersoff.cells}^3 conventional cells "
+              f"({8 * spec.tersoff.cells ** 3} atoms); lattice constant by `fix box/relax iso 0` "
+              f"+ `minimize`: a0 = {values['a0_A']:.6f} A (target a* = {spec.tersoff.lattice_target_A} A). "
+              f"Moduli by central second differences of the energy (seed 003, eq. 16) at strain "
+              f"{ev.strain:g}; C44 with the atoms relaxed (`minimize`) in each sheared box.", "",
+              *_property_rows(values, ref, exact), "",
+              "Fit model = the exact (automatic-differentiation) second derivatives of the same energy at a0; "
+              "the LAMMPS - model column is the finite-difference error.", "",
+              f"Loss eq. 13 of this set (fit model at a*, Table 1 targets): {summary['loss']:.5f}; "
+              f"Table 2's set: {summary['reference_loss']:.5f}.", "",
+              "## Error against run time: strain size of the central difference", "",
+              "| strain | max abs error (GPa) | " + " | ".join(LABELS[k][0] for k in MODULI) + " | time (s) |",
+              "|---|---|" + "---|" * len(MODULI) + "---|"]
+    for r in rows:
+        report.append(f"| {r['strain']:g} | {r['max_abs_error_GPa']:.2e} | "
+                      + " | ".join(f"{r['errors_GPa'][k]:+.1e}" for k in MODULI) + f" | {r['seconds']:.3f} |")
+    report += ["", f"Spread over strains within a decade of {ev.strain:g}: "
+               + ", ".join(f"{LABELS[k][0]} {v:.2g}" for k, v in ev.spread.items()) + " GPa. "
+               "Round-off (1e-16 x E / e^2) dominates below the plateau, the quartic term of E above it.",
+               "", "![strain scan](strain_scan.png)"]
+    return _finish(out, spec, summary, report, t0)
+
+
+def run_stability(spec: WorkflowSpec, out: Path, say=print) -> dict:
+    t0 = time.perf_counter()
+    params = load_parameters(spec.tersoff)
+    s = spec.stability
+    say(f"stability of {spec.tersoff.potential}: {', '.join(s.boundaries)} at "
+        f"{', '.join(f'{t:g}' for t in s.temperatures_K)} K, {s.time_ps:g} ps each")
+    results = stab.check(params, out, temperatures_K=tuple(s.temperatures_K), say=say, **_stability_kwargs(spec))
+    first = s.temperatures_K[0]
+    summary = {"stability": _stability_summary(results, first)}
+    verdicts = []
+    for temp in s.temperatures_K:
+        at = [r for r in results if r.temperature_K == temp]
+        failed = [r.boundary for r in at if not r.passed]
+        verdicts.append(f"{temp:g} K: " + ("all pass" if not failed else f"fails {', '.join(failed)}"))
+    summary["headline"] = f"stability of {spec.tersoff.potential}: " + "; ".join(verdicts)
+    report = [f"# Tersoff stability: {spec.tersoff.potential}", "",
+              f"{s.cells}x{s.cells}x{s.cells} conventional cells ({8 * s.cells ** 3} atoms), {s.time_ps:g} ps of NVE "
+              f"at {s.timestep_fs:g} fs after relaxing the surfaces; velocities for twice the set temperature. "
+              f"Pass: drift <= {s.max_drift_eV:g} eV/atom, 4-fold interior >= {s.min_fourfold:g}, "
+              f"interior RMS <= {s.max_rms_A:g} A, no atom lost (opalflow/tersoff/stability.py).", "",
+              *_stability_rows(results), "", summary["headline"] + "."]
+    return _finish(out, spec, summary, report, t0)
+
+
+def run_fit(spec: WorkflowSpec, out: Path, say=print) -> dict:
+    t0 = time.perf_counter()
+    t = spec.tersoff
+    start = load_parameters(t)
+    settings = loss_settings(spec, start)
+    ref = fitting.zhuravlev2021()
+    say(f"fit: {t.starts} L-BFGS starts (seed {t.seed}), free {', '.join(k for k in COLUMNS if k not in t.fixed)}; "
+        f"fixed {', '.join(f'{k} = {getattr(start, k):g}' for k in t.fixed)}")
+    results = fitting.multistart(settings, starts=t.starts, seed=t.seed, max_iter=t.max_iter, say=say)
+    fit_s = time.perf_counter() - t0
+    loss = fitting.Loss(**settings)
+    reference_loss = loss(read_tersoff(REFERENCE_POTENTIAL))
+    say(f"best loss {results[0].loss:.5f} (Table 2: {reference_loss:.5f}) in {fit_s:.1f} s")
+    stab_t = spec.stability.temperatures_K[0]
+    chosen, checks = results[0], []
+    for rank, r in enumerate(results[:t.rank_top]):
+        cand = TersoffParameters.from_values(r.params, start.element)
+        say(f"candidate {rank + 1} (start {r.start + 1}, loss {r.loss:.5f}): stability at {stab_t:g} K")
+        res = stab.check(cand, out / f"stability_candidate{rank + 1}", temperatures_K=(stab_t,), say=say,
+                         **_stability_kwargs(spec))
+        checks.append((r, res))
+        if all(x.passed for x in res):
+            chosen = r
+            break
+    best = TersoffParameters.from_values(chosen.params, start.element)
+    write_tersoff(out / "fitted.tersoff", best,
+                  f"fitted by opalflow {__version__} (workflow {spec.name}): loss eq. 13 = {chosen.loss:.6f}\n"
+                  f"{t.starts} L-BFGS starts, seed {t.seed}; start {chosen.start + 1} chosen")
+    ev, values, exact = _lammps_properties(best, spec, out / "lammps", scan=False)
+    at_target = loss.model.evaluate(best)
+    chosen_checks = next((res for r, res in checks if r is chosen), [])
+    _plot_history(results, reference_loss, out / "loss_history.png")
+    summary = _base_summary(values, chosen.loss, reference_loss)
+    summary.update({
+        "fit_s": fit_s, "parameters": best.as_dict(),
+        "stability": _stability_summary(chosen_checks, stab_t) if chosen_checks else None,
+        "candidates_checked": [{"start": r.start, "loss": r.loss, "stable": all(x.passed for x in res)}
+                               for r, res in checks],
+        "model_at_a0": exact, "model_at_target": at_target,
+        "lammps_minus_model": {k: values[k] - exact[k] for k in LABELS},
+        "reference": _errors(values, ref),
+        "starts": [{"start": r.start, "loss": r.loss, "iterations": r.iterations, "evaluations": r.evaluations,
+                    "seconds": r.seconds, "message": r.message, "history": r.history} for r in results],
+        "headline": (f"fit loss {chosen.loss:.5f} (Table 2: {reference_loss:.5f}), {t.starts} starts in "
+                     f"{fit_s:.1f} s; LAMMPS: Ec = {values['Ec_eV']:.3f} eV, B = {values['B_GPa']:.1f}, "
+                     f"C11 = {values['C11_GPa']:.1f}, C12 = {values['C12_GPa']:.1f}, "
+                     f"C44^0 = {values['C44_0_GPa']:.1f}, C44 = {values['C44_GPa']:.1f} GPa; "
+                     + ("stable" if summary_stable(chosen_checks) else "NOT stable") + f" at {stab_t:g} K")})
+    report = [f"# Tersoff fit ({spec.name})", "",
+              f"Loss eq. 13 (seed 003) at a* = {t.lattice_target_A} A, weights "
+              + ", ".join(f"{k} {v:g}" for k, v in settings["weights"].items())
+              + f". L-BFGS-B with JAX gradients from {t.starts} uniform random starts in the bounds (seed {t.seed}); "
+              f"fixed {', '.join(f'{k} = {v:g}' for k, v in settings['fixed'].items())}.", "",
+              f"Best loss **{chosen.loss:.5f}** against Table 2's **{reference_loss:.5f}** on the same targets and "
+              f"weights; fit time {fit_s:.1f} s (all starts), wall time below.", "",
+              "## Parameters (fitted.tersoff)", "", "| parameter | fitted | Table 2 |", "|---|---|---|"]
+    table2 = read_tersoff(REFERENCE_POTENTIAL)
+    report += [f"| {k} | {getattr(best, k):.6g} | {getattr(table2, k):g} |" for k in COLUMNS]
+    report += ["", "## Properties of the fitted set (LAMMPS at its a0; fit model = exact derivatives, same a0)", "",
+               f"a0 = {values['a0_A']:.5f} A; at a* the fit model gives "
+               + ", ".join(f"{LABELS[k][0]} {at_target[k]:.3f}" for k in LABELS) + ".", "",
+               *_property_rows(values, ref, exact), "",
+               "## Stability of the best candidates (ranked by loss, first stable one chosen)", ""]
+    for rank, (r, res) in enumerate(checks):
+        report += [f"Candidate {rank + 1}: start {r.start + 1}, loss {r.loss:.5f}", "", *_stability_rows(res), ""]
+    if not checks:
+        report += ["No stability check (tersoff.rank_top = 0).", ""]
+    report += ["## Starts", "", "| start | loss | iterations | evaluations | time (s) | stop |", "|---|---|---|---|---|---|"]
+    report += [f"| {r.start + 1} | {r.loss:.5f} | {r.iterations} | {r.evaluations} | {r.seconds:.2f} | {r.message} |"
+               for r in sorted(results, key=lambda r: r.start)]
+    report += ["", "![loss history](loss_history.png)"]
+    return _finish(out, spec, summary, report, t0)
+
+
+def summary_stable(results: list[stab.BoundaryResult]) -> bool:
+    return bool(results) and all(r.passed for r in results)
+
+
+def _plot_history(results, reference_loss: float, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for r in sorted(results, key=lambda r: r.start):
+        ax.semilogy(np.arange(1, len(r.history) + 1), r.history, lw=1)
+    ax.axhline(reference_loss, color="k", ls="--", label=f"Table 2 ({reference_loss:.4f})")
+    ax.set_xlabel("L-BFGS iteration")
+    ax.set_ylabel("loss eq. 13")
+    ax.set_title("Loss history of each start")
+    ax.legend()
+    _save(fig, path)
+
+
+def run(spec: WorkflowSpec, out: Path, say=print) -> dict:
+    out.mkdir(parents=True, exist_ok=True)
+    runner = {"tersoff_properties": run_properties, "tersoff_fit": run_fit,
+              "tersoff_stability": run_stability}[spec.kind]
+    return runner(spec, out, say)
