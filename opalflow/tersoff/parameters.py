@@ -130,11 +130,11 @@ def read_tersoff(path: str | Path, element: str = "Si") -> TersoffParameters:
 
 
 def format_tersoff(p: TersoffParameters, comment: str = "") -> str:
-    """File text of one entry; numbers with 10 significant digits (round trip within 1e-10)."""
+    """File text of one entry; numbers in their shortest exact form, so the file reads back bit for bit."""
     head = "".join(f"# {line}\n" for line in comment.splitlines())
     head += "# " + " ".join(("element1", "element2", "element3") + COLUMNS) + "\n"
     e = p.element
-    nums = " ".join(f"{v:.10g}" for v in p.values())
+    nums = " ".join(repr(float(v)) for v in p.values())
     return f"{head}{e} {e} {e} {nums}\n"
 
 

@@ -278,6 +278,7 @@ def run_fit(spec: WorkflowSpec, out: Path, say=print) -> dict:
     summary = _base_summary(values, chosen.loss, reference_loss)
     summary.update({
         "fit_s": fit_s, "parameters": best.as_dict(),
+        "at_bounds": [k for k in COLUMNS if "bound)" in _bound_note(k, getattr(best, k), settings)],
         "stability": _stability_summary(chosen_checks, stab_t) if chosen_checks else None,
         "candidates_checked": [{"start": r.start, "loss": r.loss, "stable": all(x.passed for x in res)}
                                for r, res in checks],
@@ -298,9 +299,13 @@ def run_fit(spec: WorkflowSpec, out: Path, say=print) -> dict:
               f"fixed {', '.join(f'{k} = {v:g}' for k, v in settings['fixed'].items())}.", "",
               f"Best loss **{chosen.loss:.5f}** against Table 2's **{reference_loss:.5f}** on the same targets and "
               f"weights; fit time {fit_s:.1f} s (all starts), wall time below.", "",
-              "## Parameters (fitted.tersoff)", "", "| parameter | fitted | Table 2 |", "|---|---|---|"]
+              "## Parameters (fitted.tersoff)", "",
+              "gamma and beta enter only as the product beta gamma (zeta is proportional to gamma), so the fit "
+              "fixes their product, not each.", "",
+              "| parameter | fitted | Table 2 | search box |", "|---|---|---|---|"]
     table2 = read_tersoff(REFERENCE_POTENTIAL)
-    report += [f"| {k} | {getattr(best, k):.6g} | {getattr(table2, k):g} |" for k in COLUMNS]
+    report += [f"| {k} | {getattr(best, k):.6g} | {getattr(table2, k):g} | {_bound_note(k, getattr(best, k), settings)} |"
+               for k in COLUMNS]
     report += ["", "## Properties of the fitted set (LAMMPS at its a0; fit model = exact derivatives, same a0)", "",
                f"a0 = {values['a0_A']:.5f} A; at a* the fit model gives "
                + ", ".join(f"{LABELS[k][0]} {at_target[k]:.3f}" for k in LABELS) + ".", "",
@@ -315,6 +320,15 @@ def run_fit(spec: WorkflowSpec, out: Path, say=print) -> dict:
                for r in sorted(results, key=lambda r: r.start)]
     report += ["", "![loss history](loss_history.png)"]
     return _finish(out, spec, summary, report, t0)
+
+
+def _bound_note(name: str, value: float, settings: dict) -> str:
+    if name in settings["fixed"]:
+        return "fixed"
+    lo, hi = settings["bounds"][name]
+    note = " (at the lower bound)" if value <= lo + 1e-6 * (hi - lo) else (
+        " (at the upper bound)" if value >= hi - 1e-6 * (hi - lo) else "")
+    return f"[{lo:g}, {hi:g}]{note}"
 
 
 def summary_stable(results: list[stab.BoundaryResult]) -> bool:
