@@ -34,3 +34,16 @@ def brute_force_pairs(x, r, box, periodic):
     dist = np.sqrt((d**2).sum(-1))
     i, j = np.nonzero(np.triu(dist < r, 1))
     return np.column_stack([i, j])
+
+
+def assert_refused(capsys, argv: list[str], sets: list[str], field: str, out) -> None:
+    """The CLI refuses the --set values with one line naming ``field``, exit 2, ``out`` not created."""
+    from opalflow.cli import main
+
+    for s in sets:
+        argv = argv + ["--set", s]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert err.startswith(f"error: {field} = ")
+    assert not out.exists()

@@ -4,9 +4,10 @@ import sys
 
 import pytest
 
-from opalflow.cli import main
 from opalflow.spec import SpecError, apply_overrides, load_spec, parse_value
 from opalflow.resources import WORKFLOWS
+
+from conftest import assert_refused
 
 BAD = [
     (["packing.diameter_nm=-15"], "packing.diameter_nm"),
@@ -25,14 +26,7 @@ BAD = [
 @pytest.mark.parametrize("sets,field", BAD)
 def test_bad_spec_one_line_nothing_written(tmp_path, capsys, sets, field):
     out = tmp_path / "run"
-    argv = ["build", "opal_quick", "--out", str(out)]
-    for s in sets:
-        argv += ["--set", s]
-    assert main(argv) == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1
-    assert err.startswith(f"error: {field} = ")
-    assert not out.exists()
+    assert_refused(capsys, ["build", "opal_quick", "--out", str(out)], sets, field, out)
 
 
 def test_bad_spec_exit_code_from_shell(tmp_path):

@@ -15,6 +15,8 @@ from opalflow.tersoff.properties import evaluate
 from opalflow.tersoff.stability import Criteria, check
 from opalflow.tersoff.workflow import REFERENCE_POTENTIAL
 
+from conftest import assert_refused
+
 REF = fitting.zhuravlev2021()
 TABLE2 = read_tersoff(REFERENCE_POTENTIAL)
 
@@ -197,13 +199,7 @@ def test_properties_workflow_with_set_potential(tmp_path, capsys):
 ])
 def test_bad_tersoff_spec_is_one_line(tmp_path, capsys, sets, field):
     out = tmp_path / "run"
-    argv = ["run", "tersoff_fit", "--out", str(out)]
-    for s in sets:
-        argv += ["--set", s]
-    assert main(argv) == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and err.startswith(f"error: {field} = ")
-    assert not out.exists()
+    assert_refused(capsys, ["run", "tersoff_fit", "--out", str(out)], sets, field, out)
 
 
 def test_columns_are_lammps_order():

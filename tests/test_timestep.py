@@ -8,7 +8,6 @@ found by bisection to 3 %; the estimate must lie between half of it and it.
 import math
 import os
 
-import numpy as np
 import pytest
 
 from opalflow.lammps.deck import compression_deck
