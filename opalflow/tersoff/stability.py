@@ -129,14 +129,15 @@ run 0 post no
         else:       # atom order is gone with the lost atoms; the run has failed anyway
             fourfold, rms = math.nan, math.nan
     reasons = []
-    if lost:
-        reasons.append(f"{lost} atoms lost")
-    if not drift <= criteria.max_drift_eV:
-        reasons.append(f"energy drift {drift:.3g} eV/atom > {criteria.max_drift_eV:g}")
-    if not fourfold >= criteria.min_fourfold:
-        reasons.append(f"4-coordinated interior fraction {fourfold:.3f} < {criteria.min_fourfold:g}")
-    if not rms <= criteria.max_rms_A:
-        reasons.append(f"interior RMS displacement {rms:.3g} A > {criteria.max_rms_A:g} A")
+    if lost:   # the rest cannot be judged on the atoms that are left
+        reasons.append(f"{lost} of {n0} atoms lost (flew out of the box padded by one lattice constant)")
+    else:
+        if not drift <= criteria.max_drift_eV:
+            reasons.append(f"energy drift {drift:.3g} eV/atom > {criteria.max_drift_eV:g}")
+        if not fourfold >= criteria.min_fourfold:
+            reasons.append(f"4-coordinated interior fraction {fourfold:.3f} < {criteria.min_fourfold:g}")
+        if not rms <= criteria.max_rms_A:
+            reasons.append(f"interior RMS displacement {rms:.3g} A > {criteria.max_rms_A:g} A")
     return BoundaryResult(boundary=boundary, temperature_K=temperature_K, passed=not reasons,
                           reason="; ".join(reasons) or "ok", drift_eV_per_atom=drift,
                           fourfold_interior=fourfold, rms_interior_A=rms, atoms_lost=int(lost),
