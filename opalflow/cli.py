@@ -110,6 +110,9 @@ def cmd_run(args) -> int:
         spec = load_spec(workflow_path(args.workflow), args.set)
     if args.np < 1:
         raise SpecError("--np", args.np, "must be >= 1")
+    if spec.kind.startswith("tersoff") and (args.np > 1 or args.suffix or args.resume):
+        raise SpecError("--np/--suffix/--resume", spec.kind, "atomistic workflows run in-process and take "
+                        "seconds; stability.workers sets how many MD runs go at once")
     if args.suffix:
         from opalflow.lammps.engine import lammps_info
 

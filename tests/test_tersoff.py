@@ -205,3 +205,10 @@ def test_bad_tersoff_spec_is_one_line(tmp_path, capsys, sets, field):
 def test_columns_are_lammps_order():
     assert COLUMNS == ("m", "gamma", "lambda3", "c", "d", "costheta0", "n", "beta", "lambda2", "B", "R", "D",
                        "lambda1", "A")
+
+
+def test_mpi_options_are_refused_for_atomistic_runs(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["run", "tersoff_properties", "--out", str(out), "--np", "2"]) == 2
+    assert capsys.readouterr().err.startswith("error: --np/--suffix/--resume = 'tersoff_properties'")
+    assert not out.exists()
