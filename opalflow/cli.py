@@ -57,8 +57,8 @@ def cmd_build(args) -> int:
     from opalflow.store import write_json_atomic
 
     spec = load_spec(workflow_path(args.workflow), args.set)
-    if spec.kind.startswith("tersoff"):
-        raise SpecError("kind", spec.kind, "atomistic workflows have no deck to build: use 'run'")
+    if spec.kind.startswith("tersoff") or spec.kind == "study":
+        raise SpecError("kind", spec.kind, "atomistic workflows and studies have no single deck to build: use 'run'")
     out = _out_folder(args.out)
     start = time.perf_counter()
     _say(f"building {spec.name} ({spec.kind})")
@@ -113,6 +113,9 @@ def cmd_run(args) -> int:
     if spec.kind.startswith("tersoff") and (args.np > 1 or args.suffix or args.resume):
         raise SpecError("--np/--suffix/--resume", spec.kind, "atomistic workflows run in-process and take "
                         "seconds; stability.workers sets how many MD runs go at once")
+    if spec.kind == "study" and (args.np > 1 or args.suffix or args.resume):
+        raise SpecError("--np/--suffix/--resume", spec.kind, "a study sets study.np and study.workers; "
+                        "rerunning it resumes it (finished jobs are kept)")
     if args.suffix:
         from opalflow.lammps.engine import lammps_info
 
@@ -169,8 +172,10 @@ def parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = parser().parse_args(argv)
+    from opalflow.build.pores import PoreError
+
     try:
         return args.func(args)
-    except SpecError as exc:
+    except (SpecError, PoreError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -24,7 +24,7 @@ from opalflow.lammps.deck import CompressionDeck, compression_deck
 from opalflow.lammps.engine import lammps_info, run_in_process, run_script_sh, run_subprocess
 from opalflow.resources import ROOT
 from opalflow.spec import SpecError, WorkflowSpec
-from opalflow.store import write_json_atomic, write_text_atomic
+from opalflow.store import new_figure, save_figure, write_json_atomic, write_text_atomic
 from opalflow.structure import Structure
 
 #: the uncoated silica opal's experiment (do Rosario et al. [57], Dosta et al. 3.1.2)
@@ -235,12 +235,7 @@ def _write_h5(out, info, curve, strain, stress, stress_plate, stress_substrate, 
 
 
 def _plots(out, strain, stress, stress_plate, stress_substrate, fit, snapshots, histograms, type_names):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(5, 3.6))
+    fig, ax = new_figure(figsize=(5, 3.6))
     ax.plot(100 * strain, stress_plate, lw=0.6, color="0.6", label="plate")
     ax.plot(100 * strain, stress_substrate, lw=0.6, color="0.8", label="substrate")
     ax.plot(100 * strain, stress, lw=1.4, label="sample (mean)")
@@ -249,10 +244,10 @@ def _plots(out, strain, stress, stress_plate, stress_substrate, fit, snapshots, 
     ax.set_xlabel("strain (%)")
     ax.set_ylabel("stress (MPa)")
     ax.legend()
-    _save(fig, out / "stress_strain.png")
+    save_figure(fig, out / "stress_strain.png")
     if snapshots:
         step, snap = list(snapshots.items())[-1]
-        fig, axes = plt.subplots(1, 2, figsize=(8, 3.4))
+        fig, axes = new_figure(1, 2, figsize=(8, 3.4))
         for col, ax, label in ((0, axes[0], "sigma_xx"), (2, axes[1], "sigma_zz")):
             for t, name in enumerate(type_names):
                 sel = snap["type"] == t + 1
@@ -262,27 +257,16 @@ def _plots(out, strain, stress, stress_plate, stress_substrate, fit, snapshots, 
             ax.set_xlabel(f"{label} (MPa) at strain {100 * snap['strain']:.2f} %")
             ax.set_ylabel("fraction")
         axes[0].legend()
-        _save(fig, out / "stress_hist.png")
+        save_figure(fig, out / "stress_hist.png")
     if histograms:
-        fig, ax = plt.subplots(figsize=(5, 3.4))
+        fig, ax = new_figure(figsize=(5, 3.4))
         for hist in histograms.values():
             mids = 0.5 * (hist["edges"][1:] + hist["edges"][:-1])
             ax.step(100 * mids, hist["fraction"], where="mid", label=f"strain {100 * hist['strain']:.2f} %")
         ax.set_xlabel("bond strain (%)")
         ax.set_ylabel("fraction of bonds")
         ax.legend()
-        _save(fig, out / "bond_strain.png")
-
-
-def _save(fig, path: Path) -> None:
-    """Write a figure under a temporary name, then rename it."""
-    import matplotlib.pyplot as plt
-
-    fig.tight_layout()
-    tmp = path.with_name(path.stem + ".tmp.png")
-    fig.savefig(tmp, dpi=120)
-    tmp.replace(path)
-    plt.close(fig)
+        save_figure(fig, out / "bond_strain.png")
 
 
 def _report(info, summary, fit) -> str:
@@ -324,10 +308,15 @@ def run_workflow(spec: WorkflowSpec, out: Path, *, np_: int = 1, resume: bool = 
                  suffix: str | None = None) -> dict:
     """prepare (unless resuming) -> execute -> analyze; the rate check runs a half-speed twin.
 
-    Atomistic kinds (``tersoff_*``) run in :mod:`opalflow.tersoff.workflow`.
+    Atomistic kinds (``tersoff_*``) run in :mod:`opalflow.tersoff.workflow`, studies in
+    :mod:`opalflow.studies.run`.
     """
     if spec.kind.startswith("tersoff"):
         from opalflow.tersoff.workflow import run
+
+        return run(spec, out, say=say)
+    if spec.kind == "study":
+        from opalflow.studies.run import run
 
         return run(spec, out, say=say)
     t = time.perf_counter()

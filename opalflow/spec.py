@@ -53,6 +53,7 @@ class PoresSpec:
     cells_x: int = 4
     cells_y: int = 2
     porosity: float | None = None
+    porosity_tolerance: float = 0.01
     seed: int = 1
 
 
@@ -161,6 +162,34 @@ class StabilitySpec:
 
 
 @dataclass
+class StudySpec:
+    """A study (kind = "study"): many compression jobs made from one base workflow (Dosta et al.)."""
+
+    type: str = "calibration"
+    base: str = "quickstart"
+    paper_base: str = "opal_fcc"
+    paper_scale: bool = False
+    set: list[str] = field(default_factory=list)
+    workers: int = 0
+    np: int = 1
+    # calibration (eqs. 18-19)
+    target_E_GPa: float = 1.7
+    target_strength_MPa: float = 41.3
+    tolerance: float = 0.005
+    max_runs: int = 8
+    jacobian: str = "decoupled"
+    fd_step: float = 0.1
+    start_E_GPa: float = 0.0
+    start_strength_MPa: float = 0.0
+    # bulk (K_E), coating, porosity, convergence
+    diameters_nm: list[float] = field(default_factory=lambda: [60.0, 45.0])
+    thicknesses_nm: list[float] = field(default_factory=lambda: [0.0, 10.0, 20.0, 34.0])
+    porosities: list[float] = field(default_factory=lambda: [0.30, 0.36, 0.42, 0.49, 0.55, 0.62])
+    seeds: list[int] = field(default_factory=lambda: [1, 2, 3])
+    cells: list[list[int]] = field(default_factory=lambda: [[1, 1], [2, 1], [2, 2]])
+
+
+@dataclass
 class BoundarySpec:
     """Side boundaries (x and y): periodic, or open (no bonds across)."""
 
@@ -187,13 +216,15 @@ class WorkflowSpec:
     datafile: DatafileSpec = field(default_factory=DatafileSpec)
     tersoff: TersoffSpec = field(default_factory=TersoffSpec)
     stability: StabilitySpec = field(default_factory=StabilitySpec)
+    study: StudySpec = field(default_factory=StudySpec)
     materials: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
 
 
-KINDS = ("opal", "lattice", "datafile", "tersoff_properties", "tersoff_fit", "tersoff_stability")
+KINDS = ("opal", "lattice", "datafile", "tersoff_properties", "tersoff_fit", "tersoff_stability", "study")
+STUDIES = ("calibration", "bulk", "coating", "porosity", "convergence")
 LATTICES = ("sc", "fcc")
 ARRANGEMENTS = ("fcc", "random", "none")
 SIDES = ("periodic", "open")
@@ -380,6 +411,8 @@ def validate(spec: WorkflowSpec, known_materials: tuple[str, ...] | None = None)
         _check(0 < p.porosity < 1, "pores.porosity", p.porosity, "must be in (0, 1)")
         _check(p.porosity <= 0.66, "pores.porosity", p.porosity,
                "must be <= 0.66: denser random non-overlapping pores cannot be placed")
+        _check(0 < p.porosity_tolerance <= 0.2, "pores.porosity_tolerance", p.porosity_tolerance,
+               "must be in (0, 0.2] (a small box holds few pores: each moves the porosity by its share)")
     elif p.porosity is not None:
         raise SpecError("pores.porosity", p.porosity,
                         "only allowed with arrangement = 'random' (fcc porosity follows from the lattice)")
@@ -445,6 +478,8 @@ def validate(spec: WorkflowSpec, known_materials: tuple[str, ...] | None = None)
                    f"unknown material; known: {', '.join(materials)}, substrate")
     if spec.kind.startswith("tersoff"):
         validate_tersoff(spec)
+    if spec.kind == "study":
+        validate_study(spec)
     _check(spec.boundary.sides in SIDES, "boundary.sides", spec.boundary.sides,
            f"must be one of {', '.join(SIDES)}")
     if k.tile_nm:
@@ -511,3 +546,32 @@ def validate_tersoff(spec: WorkflowSpec) -> None:
     _check(0 < s.min_fourfold <= 1, "stability.min_fourfold", s.min_fourfold, "must be in (0, 1]")
     _check(s.max_rms_A > 0, "stability.max_rms_A", s.max_rms_A, "must be > 0")
     _check(s.workers >= 0, "stability.workers", s.workers, "must be >= 0 (MD runs at once; 0: all cores)")
+
+
+def validate_study(spec: WorkflowSpec) -> None:
+    """The [study] section; the jobs' own specs are validated when the study builds them."""
+    st = spec.study
+    _check(st.type in STUDIES, "study.type", st.type, f"must be one of {', '.join(STUDIES)}")
+    for where, name in (("study.base", st.base), ("study.paper_base", st.paper_base)):
+        check_name(where, name)
+    _check(st.workers >= 0, "study.workers", st.workers, "must be >= 0 (jobs at once; 0: cores / np)")
+    _check(st.np >= 1, "study.np", st.np, "must be >= 1 (MPI processes per job)")
+    _check(st.target_E_GPa > 0, "study.target_E_GPa", st.target_E_GPa, "must be > 0")
+    _check(st.target_strength_MPa > 0, "study.target_strength_MPa", st.target_strength_MPa, "must be > 0")
+    _check(0 < st.tolerance < 0.5, "study.tolerance", st.tolerance, "must be in (0, 0.5) (relative)")
+    _check(2 <= st.max_runs <= 100, "study.max_runs", st.max_runs, "must be in [2, 100]")
+    _check(st.jacobian in ("decoupled", "full"), "study.jacobian", st.jacobian, "must be 'decoupled' or 'full'")
+    _check(0.001 <= st.fd_step <= 0.5, "study.fd_step", st.fd_step, "must be in [0.001, 0.5] (relative step, eq. 19)")
+    _check(st.start_E_GPa >= 0, "study.start_E_GPa", st.start_E_GPa, "must be >= 0 (0: the material's)")
+    _check(st.start_strength_MPa >= 0, "study.start_strength_MPa", st.start_strength_MPa,
+           "must be >= 0 (0: the material's)")
+    _check(len(st.diameters_nm) >= 1 and all(d > 0 for d in st.diameters_nm), "study.diameters_nm",
+           st.diameters_nm, "must be a non-empty list of diameters > 0")
+    _check(all(0 <= t < 200 for t in st.thicknesses_nm), "study.thicknesses_nm", st.thicknesses_nm,
+           "must be thicknesses in [0, 200) nm")
+    _check(len(st.porosities) >= 1 and all(0 < p <= 0.66 for p in st.porosities), "study.porosities",
+           st.porosities, "must be porosities in (0, 0.66]")
+    _check(len(st.seeds) >= 1 and all(s >= 0 for s in st.seeds) and len(set(st.seeds)) == len(st.seeds),
+           "study.seeds", st.seeds, "must be distinct seeds >= 0")
+    _check(len(st.cells) >= 1 and all(len(c) == 2 and min(c) >= 1 for c in st.cells), "study.cells",
+           st.cells, "must be [cells_x, cells_y] pairs >= 1")

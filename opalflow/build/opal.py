@@ -42,7 +42,8 @@ def _random_pores(spec: WorkflowSpec, packing, substrate, box_xy, z0, height, pr
     random order; for every particle the first pore in that order that cuts it is
     found, which gives the porosity after the first n pores for every n at once.
     The chosen n misses the target by at most half of one pore's share (about
-    V_pore / V_sample = 1.5 % in the standard sample).  Pore centres lie anywhere
+    V_pore / V_sample = 1.5 % in the standard sample); more than ``pores.porosity_tolerance``
+    is refused.  Pore centres lie anywhere
     in the sample height, so the top face cuts pores and the substrate truncates
     them, as in a sample cut out of a larger random porous body.
     """
@@ -70,9 +71,10 @@ def _random_pores(spec: WorkflowSpec, packing, substrate, box_xy, z0, height, pr
     counts = np.bincount(first[sample], minlength=len(centres) + 1)[:len(centres)]
     porosity_n = np.concatenate([[0.0], np.cumsum(counts) / n_sample])  # after 0..N pores
     n = int(np.argmin(np.abs(porosity_n - p.porosity)))
-    if abs(porosity_n[n] - p.porosity) > 0.01:
+    if abs(porosity_n[n] - p.porosity) > p.porosity_tolerance:
         raise pore_geometry.PoreError(
-            f"pores.porosity = {p.porosity}: reached only {porosity_n[n]:.3f} with {n} pores in this box")
+            f"pores.porosity = {p.porosity}: the closest is {porosity_n[n]:.3f} with {n} pores in this box "
+            f"(tolerance {p.porosity_tolerance:g}); enlarge the box or raise pores.porosity_tolerance")
     if progress:
         progress(f"random pores: {n} of {len(centres)} packed pores give porosity {porosity_n[n]:.4f} "
                  f"(target {p.porosity:.4f})")

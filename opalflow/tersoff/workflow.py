@@ -16,7 +16,7 @@ import numpy as np
 from opalflow import __version__
 from opalflow.resources import DATA
 from opalflow.spec import SpecError, TersoffSpec, WorkflowSpec
-from opalflow.store import write_json_atomic, write_text_atomic
+from opalflow.store import new_figure, save_figure, write_json_atomic, write_text_atomic
 from opalflow.tersoff import fit as fitting
 from opalflow.tersoff import stability as stab
 from opalflow.tersoff.model import DiamondModel
@@ -111,12 +111,7 @@ def _scan_table(ev, exact: dict) -> list[dict]:
 
 
 def _plot_scan(rows: list[dict], path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig, ax = new_figure(figsize=(6, 4))
     h = [r["strain"] for r in rows]
     for key in MODULI:
         ax.loglog(h, [max(abs(r["errors_GPa"][key]), 1e-12) for r in rows], "o-", label=LABELS[key][0])
@@ -125,17 +120,7 @@ def _plot_scan(rows: list[dict], path: Path) -> None:
     ax.set_title("Finite-difference moduli against the AD second derivative")
     ax.legend(fontsize=8)
     ax.grid(True, which="both", alpha=0.3)
-    _save(fig, path)
-
-
-def _save(fig, path: Path) -> None:
-    tmp = path.with_name(path.stem + ".tmp.png")
-    fig.tight_layout()
-    fig.savefig(tmp, dpi=120)
-    import matplotlib.pyplot as plt
-
-    plt.close(fig)
-    tmp.replace(path)
+    save_figure(fig, path)
 
 
 def _stability_summary(results: list[stab.BoundaryResult], temperature: float) -> dict:
@@ -339,12 +324,7 @@ def summary_stable(results: list[stab.BoundaryResult]) -> bool:
 
 
 def _plot_history(results, reference_loss: float, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig, ax = new_figure(figsize=(6, 4))
     for r in sorted(results, key=lambda r: r.start):
         ax.semilogy(np.arange(1, len(r.history) + 1), r.history, lw=1)
     ax.axhline(reference_loss, color="k", ls="--", label=f"Table 2 ({reference_loss:.4f})")
@@ -352,7 +332,7 @@ def _plot_history(results, reference_loss: float, path: Path) -> None:
     ax.set_ylabel("loss eq. 13")
     ax.set_title("Loss history of each start")
     ax.legend()
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def run(spec: WorkflowSpec, out: Path, say=print) -> dict:

@@ -1,0 +1,108 @@
+"""Sweeps: many independent compression jobs, run in parallel, each done once.
+
+A job is a workflow spec.  Its folder is ``<study>/jobs/<label>-<hash>`` where the hash is
+the SHA-256 of the spec's canonical JSON: a finished job (``summary.json`` beside a
+``job.json`` with the same hash) is never run again, so rerunning a finished sweep does no
+LAMMPS work and a killed sweep completes only what is missing (a job killed after a
+restart file continues from it).  Jobs go to a local pool of ``workers`` processes (spawn),
+each job with ``np`` MPI processes.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import multiprocessing
+import os
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+
+from opalflow.spec import WorkflowSpec, spec_from_dict
+from opalflow.store import write_json_atomic
+
+
+def spec_hash(spec: WorkflowSpec) -> str:
+    """SHA-256 of the spec's canonical JSON (keys sorted): equal specs, equal jobs."""
+    text = json.dumps(spec.to_dict(), sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+@dataclass
+class Job:
+    label: str                  # [A-Za-z0-9_.-]+, shown in reports
+    spec: WorkflowSpec
+
+    @property
+    def key(self) -> str:
+        return spec_hash(self.spec)
+
+    def folder(self, root: Path) -> Path:
+        return root / "jobs" / f"{self.label}-{self.key[:12]}"
+
+
+def finished(job: Job, root: Path) -> dict | None:
+    """The job's summary if it has completed with this very spec, else None."""
+    folder = job.folder(root)
+    try:
+        meta = json.loads((folder / "job.json").read_text())
+        if meta["hash"] != job.key:
+            return None
+        return json.loads((folder / "summary.json").read_text())
+    except (FileNotFoundError, json.JSONDecodeError, KeyError):
+        return None
+
+
+def _run_job(args) -> tuple[str, dict]:
+    spec_dict, folder, np_, label = args
+    from opalflow.pipeline import run_workflow
+
+    folder = Path(folder)
+    resume = (folder / "run.json").exists() and any(folder.glob("restart.*.bin"))
+
+    def say(msg: str) -> None:
+        print(f"[{label}] {msg}", file=sys.stderr, flush=True)
+
+    summary = run_workflow(spec_from_dict(spec_dict), folder, np_=np_, resume=resume, say=say)
+    return label, summary
+
+
+def run_jobs(jobs: list[Job], root: Path, *, workers: int = 0, np_: int = 1, say=print) -> dict[str, dict]:
+    """Run every unfinished job (``workers`` at once; 0: cores / np) and return label -> summary.
+
+    Finished jobs are read from their folders; ``job.json`` is written before a job starts and
+    its ``summary.json`` only when it has finished, so a killed job is never taken as done.
+    """
+    root = Path(root)
+    labels = [j.label for j in jobs]
+    if len(set(labels)) != len(labels):
+        raise ValueError("job labels must be unique")
+    results, todo = {}, []
+    for job in jobs:
+        done = finished(job, root)
+        if done is not None:
+            results[job.label] = done
+            continue
+        folder = job.folder(root)
+        folder.mkdir(parents=True, exist_ok=True)
+        write_json_atomic(folder / "job.json", {"label": job.label, "hash": job.key, "spec": job.spec.to_dict()})
+        todo.append((job.spec.to_dict(), str(folder), np_, job.label))
+    say(f"{len(jobs)} jobs: {len(results)} finished before, {len(todo)} to run")
+    if not todo:
+        return {label: results[label] for label in labels}
+    workers = max(1, min(workers or max(1, (os.cpu_count() or 1) // np_), len(todo)))
+    t0 = time.perf_counter()
+    if workers == 1:
+        for n, args in enumerate(todo, 1):
+            label, summary = _run_job(args)
+            results[label] = summary
+            say(f"job {label} done ({n}/{len(todo)}, {time.perf_counter() - t0:.0f} s)")
+    else:
+        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+            futures = [pool.submit(_run_job, args) for args in todo]
+            for n, fut in enumerate(as_completed(futures), 1):
+                label, summary = fut.result()
+                results[label] = summary
+                say(f"job {label} done ({n}/{len(todo)}, {time.perf_counter() - t0:.0f} s)")
+    return {label: results[label] for label in labels}

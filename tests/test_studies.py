@@ -1,0 +1,148 @@
+"""Studies: sweep cache (real LAMMPS on small lattices), kill and rerun, fits, the Newton calibration."""
+import json
+import os
+import signal
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from opalflow.resources import WORKFLOWS
+from opalflow.spec import load_spec
+from opalflow.studies import run as studies
+from opalflow.studies import sweep
+from opalflow.studies.fits import fit_exponential, fit_power, fit_power_law
+
+LATTICE = ["compression.strain_max=0.002", "compression.snapshot_strains=[0.001]", "lattice.cells_z=6"]
+
+
+def lattice_jobs(spacings=(20.0, 22.0, 24.0)):
+    return [sweep.Job(f"a{a:g}", load_spec(WORKFLOWS / "lattice_sc.toml", [*LATTICE, f"lattice.spacing_nm={a}"]))
+            for a in spacings]
+
+
+def test_rerun_of_a_finished_sweep_does_no_lammps_work(tmp_path, monkeypatch):
+    jobs = lattice_jobs()
+    first = sweep.run_jobs(jobs, tmp_path, workers=1, say=lambda m: None)
+    assert list(first) == ["a20", "a22", "a24"]
+    assert all((tmp_path / "jobs" / f"{j.label}-{j.key[:12]}" / "log.lammps").exists() for j in jobs)
+
+    def no_lammps(*args):
+        raise AssertionError("a finished job was run again")
+
+    monkeypatch.setattr(sweep, "_run_job", no_lammps)
+    again = sweep.run_jobs(jobs, tmp_path, workers=1, say=lambda m: None)
+    assert again == first
+
+
+def test_a_changed_spec_is_a_new_job(tmp_path):
+    a, b = lattice_jobs((20.0, 20.0))
+    b.spec.compression.plate_speed_m_s *= 0.5
+    assert a.key != b.key and a.folder(tmp_path) != b.folder(tmp_path)
+    assert sweep.spec_hash(a.spec) == sweep.spec_hash(lattice_jobs((20.0,))[0].spec)
+
+
+DRIVER = """
+import sys
+from opalflow.resources import WORKFLOWS
+from opalflow.spec import load_spec
+from opalflow.studies import sweep
+LATTICE = {lattice!r}
+jobs = [sweep.Job(f"a{{a:g}}", load_spec(WORKFLOWS / "lattice_sc.toml", [*LATTICE, f"lattice.spacing_nm={{a}}"]))
+        for a in (20.0, 22.0, 24.0)]
+if __name__ == "__main__":
+    sweep.run_jobs(jobs, sys.argv[1], workers=1, say=lambda m: print(m, flush=True))
+"""
+
+
+def test_killed_sweep_completes_only_the_missing_jobs(tmp_path):
+    driver = tmp_path / "driver.py"
+    driver.write_text(DRIVER.format(lattice=LATTICE))
+    root = tmp_path / "study"
+    proc = subprocess.Popen([sys.executable, str(driver), str(root)], stdout=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    for line in proc.stdout:
+        if line.startswith("job a20 done"):
+            os.killpg(proc.pid, signal.SIGKILL)
+            break
+    proc.wait()
+    done = sorted(p.parent.name for p in root.glob("jobs/*/summary.json"))
+    assert done == [j.folder(root).name for j in lattice_jobs()[:1]]
+    stamp = (lattice_jobs()[0].folder(root) / "summary.json").stat().st_mtime_ns
+    log = subprocess.run([sys.executable, str(driver), str(root)], capture_output=True, text=True, check=True).stdout
+    assert "3 jobs: 1 finished before, 2 to run" in log
+    assert (lattice_jobs()[0].folder(root) / "summary.json").stat().st_mtime_ns == stamp
+    assert len(list(root.glob("jobs/*/summary.json"))) == 3
+
+
+# ----------------------------------------------------------------------------- fits
+def test_power_and_exponential_fits_recover_their_laws():
+    rng = np.random.default_rng(3)
+    eps = np.repeat([0.3, 0.36, 0.42, 0.49, 0.55, 0.62], 5)
+    e = 22.06 * (1 - eps) ** 1.92 * np.exp(rng.normal(0, 0.03, eps.size))
+    power, expo = fit_power(eps, e), fit_exponential(eps, e)
+    assert power.exponent_ci[0] < 1.92 < power.exponent_ci[1]
+    assert power.prefactor_ci[0] < 22.06 < power.prefactor_ci[1]
+    sig = 576.3 * np.exp(-3.85 * eps) * np.exp(rng.normal(0, 0.03, eps.size))
+    s = fit_exponential(eps, sig)
+    assert s.exponent_ci[0] < 3.85 < s.exponent_ci[1]
+    assert power.r2 > 0.9 and expo.n == 30
+    cost = fit_power_law([80.0, 60.0, 45.0], [40.0 * (80 / d) ** 4 for d in (80.0, 60.0, 45.0)])
+    assert cost.exponent == pytest.approx(-4.0, abs=1e-9)
+
+
+# ----------------------------------------------------------------------------- calibration
+def test_newton_calibration_on_a_known_model(tmp_path, monkeypatch):
+    """The iteration of eqs. 18-19 alone (the DEM runs replaced by a known smooth response,
+    E = 0.26 E_b, sigma = 0.44 sigma_b (1 + 0.02 E_b / 6.53)): it must meet 0.5 % in <= 8 runs."""
+    calls = []
+
+    def fake_sweep(spec, out, jobs, say):
+        out_ = {}
+        for job in jobs:
+            mat = job.spec.materials["silica"]
+            e_b, s_b = mat["bond_youngs_modulus_GPa"], mat["bond_strength_MPa"]
+            calls.append((e_b, s_b))
+            out_[job.label] = {"youngs_modulus_GPa": 0.26 * e_b, "strength_MPa": 0.44 * s_b * (1 + 0.02 * e_b / 6.53),
+                               "wall_s": 0.0}
+        return out_
+
+    monkeypatch.setattr(studies, "_sweep", fake_sweep)
+    for jacobian in ("decoupled", "full"):
+        calls.clear()
+        spec = load_spec(WORKFLOWS / "calibrate_silica.toml", [f'study.jacobian="{jacobian}"'])
+        summary, report = studies.calibration(spec, tmp_path, lambda m: None)
+        assert summary["converged"] and summary["dem_runs"] <= 8 and summary["dem_runs"] == len(calls)
+        assert abs(summary["youngs_modulus_GPa"] / 1.7 - 1) <= 0.005
+        assert abs(summary["strength_MPa"] / 41.3 - 1) <= 0.005
+        assert any("| 1 |" in line for line in report)
+
+
+def test_study_specs_validate_and_build_their_jobs():
+    spec = load_spec(WORKFLOWS / "porosity.toml")
+    job = studies.job_spec(spec, ['pores.arrangement="random"', "pores.porosity=0.49"])
+    assert job.pores.cells_x == 2 and job.packing.diameter_nm == 80.0 and job.pores.porosity == 0.49
+    paper = load_spec(WORKFLOWS / "calibrate_silica.toml", ["study.paper_scale=true"])
+    assert studies.job_spec(paper, []).packing.diameter_nm == 15.0
+
+
+def test_bad_study_field_is_one_line(tmp_path, capsys):
+    from conftest import assert_refused
+
+    out = tmp_path / "run"
+    assert_refused(capsys, ["run", "porosity", "--out", str(out)], ["study.porosities=[0.9]"],
+                   "study.porosities", out)
+
+
+def test_summary_json_of_a_study_is_written_last(tmp_path):
+    """Jobs are marked by job.json before they run; a folder without summary.json is not finished."""
+    job = lattice_jobs((20.0,))[0]
+    folder = job.folder(tmp_path)
+    folder.mkdir(parents=True)
+    (folder / "job.json").write_text(json.dumps({"hash": job.key}))
+    assert sweep.finished(job, tmp_path) is None
+    (folder / "summary.json").write_text("{}")
+    assert sweep.finished(job, tmp_path) == {}
+    (folder / "job.json").write_text(json.dumps({"hash": "other"}))
+    assert sweep.finished(job, tmp_path) is None
