@@ -146,3 +146,22 @@ def test_summary_json_of_a_study_is_written_last(tmp_path):
     assert sweep.finished(job, tmp_path) == {}
     (folder / "job.json").write_text(json.dumps({"hash": "other"}))
     assert sweep.finished(job, tmp_path) is None
+
+
+def test_a_failed_job_does_not_end_the_sweep(tmp_path):
+    """A job whose LAMMPS run fails (an atom outside the box) is reported, left unfinished, and the
+    other jobs complete."""
+    from opalflow.lammps.datafile import write_data
+    from opalflow.pipeline import build_structure
+
+    good = lattice_jobs((20.0,))[0]
+    s = build_structure(good.spec)
+    s.positions[-1, 2] = 3 * s.box_hi[2]
+    write_data(tmp_path / "bad.lmp", s)
+    bad = sweep.Job("bad", load_spec(WORKFLOWS / "lattice_sc.toml", [
+        *LATTICE, "kind=datafile", f'datafile.path="{tmp_path / "bad.lmp"}"',
+        'datafile.materials=["silica","substrate"]']))
+    res = sweep.run_jobs([bad, good], tmp_path / "study", workers=1, say=lambda m: None)
+    assert "LAMMPS failed" in res["bad"]["failed"]
+    assert "youngs_modulus_GPa" in res["a20"]
+    assert sweep.finished(bad, tmp_path / "study") is None and (bad.folder(tmp_path / "study") / "log.lammps").exists()

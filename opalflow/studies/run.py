@@ -40,8 +40,14 @@ def job_spec(spec: WorkflowSpec, overrides: list[str]) -> WorkflowSpec:
     return load_spec(path, [*st.set, *overrides])
 
 
+FAILED: dict[str, str] = {}
+
+
 def _sweep(spec: WorkflowSpec, out: Path, jobs: list[Job], say) -> dict[str, dict]:
-    return run_jobs(jobs, out, workers=spec.study.workers, np_=spec.study.np, say=say)
+    """Run the jobs; failed ones are left out of the result and listed in FAILED (label -> reason)."""
+    res = run_jobs(jobs, out, workers=spec.study.workers, np_=spec.study.np, say=say)
+    FAILED.update({k: v["failed"] for k, v in res.items() if "failed" in v})
+    return {k: v for k, v in res.items() if "failed" not in v}
 
 
 def _num(x: float) -> str:
@@ -82,7 +88,10 @@ def calibration(spec: WorkflowSpec, out: Path, say) -> tuple[dict, list[str]]:
             points += ([x * (1 + h)] if st.jacobian == "decoupled"
                        else [x * np.array([1 + h, 1.0]), x * np.array([1.0, 1 + h])])
         points = points[:st.max_runs - runs]
-        summaries = _sweep(spec, out, [job(p) for p in points], say)
+        jobs = [job(p) for p in points]
+        summaries = _sweep(spec, out, jobs, say)
+        if len(summaries) < len(jobs):
+            raise SpecError("study", spec.name, f"calibration run failed: {FAILED}; see {out}/jobs")
         runs += len(points)
         values = [result(s) for s in summaries.values()]
         y = values[0]
@@ -154,6 +163,8 @@ def bulk(spec: WorkflowSpec, out: Path, say) -> tuple[dict, list[str]]:
     ref = paper()["bulk"]
     rows, table = [], {}
     for d, job in zip(st.diameters_nm, jobs):
+        if job.label not in res:
+            continue
         s = res[job.label]
         e_b = material(job.spec.material, job.spec.materials)["bond_youngs_modulus_GPa"]
         k_e = s["youngs_modulus_specimen_GPa"] / e_b
@@ -164,7 +175,7 @@ def bulk(spec: WorkflowSpec, out: Path, say) -> tuple[dict, list[str]]:
         rows.append(f"| {d:g} | {s['n_particles']} | {s['youngs_modulus_specimen_GPa']:.3f} | {k_e:.3f} | "
                     f"{s['youngs_modulus_GPa']:.3f} | {s['strength_MPa']:.1f} | {s['strain_at_peak']:.4f} | "
                     f"{s['broken_bonds']} | {s['wall_s']:.0f} |")
-    finest = table[_num(min(st.diameters_nm))]
+    finest = table[min(table, key=lambda k: table[k]["diameter_nm"])]
     exp = paper()["coating"]
     titania = {k: {"E_exp_GPa": v[0], "E_b_GPa": v[0] / finest["K_E"], "E_b_paper_GPa": v[0] / ref["K_E"]}
                for k, v in exp["E_exp_GPa"].items()}
@@ -214,6 +225,8 @@ def coating(spec: WorkflowSpec, out: Path, say) -> tuple[dict, list[str]]:
     res = _sweep(spec, out, jobs, say)
     table = []
     for (t, case, e_exp), job in zip(cases, jobs):
+        if job.label not in res:
+            continue
         s = res[job.label]
         table.append({"thickness_nm": t, "case": case, "E_exp_GPa": e_exp,
                       "bond_E_GPa": None if e_exp is None else e_exp / k_e,
@@ -271,6 +284,8 @@ def porosity(spec: WorkflowSpec, out: Path, say) -> tuple[dict, list[str]]:
     res = _sweep(spec, out, jobs, say)
     runs = []
     for (p, s), job in zip(keys, jobs):
+        if job.label not in res:
+            continue
         r = res[job.label]
         runs.append({"target_porosity": p, "seed": s, "porosity": r["porosity"], "density_kg_m3": r["density_kg_m3"],
                      "youngs_modulus_GPa": r["youngs_modulus_GPa"], "strength_MPa": r["strength_MPa"],
@@ -359,6 +374,8 @@ def convergence(spec: WorkflowSpec, out: Path, say) -> tuple[dict, list[str]]:
     res = _sweep(spec, out, jobs, say)
     by_setting: dict[tuple, list] = {}
     for (cells, d, s), job in zip(keys, jobs):
+        if job.label not in res:
+            continue
         r = res[job.label]
         by_setting.setdefault((cells, d), []).append(
             {"seed": s, "youngs_modulus_GPa": r["youngs_modulus_GPa"], "strength_MPa": r["strength_MPa"],
@@ -450,7 +467,12 @@ def run(spec: WorkflowSpec, out: Path, say=print) -> dict:
     """Run the study's jobs (cached) and write summary.json and report.md."""
     t0 = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
+    FAILED.clear()
     summary, body = STUDIES[spec.study.type](spec, out, say)
+    summary["failed_jobs"] = dict(FAILED)
+    if FAILED:
+        body += ["", "## Failed jobs (left out above; a rerun tries them again)", "",
+                 *[f"- `{k}`: {v}" for k, v in FAILED.items()]]
     summary.update({"study": spec.study.type, "wall_s": time.perf_counter() - t0, "opalflow_version": __version__,
                     "spec": spec.to_dict()})
     report = [f"# Study: {spec.study.type} ({spec.name})", "",

@@ -55,6 +55,8 @@ def finished(job: Job, root: Path) -> dict | None:
 
 
 def _run_job(args) -> tuple[str, dict]:
+    """One job; a job that fails (bad geometry, LAMMPS error) returns {"failed": first line} and stays
+    unfinished (its folder is kept for inspection and a rerun tries it again)."""
     spec_dict, folder, np_, label = args
     from opalflow.pipeline import run_workflow
 
@@ -64,12 +66,16 @@ def _run_job(args) -> tuple[str, dict]:
     def say(msg: str) -> None:
         print(f"[{label}] {msg}", file=sys.stderr, flush=True)
 
-    summary = run_workflow(spec_from_dict(spec_dict), folder, np_=np_, resume=resume, say=say)
+    try:
+        summary = run_workflow(spec_from_dict(spec_dict), folder, np_=np_, resume=resume, say=say)
+    except Exception as exc:  # noqa: BLE001 - one failed job must not end the sweep
+        return label, {"failed": str(exc).splitlines()[0], "folder": str(folder)}
     return label, summary
 
 
 def run_jobs(jobs: list[Job], root: Path, *, workers: int = 0, np_: int = 1, say=print) -> dict[str, dict]:
-    """Run every unfinished job (``workers`` at once; 0: cores / np) and return label -> summary.
+    """Run every unfinished job (``workers`` at once; 0: cores / np) and return label -> summary
+    (``{"failed": reason, "folder": ...}`` for a job that failed).
 
     Finished jobs are read from their folders; ``job.json`` is written before a job starts and
     its ``summary.json`` only when it has finished, so a killed job is never taken as done.
@@ -97,12 +103,17 @@ def run_jobs(jobs: list[Job], root: Path, *, workers: int = 0, np_: int = 1, say
         for n, args in enumerate(todo, 1):
             label, summary = _run_job(args)
             results[label] = summary
-            say(f"job {label} done ({n}/{len(todo)}, {time.perf_counter() - t0:.0f} s)")
+            _report(say, label, summary, n, len(todo), t0)
     else:
         with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
             futures = [pool.submit(_run_job, args) for args in todo]
             for n, fut in enumerate(as_completed(futures), 1):
                 label, summary = fut.result()
                 results[label] = summary
-                say(f"job {label} done ({n}/{len(todo)}, {time.perf_counter() - t0:.0f} s)")
+                _report(say, label, summary, n, len(todo), t0)
     return {label: results[label] for label in labels}
+
+
+def _report(say, label: str, summary: dict, n: int, total: int, t0: float) -> None:
+    state = f"FAILED: {summary['failed']}" if "failed" in summary else "done"
+    say(f"job {label} {state} ({n}/{total}, {time.perf_counter() - t0:.0f} s)")
