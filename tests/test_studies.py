@@ -122,7 +122,7 @@ def test_newton_calibration_on_a_known_model(tmp_path, monkeypatch):
 def test_study_specs_validate_and_build_their_jobs():
     spec = load_spec(WORKFLOWS / "porosity.toml")
     job = studies.job_spec(spec, ['pores.arrangement="random"', "pores.porosity=0.49"])
-    assert job.pores.cells_x == 2 and job.packing.diameter_nm == 80.0 and job.pores.porosity == 0.49
+    assert job.pores.cells_x == 2 and job.packing.diameter_nm == 110.0 and job.pores.porosity == 0.49
     paper = load_spec(WORKFLOWS / "calibrate_silica.toml", ["study.paper_scale=true"])
     assert studies.job_spec(paper, []).packing.diameter_nm == 15.0
 
