@@ -55,6 +55,11 @@ def diamond_neighbors(radius_over_a: float = 0.62) -> tuple[np.ndarray, np.ndarr
     return np.array(vec), np.array(flip)
 
 
+def neighbor_radius(cutoff: float, a: float) -> float:
+    """Candidate-neighbour radius (units of a) that reaches past the cutoff R + D by 10 % (strain)."""
+    return max(0.5, 1.1 * cutoff / a)
+
+
 def _cutoff(r, R, D):
     """f_C(r), smooth sine switch between R - D and R + D."""
     inner = 0.5 * (1.0 - jnp.sin(0.5 * np.pi * (r - R) / D))

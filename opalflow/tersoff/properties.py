@@ -29,7 +29,6 @@ from opalflow.tersoff.parameters import TersoffParameters, write_tersoff
 SI_MASS = 28.0855      # g/mol (metal units)
 POTENTIAL_FILE = "potential.tersoff"
 PROPERTY_KEYS = ("B_GPa", "Cprime_GPa", "C11_GPa", "C12_GPa", "C44_0_GPa", "C44_GPa")
-DEFAULT_SCAN = (1e-5, 3e-5, 1e-4, 3e-4, 1e-3, 3e-3, 1e-2, 3e-2, 1e-1)
 
 # strain paths: F(e) as (xx, yy, zz, xy) increments; relax = atoms minimised in the strained box
 PATHS = {

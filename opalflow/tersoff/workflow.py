@@ -19,7 +19,7 @@ from opalflow.spec import SpecError, TersoffSpec, WorkflowSpec
 from opalflow.store import new_figure, save_figure, write_json_atomic, write_text_atomic
 from opalflow.tersoff import fit as fitting
 from opalflow.tersoff import stability as stab
-from opalflow.tersoff.model import DiamondModel
+from opalflow.tersoff.model import DiamondModel, neighbor_radius
 from opalflow.tersoff.parameters import COLUMNS, TersoffParameters, read_tersoff, write_tersoff
 from opalflow.tersoff.properties import PROPERTY_KEYS as MODULI, evaluate
 
@@ -45,8 +45,8 @@ def load_parameters(t: TersoffSpec) -> TersoffParameters:
 
 
 def model_for(cutoff: float, a: float) -> DiamondModel:
-    """A diamond model whose neighbour list reaches past the cutoff R + D (10 % margin for strain)."""
-    return DiamondModel(a=a, neighbor_radius_over_a=max(0.5, 1.1 * cutoff / a))
+    """A diamond model whose neighbour list reaches past the cutoff R + D."""
+    return DiamondModel(a=a, neighbor_radius_over_a=neighbor_radius(cutoff, a))
 
 
 def loss_settings(spec: WorkflowSpec, start: TersoffParameters) -> dict:
@@ -60,7 +60,7 @@ def loss_settings(spec: WorkflowSpec, start: TersoffParameters) -> dict:
     r_max = fixed.get("R", bounds.get("R", (0, 0))[1]) + fixed.get("D", bounds.get("D", (0, 0))[1])
     return {"targets": {**ref["targets"], **t.targets}, "weights": {**fitting.default_weights(), **t.weights},
             "bounds": bounds, "fixed": fixed, "a_target": t.lattice_target_A,
-            "neighbor_radius_over_a": max(0.5, 1.1 * r_max / t.lattice_target_A)}
+            "neighbor_radius_over_a": neighbor_radius(r_max, t.lattice_target_A)}
 
 
 def _errors(values: dict, ref: dict) -> dict:
