@@ -68,7 +68,7 @@ class Loss:
         self.value_and_grad = jax.jit(jax.value_and_grad(self.scaled))
 
     def full(self, z):
-        """All 14 parameters from scaled free ones (autograd-friendly)."""
+        """All 14 parameters from scaled free ones (traceable by JAX)."""
         return self._fixed_vec + self._embed @ (self.lo + z * (self.hi - self.lo))
 
     def scale(self, p: TersoffParameters) -> np.ndarray:
