@@ -78,6 +78,10 @@ def solid_fraction(s: Structure) -> float:
     return float(s.meta.get("packing_solid_fraction", s.meta.get("solid_fraction", 1.0)))
 
 
+#: structure statistics of an opal that its run summary carries (studies plot against them)
+STRUCTURE_KEYS = ("porosity", "total_porosity", "density_kg_m3")
+
+
 def prepare(spec: WorkflowSpec, out: Path, progress=None) -> CompressionDeck:
     """Build the scene and write the run folder's inputs (data.lmp, decks, run.sh, run.json)."""
     t = time.perf_counter()
@@ -96,6 +100,11 @@ def prepare(spec: WorkflowSpec, out: Path, progress=None) -> CompressionDeck:
     info = {"workflow": spec.name, "spec": spec.to_dict(), "opalflow_version": __version__,
             "type_names": deck.structure.type_names, "n_particles": s.n_particles, "n_bonds": s.n_bonds,
             "solid_fraction": solid_fraction(s), "build_s": build_s, **deck.info()}
+    if spec.kind == "opal":
+        from opalflow.build.opal import structure_statistics
+
+        stats = structure_statistics(deck.source)
+        info["structure"] = {k: stats[k] for k in STRUCTURE_KEYS}
     write_json_atomic(out / "run.json", info)
     return deck
 
@@ -183,6 +192,7 @@ def analyze(out: Path, wall_s: float | None = None, lammps_s: float | None = Non
         "solid_fraction": phi,
         "bond_stiffness_error_max": info["bond_stiffness_error_max"],
         "timestep_estimate_s": info["timestep_estimate_s"],
+        **info.get("structure", {}),
         "headline": f"E = {E_GPa:.4g} GPa, strength = {float(stress[peak]):.4g} MPa "
                     f"(strain at peak {float(strain[peak]):.4f})",
     }

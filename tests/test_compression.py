@@ -201,3 +201,15 @@ def test_mpi_run_matches(tmp_path, lattice_run):
     assert main(["run", "lattice_sc", "--out", str(out), "--np", "2"]) == 0
     mpi = json.loads((out / "summary.json").read_text())
     assert mpi["youngs_modulus_GPa"] == pytest.approx(summary["youngs_modulus_GPa"], rel=1e-3)
+
+
+def test_opal_run_carries_its_structure_statistics(tmp_path, quick_spec, quick_structure):
+    """Studies plot E against porosity and density: prepare stores them for the run summary."""
+    from opalflow.build.opal import structure_statistics
+    from opalflow.pipeline import STRUCTURE_KEYS, prepare
+
+    prepare(quick_spec, tmp_path)
+    info = json.loads((tmp_path / "run.json").read_text())
+    stats = structure_statistics(quick_structure)
+    assert info["structure"] == pytest.approx({k: stats[k] for k in STRUCTURE_KEYS})
+    assert 0.3 < info["structure"]["porosity"] < 0.9
