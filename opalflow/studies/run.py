@@ -424,11 +424,10 @@ def convergence(spec: WorkflowSpec, out: Path, say) -> tuple[dict, list[str]]:
     report = ["Every setting with seeds " + ", ".join(map(str, st.seeds)) + "; errors against the finest "
               "setting of the same axis (largest cross-section at the base diameter; smallest diameter at the base "
               "cross-section).", "",
-              "| cells | d (nm) | area (um^2) | particles | E (GPa) | E spread | error E | strength (MPa) | "
-              "strength spread | error strength | wall (s) |", "|---|---|---|---|---|---|---|---|---|---|---|"]
-    for r in size_rows + [r for r in diam_rows if r not in size_rows]:
-        axis = "cells" if r in size_rows else "diameter"
-        report.append(f"| {r['cells'][0]}x{r['cells'][1]} | {r['diameter_nm']:g} | {r['area_um2']:.2f} | "
+              "| axis | cells | d (nm) | area (um^2) | particles | E (GPa) | E spread | error E | strength (MPa) | "
+              "strength spread | error strength | wall (s) |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for axis, r in [("cells", r) for r in size_rows] + [("diameter", r) for r in diam_rows]:
+        report.append(f"| {axis} | {r['cells'][0]}x{r['cells'][1]} | {r['diameter_nm']:g} | {r['area_um2']:.2f} | "
                       f"{r['n_particles']:.0f} | {r['E_mean_GPa']:.4g} | {r['E_std_GPa']:.2g} | "
                       f"{100 * r[f'error_E_vs_finest_{axis}']:+.1f} % | {r['strength_mean_MPa']:.4g} | "
                       f"{r['strength_std_MPa']:.2g} | {100 * r[f'error_strength_vs_finest_{axis}']:+.1f} % | "
