@@ -458,7 +458,7 @@ def _plot_convergence(rows, path: Path) -> None:
     save_figure(fig, path)
 
 
-STUDIES = {"calibration": calibration, "bulk": bulk, "coating": coating, "porosity": porosity,
+RUNNERS = {"calibration": calibration, "bulk": bulk, "coating": coating, "porosity": porosity,
            "convergence": convergence}
 
 
@@ -467,7 +467,7 @@ def run(spec: WorkflowSpec, out: Path, say=print) -> dict:
     t0 = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
     FAILED.clear()
-    summary, body = STUDIES[spec.study.type](spec, out, say)
+    summary, body = RUNNERS[spec.study.type](spec, out, say)
     summary["failed_jobs"] = dict(FAILED)
     if FAILED:
         body += ["", "## Failed jobs (left out above; a rerun tries them again)", "",

@@ -96,7 +96,6 @@ def default_weights() -> dict[str, float]:
 @dataclass
 class StartResult:
     start: int
-    z0: np.ndarray
     params: np.ndarray          # all 14, LAMMPS column order
     loss: float
     history: list[float]
@@ -119,7 +118,7 @@ def _run_start(loss: Loss, start: int, z0: np.ndarray, max_iter: int, gtol: floa
     res = minimize(fun, z0, jac=True, method="L-BFGS-B", bounds=[(0.0, 1.0)] * len(z0),
                    callback=lambda zk: history.append(float(fun(zk)[0])),
                    options={"maxiter": max_iter, "gtol": gtol, "ftol": 1e-15})
-    return StartResult(start=start, z0=z0, params=np.asarray(loss.full(res.x)), loss=float(res.fun),
+    return StartResult(start=start, params=np.asarray(loss.full(res.x)), loss=float(res.fun),
                        history=history, iterations=int(res.nit), evaluations=int(res.nfev),
                        seconds=time.perf_counter() - t, message=str(res.message))
 

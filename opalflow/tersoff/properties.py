@@ -96,10 +96,6 @@ class Evaluation:
     scan_s: dict[float, float] = field(default_factory=dict)            # strain -> seconds
     seconds: float = 0.0                      # all of it: set-up, lattice relaxation, every strain
 
-    def summary(self) -> dict:
-        return {"a0_A": self.a0_A, "Ec_eV": self.Ec_eV, **self.values, "strain": self.strain,
-                "spread_GPa": self.spread, "seconds": self.seconds}
-
 
 def relax_lattice(lmp, cells: int) -> float:
     """Zero-pressure lattice constant (A) by minimising with an isotropic box relaxation."""
