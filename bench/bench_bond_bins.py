@@ -13,10 +13,10 @@ import json
 import sys
 from pathlib import Path
 
-from opalflow.lammps.deck import bin_bonds
-from opalflow.pipeline import build_structure
+from opalflow.bpm.deck import bin_bonds
+from opalflow.bpm.pipeline import build_structure
 from opalflow.resources import WORKFLOWS
-from opalflow.spec import load_spec
+from opalflow.registry import load_spec
 
 HERE = Path(__file__).resolve().parent
 

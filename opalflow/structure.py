@@ -104,3 +104,18 @@ class Structure:
             type_names=list(self.type_names), bond_type_names=list(self.bond_type_names),
             groups={k: v[keep] for k, v in self.groups.items()}, meta=dict(self.meta),
         )
+
+
+#: positions are rounded to this many decimals (nm) so data files round-trip exactly
+POSITION_DECIMALS = 6
+
+
+def quantize(x: np.ndarray, box: np.ndarray, periodic: np.ndarray) -> np.ndarray:
+    """Round to POSITION_DECIMALS (k / 10^n is the double nearest the decimal text) and wrap."""
+    scale = 10.0**POSITION_DECIMALS
+    q = np.round(x * scale) / scale
+    for k in np.flatnonzero(periodic):
+        q[:, k] = np.where(q[:, k] >= box[k], q[:, k] - box[k], q[:, k])
+        q[:, k] = np.where(q[:, k] < 0, q[:, k] + box[k], q[:, k])
+        q[:, k] = np.round(q[:, k] * scale) / scale
+    return q

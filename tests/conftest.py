@@ -1,9 +1,9 @@
 import numpy as np
 import pytest
 
-from opalflow.build.opal import build_opal
+from opalflow.opal.scene import build_opal
 from opalflow.resources import WORKFLOWS
-from opalflow.spec import load_spec
+from opalflow.registry import load_spec
 
 
 @pytest.fixture(scope="session")

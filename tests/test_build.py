@@ -5,10 +5,10 @@ import tomllib
 import numpy as np
 import pytest
 
-from opalflow.build.opal import build_opal, structure_statistics
+from opalflow.opal.scene import build_opal, structure_statistics
 from opalflow.cli import main
 from opalflow.resources import DATA, WORKFLOWS
-from opalflow.spec import load_spec
+from opalflow.registry import load_spec
 
 from conftest import brute_force_pairs
 
@@ -93,5 +93,5 @@ def test_open_sides_have_no_bonds_across(tmp_path):
     assert dx.max() <= spec.bonds.cutoff_factor * spec.packing.diameter_nm
     periodic = build_opal(load_spec(WORKFLOWS / "opal_quick.toml"))[0]
     assert s.n_bonds < periodic.n_bonds and s.n_particles == periodic.n_particles
-    from opalflow.lammps.deck import compression_deck
+    from opalflow.bpm.deck import compression_deck
     assert "boundary        m m f" in compression_deck(spec, s).in_lmp

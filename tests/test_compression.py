@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 
 from opalflow.cli import main
-from opalflow.lammps.deck import compression_deck
+from opalflow.bpm.deck import compression_deck
 from opalflow.materials import material
-from opalflow.pipeline import build_structure, run_workflow
+from opalflow.bpm.pipeline import build_structure, run_workflow
 from opalflow.resources import WORKFLOWS
-from opalflow.spec import load_spec
+from opalflow.registry import load_spec
 
 
 def lattice_spec(*sets):
@@ -205,8 +205,9 @@ def test_mpi_run_matches(tmp_path, lattice_run):
 
 def test_opal_run_carries_its_structure_statistics(tmp_path, quick_spec, quick_structure):
     """Studies plot E against porosity and density: prepare stores them for the run summary."""
-    from opalflow.build.opal import structure_statistics
-    from opalflow.pipeline import STRUCTURE_KEYS, prepare
+    from opalflow.opal.scene import structure_statistics
+    from opalflow.bpm.pipeline import prepare
+    from opalflow.opal.scene import STRUCTURE_KEYS
 
     prepare(quick_spec, tmp_path)
     info = json.loads((tmp_path / "run.json").read_text())

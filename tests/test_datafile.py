@@ -1,12 +1,12 @@
 """bpm/sphere data files: exact round trip, real LAMMPS and MDAnalysis read them."""
 import numpy as np
 
-from opalflow.build.opal import build_opal
+from opalflow.opal.scene import build_opal
 from opalflow.lammps.datafile import read_data, write_data
-from opalflow.lammps.deck import compression_deck
+from opalflow.bpm.deck import compression_deck
 from opalflow.lammps.engine import new_lammps
 from opalflow.resources import WORKFLOWS
-from opalflow.spec import load_spec
+from opalflow.registry import load_spec
 
 FIELDS = ["positions", "diameters", "types", "densities", "box_lo", "box_hi", "bonds",
           "bond_types", "molecules"]

@@ -4,10 +4,10 @@ import math
 import numpy as np
 import pytest
 
-from opalflow.build.opal import build_opal, structure_statistics
-from opalflow.build.pores import fcc_centres, periodic_images, union_depth
+from opalflow.opal.scene import build_opal, structure_statistics
+from opalflow.opal.pores import fcc_centres, periodic_images, union_depth
 from opalflow.resources import WORKFLOWS
-from opalflow.spec import load_spec
+from opalflow.registry import load_spec
 
 A = 762.0
 
@@ -131,7 +131,7 @@ def test_random_pores_reach_target_porosity(target):
 
 
 def test_window_checker_sees_open_and_closed_windows(quick_structure, quick_spec):
-    from opalflow.analysis.pores import window_openings
+    from opalflow.opal.windows import window_openings
     from opalflow.structure import Structure
 
     R = quick_spec.pores.diameter_nm / 2

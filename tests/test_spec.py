@@ -4,7 +4,8 @@ import sys
 
 import pytest
 
-from opalflow.spec import SpecError, apply_overrides, load_spec, parse_value
+from opalflow.registry import load_spec
+from opalflow.spec import SpecError, apply_overrides, parse_value
 from opalflow.resources import WORKFLOWS
 
 from conftest import assert_refused

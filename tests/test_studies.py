@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from opalflow.resources import WORKFLOWS
-from opalflow.spec import load_spec
+from opalflow.registry import load_spec
 from opalflow.studies import run as studies
 from opalflow.studies import sweep
-from opalflow.studies.fits import fit_exponential, fit_power, fit_power_law
+from opalflow.analysis.fits import fit_exponential, fit_power, fit_power_law
 
 LATTICE = ["compression.strain_max=0.002", "compression.snapshot_strains=[0.001]", "lattice.cells_z=6"]
 
@@ -46,7 +46,7 @@ def test_a_changed_spec_is_a_new_job(tmp_path):
 DRIVER = """
 import sys
 from opalflow.resources import WORKFLOWS
-from opalflow.spec import load_spec
+from opalflow.registry import load_spec
 from opalflow.studies import sweep
 LATTICE = {lattice!r}
 jobs = [sweep.Job(f"a{{a:g}}", load_spec(WORKFLOWS / "lattice_sc.toml", [*LATTICE, f"lattice.spacing_nm={{a}}"]))
@@ -152,7 +152,7 @@ def test_a_failed_job_does_not_end_the_sweep(tmp_path):
     """A job whose LAMMPS run fails (an atom outside the box) is reported, left unfinished, and the
     other jobs complete."""
     from opalflow.lammps.datafile import write_data
-    from opalflow.pipeline import build_structure
+    from opalflow.bpm.pipeline import build_structure
 
     good = lattice_jobs((20.0,))[0]
     s = build_structure(good.spec)

@@ -13,7 +13,7 @@ from opalflow.tersoff.model import DiamondModel
 from opalflow.tersoff.parameters import COLUMNS, TersoffParameters, format_tersoff, read_tersoff, write_tersoff
 from opalflow.tersoff.properties import evaluate
 from opalflow.tersoff.stability import Criteria, check
-from opalflow.tersoff.workflow import REFERENCE_POTENTIAL
+from opalflow.tersoff.parameters import REFERENCE_POTENTIAL
 
 from conftest import assert_refused
 

@@ -10,12 +10,12 @@ import os
 
 import pytest
 
-from opalflow.lammps.deck import compression_deck
+from opalflow.bpm.deck import compression_deck
 from opalflow.lammps.engine import new_lammps, script_commands
-from opalflow.pipeline import build_structure
+from opalflow.bpm.pipeline import build_structure
 from opalflow.lammps.datafile import write_data
 from opalflow.resources import WORKFLOWS
-from opalflow.spec import load_spec
+from opalflow.registry import load_spec
 
 SMALL = ["pores.arrangement=none", "pores.spacing_nm=300.0", "pores.diameter_nm=250.0",
          "pores.layers=1", "packing.seed=3"]

@@ -8,7 +8,7 @@ Writing tens of millions of lines with ``%``-formatting costs minutes in Python;
 each column becomes fixed-width ASCII digits by integer arithmetic on numpy arrays
 (``_digits``), written in blocks of 1 M rows.  Coordinates are written with six
 decimals from their integer count of 1e-6 nm, so a Structure whose positions were
-rounded the same way (:func:`opalflow.build.opal.quantize`) reads back bit for bit.
+rounded the same way (:func:`opalflow.structure.quantize`) reads back bit for bit.
 Diameters, densities and box bounds are written with ``repr`` (shortest round trip).
 """
 from __future__ import annotations

@@ -237,7 +237,7 @@ fi
 
 
 def _version() -> str:
-    from opalflow import __version__
+    from opalflow.version import __version__
 
     return __version__
 

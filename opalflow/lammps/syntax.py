@@ -1,9 +1,12 @@
-"""The only ways values enter LAMMPS text: checked numbers and checked names."""
+"""The only ways values enter LAMMPS text: checked numbers, checked names, and template blocks filled with them."""
 from __future__ import annotations
 
 import math
 import numbers
 import re
+import string
+
+from opalflow.resources import TEMPLATES, resource
 
 _NAME = re.compile(r"[A-Za-z0-9_]+")
 
@@ -22,3 +25,9 @@ def name(value: str) -> str:
     if not isinstance(value, str) or not _NAME.fullmatch(value):
         raise ValueError(f"expected a name of [A-Za-z0-9_]+ for LAMMPS, got {value!r}")
     return value
+
+
+def render(block: str, **values) -> str:
+    """Fill ``templates/<block>.lmp``; every placeholder must be given."""
+    text = resource(TEMPLATES, f"{block}.lmp").read_text()
+    return string.Template(text).substitute(values)

@@ -15,13 +15,15 @@ from pathlib import Path
 
 import numpy as np
 
-from opalflow import __version__
+from opalflow.analysis.fits import fit_exponential, fit_power, fit_power_law
 from opalflow.materials import material
+from opalflow.registry import load_spec
 from opalflow.resources import DATA, WORKFLOWS, resource
-from opalflow.spec import SpecError, WorkflowSpec, load_spec
+from opalflow.spec import SpecError, WorkflowSpec
 from opalflow.store import new_figure, save_figure, write_json_atomic, write_text_atomic
-from opalflow.studies.fits import fit_exponential, fit_power, fit_power_law
+from opalflow.studies.spec import StudyWorkflow
 from opalflow.studies.sweep import Job, run_jobs
+from opalflow.version import __version__
 
 
 def paper() -> dict:
@@ -29,7 +31,7 @@ def paper() -> dict:
     return tomllib.loads(resource(DATA / "reference", "dosta2022.toml").read_text())
 
 
-def job_spec(spec: WorkflowSpec, overrides: list[str]) -> WorkflowSpec:
+def job_spec(spec: StudyWorkflow, overrides: list[str]) -> WorkflowSpec:
     """The study's base workflow with the study's and the job's overrides."""
     st = spec.study
     base = st.paper_base if st.paper_scale else st.base
@@ -43,7 +45,7 @@ def job_spec(spec: WorkflowSpec, overrides: list[str]) -> WorkflowSpec:
 FAILED: dict[str, str] = {}
 
 
-def _sweep(spec: WorkflowSpec, out: Path, jobs: list[Job], say) -> dict[str, dict]:
+def _sweep(spec: StudyWorkflow, out: Path, jobs: list[Job], say) -> dict[str, dict]:
     """Run the jobs; failed ones are left out of the result and listed in FAILED (label -> reason)."""
     res = run_jobs(jobs, out, workers=spec.study.workers, np_=spec.study.np, say=say)
     FAILED.update({k: v["failed"] for k, v in res.items() if "failed" in v})
@@ -55,7 +57,7 @@ def _num(x: float) -> str:
 
 
 # ----------------------------------------------------------------------------- calibration
-def calibration(spec: WorkflowSpec, out: Path, say) -> tuple[dict, list[str]]:
+def calibration(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
     """Newton iteration on bond E_b and strength (eqs. 18-19) to E* and sigma*.
 
     Iteration 1 runs the start point and, at the same time, the finite-difference point(s) of
@@ -154,7 +156,7 @@ def calibration(spec: WorkflowSpec, out: Path, say) -> tuple[dict, list[str]]:
 
 
 # ----------------------------------------------------------------------------- K_E
-def bulk(spec: WorkflowSpec, out: Path, say) -> tuple[dict, list[str]]:
+def bulk(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
     """K_E = E_macro / E_b (eq. 20) from pore-free samples at each particle diameter."""
     st = spec.study
     jobs = [Job(f"bulk_d{_num(d)}", job_spec(spec, ['pores.arrangement="none"', f"packing.diameter_nm={d!r}"]))
@@ -202,7 +204,7 @@ def bulk(spec: WorkflowSpec, out: Path, say) -> tuple[dict, list[str]]:
 
 
 # ----------------------------------------------------------------------------- coating
-def coating(spec: WorkflowSpec, out: Path, say) -> tuple[dict, list[str]]:
+def coating(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
     """Coatings of each thickness at E_exp - std, E_exp, E_exp + std (E_b = E_exp / K_E, K_E = 3.35)."""
     st = spec.study
     ref = paper()
@@ -272,7 +274,7 @@ def _plot_coating(table, path: Path) -> None:
 
 
 # ----------------------------------------------------------------------------- porosity
-def porosity(spec: WorkflowSpec, out: Path, say) -> tuple[dict, list[str]]:
+def porosity(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
     """Random pores at each porosity x seed -> fits of eqs. 22, 23, 26 with 95 % intervals."""
     st = spec.study
     jobs, keys = [], []
@@ -353,7 +355,7 @@ def _plot_porosity(runs, fits, path: Path) -> None:
 
 
 # ----------------------------------------------------------------------------- convergence
-def convergence(spec: WorkflowSpec, out: Path, say) -> tuple[dict, list[str]]:
+def convergence(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
     """Cross-section (cells) x seeds at the base diameter, and diameters x seeds at the base cell count."""
     st = spec.study
     base = job_spec(spec, [])
@@ -462,7 +464,7 @@ RUNNERS = {"calibration": calibration, "bulk": bulk, "coating": coating, "porosi
            "convergence": convergence}
 
 
-def run(spec: WorkflowSpec, out: Path, say=print) -> dict:
+def run(spec: StudyWorkflow, out: Path, say=print) -> dict:
     """Run the study's jobs (cached) and write summary.json and report.md."""
     t0 = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)

@@ -19,7 +19,8 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 
-from opalflow.spec import WorkflowSpec, spec_from_dict
+from opalflow import registry
+from opalflow.spec import WorkflowSpec
 from opalflow.store import write_json_atomic
 
 
@@ -58,8 +59,6 @@ def _run_job(args) -> tuple[str, dict]:
     """One job; a job that fails (bad geometry, LAMMPS error) returns {"failed": first line} and stays
     unfinished (its folder is kept for inspection and a rerun tries it again)."""
     spec_dict, folder, np_, label = args
-    from opalflow.pipeline import run_workflow
-
     folder = Path(folder)
     resume = (folder / "run.json").exists() and any(folder.glob("restart.*.bin"))
 
@@ -67,7 +66,8 @@ def _run_job(args) -> tuple[str, dict]:
         print(f"[{label}] {msg}", file=sys.stderr, flush=True)
 
     try:
-        summary = run_workflow(spec_from_dict(spec_dict), folder, np_=np_, resume=resume, say=say)
+        spec = registry.spec_from_dict(spec_dict)
+        summary = registry.get(spec.kind).run_workflow(spec, folder, np_=np_, resume=resume, say=say)
     except Exception as exc:  # noqa: BLE001 - one failed job must not end the sweep
         return label, {"failed": str(exc).splitlines()[0], "folder": str(folder)}
     return label, summary

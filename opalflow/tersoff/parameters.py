@@ -23,9 +23,12 @@ from pathlib import Path
 
 import numpy as np
 
+from opalflow.resources import DATA
 from opalflow.spec import SpecError, check_name
 from opalflow.store import write_text_atomic
 
+POTENTIALS = DATA / "potentials"
+REFERENCE_POTENTIAL = POTENTIALS / "Si_zhuravlev2021.tersoff"
 COLUMNS = ("m", "gamma", "lambda3", "c", "d", "costheta0", "n", "beta", "lambda2", "B", "R", "D",
            "lambda1", "A")
 POSITIVE = ("gamma", "c", "d", "n", "beta", "lambda2", "B", "R", "D", "lambda1", "A")
@@ -143,3 +146,19 @@ def write_tersoff(path: str | Path, p: TersoffParameters, comment: str = "") -> 
     p.validate()
     write_text_atomic(path, format_tersoff(p, comment))
     return Path(path)
+
+
+def potential_path(name: str) -> Path:
+    """A path to a ``.tersoff`` file, or the name of one in data/potentials/."""
+    path = Path(name)
+    if path.is_file():
+        return path
+    if (POTENTIALS / name).is_file():
+        return POTENTIALS / name
+    have = ", ".join(sorted(p.name for p in POTENTIALS.glob("*.tersoff")))
+    raise SpecError("tersoff.potential", name, f"no such file, nor a potential in data/potentials ({have})")
+
+
+def load_parameters(potential: str, element: str) -> TersoffParameters:
+    """The ``element`` entry of a potential given by path or by name in data/potentials/."""
+    return read_tersoff(potential_path(potential), element)

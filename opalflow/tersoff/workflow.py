@@ -13,35 +13,18 @@ from pathlib import Path
 
 import numpy as np
 
-from opalflow import __version__
-from opalflow.resources import DATA
-from opalflow.spec import SpecError, TersoffSpec, WorkflowSpec
 from opalflow.store import new_figure, save_figure, write_json_atomic, write_text_atomic
 from opalflow.tersoff import fit as fitting
 from opalflow.tersoff import stability as stab
 from opalflow.tersoff.model import DiamondModel, neighbor_radius
-from opalflow.tersoff.parameters import COLUMNS, TersoffParameters, read_tersoff, write_tersoff
+from opalflow.tersoff.parameters import (COLUMNS, REFERENCE_POTENTIAL, TersoffParameters, load_parameters,
+                                         read_tersoff, write_tersoff)
 from opalflow.tersoff.properties import PROPERTY_KEYS as MODULI, evaluate
+from opalflow.tersoff.spec import TersoffWorkflow
+from opalflow.version import __version__
 
-POTENTIALS = DATA / "potentials"
-REFERENCE_POTENTIAL = POTENTIALS / "Si_zhuravlev2021.tersoff"
 LABELS = {"Ec_eV": ("E_c", "eV"), "B_GPa": ("B", "GPa"), "Cprime_GPa": ("C'", "GPa"), "C11_GPa": ("C11", "GPa"),
           "C12_GPa": ("C12", "GPa"), "C44_0_GPa": ("C44^0", "GPa"), "C44_GPa": ("C44", "GPa")}
-
-
-def potential_path(name: str) -> Path:
-    """A path to a ``.tersoff`` file, or the name of one in data/potentials/."""
-    path = Path(name)
-    if path.is_file():
-        return path
-    if (POTENTIALS / name).is_file():
-        return POTENTIALS / name
-    have = ", ".join(sorted(p.name for p in POTENTIALS.glob("*.tersoff")))
-    raise SpecError("tersoff.potential", name, f"no such file, nor a potential in data/potentials ({have})")
-
-
-def load_parameters(t: TersoffSpec) -> TersoffParameters:
-    return read_tersoff(potential_path(t.potential), t.element)
 
 
 def model_for(cutoff: float, a: float) -> DiamondModel:
@@ -49,7 +32,7 @@ def model_for(cutoff: float, a: float) -> DiamondModel:
     return DiamondModel(a=a, neighbor_radius_over_a=neighbor_radius(cutoff, a))
 
 
-def loss_settings(spec: WorkflowSpec, start: TersoffParameters) -> dict:
+def loss_settings(spec: TersoffWorkflow, start: TersoffParameters) -> dict:
     """Keyword arguments of :class:`fit.Loss`: targets and weights (Table 1, weight 1 unless set),
     bounds (defaults updated by the spec), fixed parameters at the values of ``start``."""
     t = spec.tersoff
@@ -91,7 +74,7 @@ def _property_rows(values: dict, ref: dict, model: dict | None = None) -> list[s
     return rows
 
 
-def _lammps_properties(params: TersoffParameters, spec: WorkflowSpec, folder: Path, scan: bool):
+def _lammps_properties(params: TersoffParameters, spec: TersoffWorkflow, folder: Path, scan: bool):
     t = spec.tersoff
     ev = evaluate(params, folder, strain=t.strain, scan=tuple(t.strain_scan) if scan else (), cells=t.cells,
                   a_guess=t.lattice_target_A)
@@ -139,14 +122,14 @@ def _stability_rows(results: list[stab.BoundaryResult]) -> list[str]:
     return rows
 
 
-def _stability_kwargs(spec: WorkflowSpec) -> dict:
+def _stability_kwargs(spec: TersoffWorkflow) -> dict:
     s = spec.stability
     return {"boundaries": tuple(s.boundaries), "workers": s.workers, "cells": s.cells,
             "time_ps": s.time_ps, "timestep_fs": s.timestep_fs, "seed": s.seed,
             "criteria": stab.Criteria(s.max_drift_eV, s.min_fourfold, s.max_rms_A)}
 
 
-def _finish(out: Path, spec: WorkflowSpec, summary: dict, report: list[str], t0: float) -> dict:
+def _finish(out: Path, spec: TersoffWorkflow, summary: dict, report: list[str], t0: float) -> dict:
     summary["wall_s"] = time.perf_counter() - t0
     summary["opalflow_version"] = __version__
     summary["spec"] = spec.to_dict()
@@ -162,9 +145,10 @@ def _base_summary(values: dict, loss: float, reference_loss: float) -> dict:
             "fit_s": None, "stability": None}
 
 
-def run_properties(spec: WorkflowSpec, out: Path, say=print) -> dict:
+def run_properties(spec: TersoffWorkflow, out: Path, say=print) -> dict:
     t0 = time.perf_counter()
-    params = load_parameters(spec.tersoff)
+    out.mkdir(parents=True, exist_ok=True)
+    params = load_parameters(spec.tersoff.potential, spec.tersoff.element)
     ref = fitting.zhuravlev2021()
     say(f"properties of {spec.tersoff.potential} ({params.element}) by LAMMPS, strain scan "
         f"{len(spec.tersoff.strain_scan)} sizes")
@@ -207,9 +191,10 @@ def run_properties(spec: WorkflowSpec, out: Path, say=print) -> dict:
     return _finish(out, spec, summary, report, t0)
 
 
-def run_stability(spec: WorkflowSpec, out: Path, say=print) -> dict:
+def run_stability(spec: TersoffWorkflow, out: Path, say=print) -> dict:
     t0 = time.perf_counter()
-    params = load_parameters(spec.tersoff)
+    out.mkdir(parents=True, exist_ok=True)
+    params = load_parameters(spec.tersoff.potential, spec.tersoff.element)
     s = spec.stability
     say(f"stability of {spec.tersoff.potential}: {', '.join(s.boundaries)} at "
         f"{', '.join(f'{t:g}' for t in s.temperatures_K)} K, {s.time_ps:g} ps each")
@@ -231,10 +216,11 @@ def run_stability(spec: WorkflowSpec, out: Path, say=print) -> dict:
     return _finish(out, spec, summary, report, t0)
 
 
-def run_fit(spec: WorkflowSpec, out: Path, say=print) -> dict:
+def run_fit(spec: TersoffWorkflow, out: Path, say=print) -> dict:
     t0 = time.perf_counter()
+    out.mkdir(parents=True, exist_ok=True)
     t = spec.tersoff
-    start = load_parameters(t)
+    start = load_parameters(t.potential, t.element)
     settings = loss_settings(spec, start)
     ref = fitting.zhuravlev2021()
     say(f"fit: {t.starts} L-BFGS starts (seed {t.seed}), free {', '.join(k for k in COLUMNS if k not in t.fixed)}; "
@@ -333,10 +319,3 @@ def _plot_history(results, reference_loss: float, path: Path) -> None:
     ax.set_title("Loss history of each start")
     ax.legend()
     save_figure(fig, path)
-
-
-def run(spec: WorkflowSpec, out: Path, say=print) -> dict:
-    out.mkdir(parents=True, exist_ok=True)
-    runner = {"tersoff_properties": run_properties, "tersoff_fit": run_fit,
-              "tersoff_stability": run_stability}[spec.kind]
-    return runner(spec, out, say)

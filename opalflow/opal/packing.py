@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from opalflow.build.neighbors import pairs_within, separations
+from opalflow.neighbors import pairs_within, separations
 from opalflow.lammps.engine import new_lammps
 from opalflow.lammps.syntax import num
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from opalflow.build.pores import periodic_images, union_depth
+from opalflow.opal.pores import periodic_images, union_depth
 from opalflow.structure import Structure
 
 
@@ -66,7 +66,7 @@ def coating_surface_distance(s: Structure, pore_radius: float) -> np.ndarray:
 
     The pore wall is the surface of the union of the pore balls (radius R_pore, not
     the cut radius), computed exactly with the rim construction of
-    :func:`opalflow.build.pores.union_depth`; the paper's rule keeps it below
+    :func:`opalflow.opal.pores.union_depth`; the paper's rule keeps it below
     L_coat + R_part.
     """
     coated = s.groups.get("coating")

@@ -15,11 +15,11 @@ import math
 
 import numpy as np
 
-from opalflow.build.bonds import bond_types_by_material, find_bonds
-from opalflow.build.opal import quantize
+from opalflow.bpm.bonds import bond_types_by_material, find_bonds
+from opalflow.bpm.scene import Scene
+from opalflow.lattice.spec import LatticeWorkflow
 from opalflow.materials import material
-from opalflow.spec import WorkflowSpec
-from opalflow.structure import Structure
+from opalflow.structure import Structure, quantize
 from opalflow.units import density_to_nano
 
 
@@ -32,7 +32,7 @@ def lattice_sites(arrangement: str, a: float, nx: int, ny: int, nz: int) -> tupl
     return sites * a, diameter
 
 
-def build_lattice(spec: WorkflowSpec) -> Structure:
+def build_lattice(spec: LatticeWorkflow, progress=None) -> Structure:
     lat = spec.lattice
     a = lat.spacing_nm
     x, d = lattice_sites(lat.arrangement, a, lat.cells_x, lat.cells_y, lat.cells_z)
@@ -50,3 +50,6 @@ def build_lattice(spec: WorkflowSpec) -> Structure:
                      type_names=[spec.material, "substrate"], bond_type_names=[spec.material],
                      groups={"substrate": substrate},
                      meta={"solid_fraction": float(len(x) * math.pi / 6 * d**3 / np.prod(box))})
+
+
+SCENE = Scene(build=build_lattice)

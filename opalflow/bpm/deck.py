@@ -10,27 +10,20 @@ the materials present.
 from __future__ import annotations
 
 import math
-import string
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from opalflow import __version__
-from opalflow.lammps.syntax import name, num
-from opalflow.lammps.timestep import TimestepEstimate, estimate_timestep
+from opalflow.version import __version__
+from opalflow.bpm.spec import BpmWorkflow
+from opalflow.bpm.timestep import TimestepEstimate, estimate_timestep
+from opalflow.lammps.syntax import name, num, render
 from opalflow.materials import (BondCoefficients, ContactProperties, bond_coefficients,
                                 contact_properties)
-from opalflow.resources import TEMPLATES, resource
-from opalflow.spec import SpecError, WorkflowSpec
+from opalflow.spec import SpecError
 from opalflow.structure import Structure
 
 DIAMOND = "diamond"
-
-
-def render(block: str, **values) -> str:
-    """Fill ``templates/<block>.lmp``; every placeholder must be given."""
-    text = resource(TEMPLATES, f"{block}.lmp").read_text()
-    return string.Template(text).substitute(values)
 
 
 @dataclass
@@ -140,7 +133,7 @@ class CompressionDeck:
         }
 
 
-def compression_deck(spec: WorkflowSpec, s: Structure) -> CompressionDeck:
+def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
     """Decks (fresh and resume) for the uniaxial compression of ``s`` by a plate."""
     c = spec.compression
     d_mean = float(np.mean(s.diameters))

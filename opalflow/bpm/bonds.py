@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from opalflow.build.neighbors import pairs_within, separations
+from opalflow.neighbors import pairs_within, separations
 
 
 def find_bonds(positions: np.ndarray, diameters: np.ndarray, box: np.ndarray, periodic,

@@ -28,9 +28,11 @@ import math
 import numpy as np
 from scipy.spatial import cKDTree
 
+from opalflow.spec import InputError
 
-class PoreError(RuntimeError):
-    """Pores could not be placed as asked."""
+
+class PoreError(InputError):
+    """Pores could not be placed as asked (bad input: the CLI says it in one line, exit 2)."""
 
 
 def fcc_centres(spacing: float, diameter: float, layers: int, cells_x: int, cells_y: int,

@@ -1,91 +1,56 @@
-"""The one flow of a compression run: spec -> structure -> deck -> LAMMPS -> analysis -> results.
+"""The compression pipeline of every bonded-particle scene: spec -> scene -> deck -> LAMMPS -> analysis -> results.
 
-A run folder holds everything: data.lmp, in.lmp, resume.lmp, run.sh (LAMMPS alone),
-run.json (what analysis needs to know about the deck), the raw LAMMPS output
-(log.lammps, curve.txt, snapshots/, restart files) and the results (results.h5,
-summary.json, report.md, PNG plots).  Results are written under temporary names and
-renamed, so a failed run never replaces earlier results.
+A scene (the opal, the lattice, a user's data file) gives only its structure
+(:class:`Scene`, found through :mod:`opalflow.registry` by the spec's kind); everything
+after it is the same for all.  A run folder holds everything: data.lmp, in.lmp,
+resume.lmp, run.sh (LAMMPS alone), run.json (what analysis needs to know about the
+deck), the raw LAMMPS output (log.lammps, curve.txt, snapshots/, restart files) and the
+results (results.h5, summary.json, report.md, PNG plots).  Results are written under
+temporary names and renamed, so a failed run never replaces earlier results.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
-import math
 import subprocess
 import time
 from pathlib import Path
 
 import numpy as np
 
-from opalflow import __version__
+from opalflow import registry
 from opalflow.analysis import compression as mech
-from opalflow.build.bonds import bond_types_by_material
-from opalflow.lammps.datafile import read_data, write_data
-from opalflow.lammps.deck import CompressionDeck, compression_deck
+from opalflow.bpm.deck import CompressionDeck, compression_deck
+from opalflow.bpm.scene import Scene
+from opalflow.bpm.spec import BpmWorkflow
+from opalflow.lammps.datafile import write_data
 from opalflow.lammps.engine import lammps_info, run_in_process, run_script_sh, run_subprocess
 from opalflow.resources import ROOT
-from opalflow.spec import SpecError, WorkflowSpec
+from opalflow.spec import SpecError
 from opalflow.store import new_figure, save_figure, write_json_atomic, write_text_atomic
 from opalflow.structure import Structure
-
-#: the uncoated silica opal's experiment (do Rosario et al. [57], Dosta et al. 3.1.2)
-EXPERIMENT_SILICA_OPAL = {"youngs_modulus_GPa": (1.7, "experiment, do Rosario et al. via Dosta et al. 3.1.2"),
-                          "strength_MPa": (41.3, "experiment, do Rosario et al. via Dosta et al. 3.1.2")}
+from opalflow.version import __version__
 
 
-def references(spec: dict) -> dict[str, tuple[float, str]]:
-    """Reference values a run is compared with: experiment, paper or analytic value."""
-    if spec["kind"] == "lattice" and spec["lattice"]["arrangement"] == "sc" and not spec["contacts"]["enabled"]:
-        from opalflow.materials import material
-
-        E_b = material(spec["material"], spec["materials"])["bond_youngs_modulus_GPa"]
-        r = spec["bonds"]["radius_factor"] / 2
-        return {"youngs_modulus_specimen_GPa": (math.pi * r**2 * E_b,
-                                                "analytic: E_b pi r_b^2 / a^2 (simple-cubic lattice)")}
-    uncoated_fcc_silica = (spec["kind"] == "opal" and spec["pores"]["arrangement"] == "fcc"
-                           and spec["coating"]["thickness_nm"] == 0 and spec["material"] == "silica")
-    return dict(EXPERIMENT_SILICA_OPAL) if uncoated_fcc_silica else {}
+def scene_of(spec: BpmWorkflow) -> Scene:
+    """The scene registered for the spec's kind."""
+    return registry.resolve(registry.get(spec.kind).scene)
 
 
-def build_structure(spec: WorkflowSpec, progress=None) -> Structure:
-    """The scene of a spec: an opal, a lattice, or a user's data file."""
-    if spec.kind == "lattice":
-        from opalflow.build.lattice import build_lattice
-
-        return build_lattice(spec)
-    if spec.kind == "datafile":
-        d = spec.datafile
-        s = read_data(d.path, periodic=(d.periodic_sides, d.periodic_sides, False))
-        n_types = int(s.types.max())
-        if len(d.materials) != n_types:
-            raise SpecError("datafile.materials", d.materials, f"must name all {n_types} atom types of {d.path}")
-        s.type_names = list(d.materials)
-        s.groups["substrate"] = np.isin(s.types, [k + 1 for k, m in enumerate(d.materials) if m == "substrate"])
-        coat = np.isin(s.types, [k + 1 for k, m in enumerate(d.materials) if m not in (spec.material, "substrate")])
-        others = sorted({m for m in d.materials if m not in (spec.material, "substrate")})
-        if len(others) > 1:
-            raise SpecError("datafile.materials", d.materials, "at most one material besides the matrix")
-        s.bond_types = bond_types_by_material(s.bonds, coat)
-        s.bond_type_names = [spec.material] + others
-        s.meta["solid_fraction"] = float(np.sum(s.particle_volumes()) / np.prod(s.box_lengths))
-        return s
-    from opalflow.build.opal import build_opal
-
-    s, _ = build_opal(spec, progress=progress)
-    return s
+def build_structure(spec: BpmWorkflow, progress=None) -> Structure:
+    """The scene's structure."""
+    return scene_of(spec).build(spec, progress)
 
 
 def solid_fraction(s: Structure) -> float:
     return float(s.meta.get("packing_solid_fraction", s.meta.get("solid_fraction", 1.0)))
 
 
-#: structure statistics of an opal that its run summary carries (studies plot against them)
-STRUCTURE_KEYS = ("porosity", "total_porosity", "density_kg_m3")
-
-
-def prepare(spec: WorkflowSpec, out: Path, progress=None) -> CompressionDeck:
+def prepare(spec: BpmWorkflow, out: Path, progress=None) -> CompressionDeck:
     """Build the scene and write the run folder's inputs (data.lmp, decks, run.sh, run.json)."""
     t = time.perf_counter()
-    s = build_structure(spec, progress)
+    scene = scene_of(spec)
+    s = scene.build(spec, progress)
     deck = compression_deck(spec, s)
     build_s = time.perf_counter() - t
     out.mkdir(parents=True, exist_ok=True)
@@ -99,14 +64,36 @@ def prepare(spec: WorkflowSpec, out: Path, progress=None) -> CompressionDeck:
     (out / "run.sh").chmod(0o755)
     info = {"workflow": spec.name, "spec": spec.to_dict(), "opalflow_version": __version__,
             "type_names": deck.structure.type_names, "n_particles": s.n_particles, "n_bonds": s.n_bonds,
-            "solid_fraction": solid_fraction(s), "build_s": build_s, **deck.info()}
-    if spec.kind == "opal":
-        from opalflow.build.opal import structure_statistics
-
-        stats = structure_statistics(deck.source)
-        info["structure"] = {k: stats[k] for k in STRUCTURE_KEYS}
+            "solid_fraction": solid_fraction(s), "build_s": build_s, "references": spec.references(),
+            **deck.info()}
+    if scene.run_keys:
+        stats = scene.statistics(deck.source)
+        info["structure"] = {k: stats[k] for k in scene.run_keys}
     write_json_atomic(out / "run.json", info)
     return deck
+
+
+def build(spec: BpmWorkflow, out: Path, say=print) -> dict:
+    """Structure + full deck (data.lmp, in.lmp, resume.lmp, run.sh) + summary.json; no run."""
+    start = time.perf_counter()
+    say(f"building {spec.name} ({spec.kind})")
+    deck = prepare(spec, out, progress=say)
+    scene = scene_of(spec)
+    summary = {"workflow": spec.name, "opalflow_version": __version__}
+    if scene.statistics:
+        summary.update(scene.statistics(deck.source))
+    else:
+        summary.update({"n_particles": deck.structure.n_particles, "n_bonds": deck.structure.n_bonds})
+    if scene.describe:
+        say(scene.describe(summary))
+    summary["deck"] = deck.info()
+    summary["timings_s"] = {**deck.structure.meta.get("timings_s", {}),
+                            "total": round(time.perf_counter() - start, 3)}
+    summary["spec"] = spec.to_dict()
+    write_json_atomic(out / "summary.json", summary)
+    say(f"wrote {out}/data.lmp, in.lmp, run.sh ({time.perf_counter() - start:.1f} s); "
+        f"'bash {out}/run.sh' runs it with LAMMPS alone")
+    return summary
 
 
 def execute(out: Path, *, np_: int = 1, resume: bool = False, label: str = "", suffix: str | None = None) -> float:
@@ -196,7 +183,7 @@ def analyze(out: Path, wall_s: float | None = None, lammps_s: float | None = Non
         "headline": f"E = {E_GPa:.4g} GPa, strength = {float(stress[peak]):.4g} MPa "
                     f"(strain at peak {float(strain[peak]):.4f})",
     }
-    refs = references(info["spec"])
+    refs = info.get("references", {})
     summary["reference"] = {k: {"value": v, "source": src,
                                 "error": (summary[k] - v) / v} for k, (v, src) in refs.items()}
     if extra:
@@ -237,8 +224,8 @@ def _write_h5(out, info, curve, strain, stress, stress_plate, stress_substrate, 
         p.attrs["opalflow_version"] = __version__
         p.attrs["lammps_version"] = lammps_info()["version"]
         p.attrs["git_commit"] = git_commit()
-        p.attrs["seeds"] = json.dumps({"packing": info["spec"]["packing"]["seed"],
-                                       "pores": info["spec"]["pores"]["seed"]})
+        p.attrs["seeds"] = json.dumps({name: section["seed"] for name, section in info["spec"].items()
+                                       if isinstance(section, dict) and "seed" in section})
         p.attrs["run"] = json.dumps({k: v for k, v in info.items() if k != "spec"})
         h.attrs["summary"] = json.dumps(summary, default=float)
     tmp.replace(out / "results.h5")
@@ -314,21 +301,16 @@ def _report(info, summary, fit) -> str:
     return "\n".join(lines) + "\n"
 
 
-def run_workflow(spec: WorkflowSpec, out: Path, *, np_: int = 1, resume: bool = False, say=print,
+def analyze_folder(out: Path) -> dict:
+    """The results of a run folder whose deck ran outside opalflow (``bash run.sh``)."""
+    if not (out / "run.json").exists() or not (out / "curve.txt").exists():
+        raise SpecError("folder", str(out), "needs run.json and curve.txt (a built folder after 'bash run.sh')")
+    return analyze(out)
+
+
+def run_workflow(spec: BpmWorkflow, out: Path, *, np_: int = 1, resume: bool = False, say=print,
                  suffix: str | None = None) -> dict:
-    """prepare (unless resuming) -> execute -> analyze; the rate check runs a half-speed twin.
-
-    Atomistic kinds (``tersoff_*``) run in :mod:`opalflow.tersoff.workflow`, studies in
-    :mod:`opalflow.studies.run`.
-    """
-    if spec.kind.startswith("tersoff"):
-        from opalflow.tersoff.workflow import run
-
-        return run(spec, out, say=say)
-    if spec.kind == "study":
-        from opalflow.studies.run import run
-
-        return run(spec, out, say=say)
+    """prepare (unless resuming) -> execute -> analyze; the rate check runs a half-speed twin."""
     t = time.perf_counter()
     if not resume:
         deck = prepare(spec, out, progress=say)
@@ -337,8 +319,6 @@ def run_workflow(spec: WorkflowSpec, out: Path, *, np_: int = 1, resume: bool = 
     lammps_s = execute(out, np_=np_, resume=resume, label=f"{spec.name}: ", suffix=suffix)
     extra = {}
     if spec.compression.check_rate and not resume:
-        import dataclasses
-
         half = dataclasses.replace(spec, compression=dataclasses.replace(
             spec.compression, plate_speed_m_s=spec.compression.plate_speed_m_s / 2, check_rate=False))
         sub = out / "rate_half"

@@ -11,31 +11,17 @@ import time
 
 import numpy as np
 
-from opalflow.analysis.pores import coating_surface_distance, window_openings
-from opalflow.build import pores as pore_geometry
-from opalflow.build.bonds import bond_types_by_material, find_bonds
-from opalflow.build.packing import dense_random_packing
+from opalflow.bpm.bonds import bond_types_by_material, find_bonds
+from opalflow.bpm.scene import Scene
 from opalflow.materials import material
-from opalflow.spec import WorkflowSpec, sample_box_nm
-from opalflow.structure import Structure
+from opalflow.opal import pores as pore_geometry
+from opalflow.opal.packing import dense_random_packing
+from opalflow.opal.spec import OpalWorkflow, sample_box_nm
+from opalflow.opal.windows import coating_surface_distance, window_openings
+from opalflow.structure import Structure, quantize
 from opalflow.units import NM3_PER_UM3, density_from_nano, density_to_nano
 
-#: positions are rounded to this many decimals (nm) so data files round-trip exactly
-POSITION_DECIMALS = 6
-
-
-def quantize(x: np.ndarray, box: np.ndarray, periodic: np.ndarray) -> np.ndarray:
-    """Round to POSITION_DECIMALS (k / 10^n is the double nearest the decimal text) and wrap."""
-    scale = 10.0**POSITION_DECIMALS
-    q = np.round(x * scale) / scale
-    for k in np.flatnonzero(periodic):
-        q[:, k] = np.where(q[:, k] >= box[k], q[:, k] - box[k], q[:, k])
-        q[:, k] = np.where(q[:, k] < 0, q[:, k] + box[k], q[:, k])
-        q[:, k] = np.round(q[:, k] * scale) / scale
-    return q
-
-
-def _random_pores(spec: WorkflowSpec, packing, substrate, box_xy, z0, height, progress):
+def _random_pores(spec: OpalWorkflow, packing, substrate, box_xy, z0, height, progress):
     """Place random pores and take as many as bring the macro-porosity closest to the target.
 
     More pores than needed are packed (non-overlapping, collective rearrangement) in
@@ -84,7 +70,7 @@ def _random_pores(spec: WorkflowSpec, packing, substrate, box_xy, z0, height, pr
     return centres, keep, coated
 
 
-def build_opal(spec: WorkflowSpec, progress=None) -> tuple[Structure, dict]:
+def build_opal(spec: OpalWorkflow, progress=None) -> tuple[Structure, dict]:
     """Build the inverse-opal Structure of ``spec``; returns it and its statistics."""
     timings = {}
     d = spec.packing.diameter_nm
@@ -249,3 +235,19 @@ def structure_statistics(s: Structure) -> dict:
     if len(coat):
         stats["coating_max_distance_to_pore_surface_nm"] = float(coat.max())
     return stats
+
+
+#: structure statistics of an opal that its run summary carries (studies plot against them)
+STRUCTURE_KEYS = ("porosity", "total_porosity", "density_kg_m3")
+
+
+def _describe(stats: dict) -> str:
+    return (f"{stats['n_particles']} particles, {stats['n_bonds']} bonds, porosity {stats['porosity']:.3f}, "
+            f"{stats['particles_per_um3']:.0f} particles/um^3, {stats['bonds_per_um3']:.0f} bonds/um^3")
+
+
+def opal_structure(spec: OpalWorkflow, progress=None) -> Structure:
+    return build_opal(spec, progress)[0]
+
+
+SCENE = Scene(build=opal_structure, statistics=structure_statistics, run_keys=STRUCTURE_KEYS, describe=_describe)

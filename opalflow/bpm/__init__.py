@@ -1,0 +1,1 @@
+"""Bonded-particle compression pipeline, scene-agnostic: shared spec sections, bonds, deck, time step, run and analysis."""

@@ -1,0 +1,114 @@
+"""Spec sections of the compression pipeline, shared by every bonded-particle scene.
+
+:class:`BpmWorkflow` is the workflow spec a scene extends with its own sections (the opal's
+packing and pores, the lattice's array, the user's data file): the matrix ``material``,
+``[materials.<name>]`` overrides, ``[bonds]``, ``[contacts]`` and ``[compression]``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from opalflow.materials import OVERRIDABLE, material_names
+from opalflow.spec import WorkflowSpec, check, check_name, is_number
+
+SIDES = ("periodic", "open")
+
+
+@dataclass
+class BondsSpec:
+    """Bonds: who is bonded (cutoff) and how they respond (bpm/rotational)."""
+
+    cutoff_factor: float = 1.75
+    radius_factor: float = 1.0
+    length_bins: int = 8
+    breakable: bool = True
+    damping_ratio: float = 0.05
+
+
+@dataclass
+class ContactsSpec:
+    """Hertz-Mindlin contacts between unbonded particles (pair_style granular)."""
+
+    enabled: bool = True
+
+
+@dataclass
+class CompressionSpec:
+    """Uniaxial compression by a rigid plate moving down at constant speed."""
+
+    strain_max: float = 0.04
+    plate_speed_m_s: float = 2.0
+    timestep_s: float = 0.0
+    timestep_safety: float = 0.8
+    global_damping: float = 0.5
+    output_every_strain: float = 2.0e-4
+    snapshot_strains: list[float] = field(default_factory=lambda: [0.01, 0.02])
+    restart_every_strain: float = 0.005
+    check_rate: bool = False
+
+
+@dataclass
+class BoundarySpec:
+    """Side boundaries (x and y): periodic, or open (no bonds across)."""
+
+    sides: str = "periodic"
+
+    def validate(self) -> None:
+        check(self.sides in SIDES, "boundary.sides", self.sides, f"must be one of {', '.join(SIDES)}")
+
+
+@dataclass
+class BpmWorkflow(WorkflowSpec):
+    """A bonded-particle scene compressed by a plate: what every scene's workflow has."""
+
+    material: str = "silica"
+    materials: dict = field(default_factory=dict)
+    bonds: BondsSpec = field(default_factory=BondsSpec)
+    contacts: ContactsSpec = field(default_factory=ContactsSpec)
+    compression: CompressionSpec = field(default_factory=CompressionSpec)
+
+    def references(self) -> dict[str, tuple[float, str]]:
+        """Reference values a run of this scene is compared with: {summary key: (value, source)}."""
+        return {}
+
+    def validate(self) -> None:
+        super().validate()
+        materials = material_names()
+        for mname, props in self.materials.items():
+            check_name("materials", mname)
+            check(mname in materials, f"materials.{mname}", props, f"unknown material; known: {', '.join(materials)}")
+            check(isinstance(props, dict), f"materials.{mname}", props, "must be a table of properties")
+            for key, value in props.items():
+                check(key in OVERRIDABLE, f"materials.{mname}.{key}", value,
+                      f"unknown key; allowed: {', '.join(OVERRIDABLE)}")
+                check(is_number(value) and value > 0, f"materials.{mname}.{key}", value, "must be a number > 0")
+        check_material("material", self.material)
+        b = self.bonds
+        check(1.0 <= b.cutoff_factor <= 3.0, "bonds.cutoff_factor", b.cutoff_factor,
+              "must be in [1.0, 3.0] (bond cutoff in particle diameters)")
+        check(0 < b.radius_factor <= 2.0, "bonds.radius_factor", b.radius_factor,
+              "must be in (0, 2] (bond radius / particle radius)")
+        check(1 <= b.length_bins <= 100, "bonds.length_bins", b.length_bins, "must be in [1, 100]")
+        check(0 <= b.damping_ratio <= 2.0, "bonds.damping_ratio", b.damping_ratio, "must be in [0, 2]")
+        c = self.compression
+        check(0 < c.strain_max <= 0.5, "compression.strain_max", c.strain_max, "must be in (0, 0.5]")
+        check(0 < c.plate_speed_m_s <= 100, "compression.plate_speed_m_s", c.plate_speed_m_s,
+              "must be in (0, 100] m/s (quasi-static loading)")
+        check(c.timestep_s >= 0, "compression.timestep_s", c.timestep_s, "must be >= 0 (0: estimated)")
+        check(0 < c.timestep_safety <= 1, "compression.timestep_safety", c.timestep_safety, "must be in (0, 1]")
+        check(0 <= c.global_damping <= 2, "compression.global_damping", c.global_damping,
+              "must be in [0, 2] (fraction of critical damping of the sample's fundamental mode)")
+        check(0 < c.output_every_strain <= c.strain_max / 10, "compression.output_every_strain",
+              c.output_every_strain, f"must be in (0, strain_max/10 = {c.strain_max / 10:g}]")
+        for i, e in enumerate(c.snapshot_strains):
+            check(0 < e <= c.strain_max, f"compression.snapshot_strains[{i}]", e,
+                  f"must be in (0, strain_max = {c.strain_max:g}]")
+        check(c.restart_every_strain > 0, "compression.restart_every_strain", c.restart_every_strain,
+              "must be > 0 (restart files every this much strain)")
+
+
+def check_material(where: str, value: str, also: tuple[str, ...] = ()) -> None:
+    """A material name of data/materials.toml (or one of ``also``)."""
+    check_name(where, value)
+    known = (*material_names(), *also)
+    check(value in known, where, value, f"unknown material; known: {', '.join(known)}")

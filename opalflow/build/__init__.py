@@ -1,1 +1,0 @@
-"""Structure generators: packing, pores, coating, substrate, bonds."""

@@ -1,0 +1,1 @@
+"""Lattice scene (kind = "lattice"): regular arrays of bonded spheres for analytic checks."""

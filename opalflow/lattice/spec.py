@@ -1,0 +1,50 @@
+"""Spec of the lattice scene: the ``[lattice]`` section and the analytic reference it gives."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from opalflow.bpm.spec import BoundarySpec, BpmWorkflow
+from opalflow.materials import material
+from opalflow.spec import check
+
+LATTICES = ("sc", "fcc")
+
+
+@dataclass
+class LatticeSpec:
+    """Regular arrays of bonded spheres (kind = "lattice") for analytic checks."""
+
+    arrangement: str = "sc"
+    spacing_nm: float = 20.0
+    cells_x: int = 4
+    cells_y: int = 4
+    cells_z: int = 8
+
+
+@dataclass
+class LatticeWorkflow(BpmWorkflow):
+    """A regular lattice (kind = "lattice") compressed by a plate."""
+
+    lattice: LatticeSpec = field(default_factory=LatticeSpec)
+    boundary: BoundarySpec = field(default_factory=BoundarySpec)
+
+    def references(self) -> dict[str, tuple[float, str]]:
+        """Simple cubic without contacts: E = E_b pi r_b^2 / a^2 (see :mod:`opalflow.lattice.scene`)."""
+        if self.lattice.arrangement != "sc" or self.contacts.enabled:
+            return {}
+        E_b = material(self.material, self.materials)["bond_youngs_modulus_GPa"]
+        r = self.bonds.radius_factor / 2
+        return {"youngs_modulus_specimen_GPa": (math.pi * r**2 * E_b,
+                                                "analytic: E_b pi r_b^2 / a^2 (simple-cubic lattice)")}
+
+    def validate(self) -> None:
+        super().validate()
+        lat = self.lattice
+        check(lat.arrangement in LATTICES, "lattice.arrangement", lat.arrangement,
+              f"must be one of {', '.join(LATTICES)}")
+        check(lat.spacing_nm > 0, "lattice.spacing_nm", lat.spacing_nm, "must be > 0")
+        for axis in "xyz":
+            n = getattr(lat, f"cells_{axis}")
+            check(2 <= n <= 200, f"lattice.cells_{axis}", n, "must be in [2, 200]")
+        self.boundary.validate()

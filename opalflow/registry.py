@@ -1,0 +1,180 @@
+"""The one switch: workflow ``kind`` -> the track that reads, validates, builds and runs it.
+
+A kind is a :class:`Kind`: its spec class (a :class:`opalflow.spec.WorkflowSpec` subclass
+with the sections it reads and their validation), its runner, and what it offers besides
+(a deck built alone, an analysis of a run folder, the CLI options it takes).  Runners are
+named as ``"module:function"`` and imported only when used, so ``list`` and ``info`` stay
+fast and no track is imported by another.
+
+Kinds come from three places, looked up in this order:
+
+1. :func:`register` at run time (a notebook, a test);
+2. the built-in tracks below, one line each;
+3. installed plugins: packages that declare an entry point in the group ``opalflow.kinds``
+   (``toy = "toytrack:KIND"`` in their ``pyproject.toml``) whose object is a :class:`Kind`.
+
+Adding a track is a new package plus one line here (or one entry point in its own package).
+"""
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+from opalflow.spec import SpecError, WorkflowSpec, apply_overrides, convert, read_toml
+
+#: CLI options a kind may take, besides --out and --set, and the runner's keyword for each
+OPTIONS = {"np": "np_", "suffix": "suffix", "resume": "resume"}
+
+#: a workflow file without ``kind`` is an opal
+DEFAULT_KIND = "opal"
+
+ENTRY_POINT_GROUP = "opalflow.kinds"
+
+
+def resolve(target: str) -> Any:
+    """The object named ``"module:attribute"``."""
+    module, _, attr = target.partition(":")
+    return getattr(importlib.import_module(module), attr)
+
+
+@dataclass(frozen=True)
+class Kind:
+    """A workflow kind.
+
+    Parameters
+    ----------
+    name : the ``kind`` value of workflow files.
+    spec : ``"module:Class"`` of its workflow spec (a dataclass subclass of WorkflowSpec with a
+        ``validate`` method); the module must be light (dataclasses and checks only).
+    run : ``"module:function"`` called as ``run(spec, out, say=..., **options)`` -> summary dict
+        (with ``headline`` and ``wall_s``), where options are the keywords of :data:`OPTIONS`
+        that the kind takes.
+    build : ``"module:function"`` called as ``build(spec, out, say=...)`` -> summary dict:
+        everything ``run`` writes before it runs (``python -m opalflow build``); "" if none.
+    analyze : ``"module:function"`` called as ``analyze(folder)`` -> summary dict: the results of
+        a run folder whose deck ran outside opalflow (``python -m opalflow analyze``); "" if none.
+    scene : ``"module:attribute"`` of the :class:`opalflow.bpm.scene.Scene` that the compression
+        pipeline builds the structure with; "" for kinds that are not bonded-particle scenes.
+    options : the names in :data:`OPTIONS` it takes.
+    refusal : why it does not take the others (said when one is given).
+    summary : one line for ``list`` and ``info``.
+    """
+
+    name: str
+    spec: str
+    run: str
+    build: str = ""
+    analyze: str = ""
+    scene: str = ""
+    options: tuple[str, ...] = ()
+    refusal: str = ""
+    summary: str = ""
+
+    def spec_class(self) -> type[WorkflowSpec]:
+        return resolve(self.spec)
+
+    def run_workflow(self, spec: WorkflowSpec, out: Path, *, say=print, np_: int = 1, resume: bool = False,
+                     suffix: str | None = None) -> dict:
+        """Run ``spec`` into ``out``; options the kind does not take must be at their defaults."""
+        given = {"np": np_ != 1, "resume": resume, "suffix": suffix is not None}
+        if any(on and o not in self.options for o, on in given.items()):
+            raise SpecError("/".join(f"--{o}" for o in OPTIONS), self.name,
+                            self.refusal or f"it takes only {', '.join(self.options) or 'none of them'}")
+        values = {"np": np_, "resume": resume, "suffix": suffix}
+        return resolve(self.run)(spec, out, say=say, **{OPTIONS[o]: values[o] for o in self.options})
+
+    def build_workflow(self, spec: WorkflowSpec, out: Path, *, say=print) -> dict:
+        if not self.build:
+            raise SpecError("kind", self.name, "has no deck of its own to build (it runs several or none): use 'run'")
+        return resolve(self.build)(spec, out, say=say)
+
+    def analyze_folder(self, folder: Path) -> dict:
+        if not self.analyze:
+            raise SpecError("folder", str(folder), f"a {self.name} run has no analysis of its own: its run "
+                            "writes the results")
+        return resolve(self.analyze)(folder)
+
+
+def _compression(name: str, spec: str, scene: str, summary: str) -> Kind:
+    """A bonded-particle scene compressed by a plate: the pipeline of :mod:`opalflow.bpm`."""
+    return Kind(name, spec, run="opalflow.bpm.pipeline:run_workflow", build="opalflow.bpm.pipeline:build",
+                analyze="opalflow.bpm.pipeline:analyze_folder", scene=scene, options=("np", "resume", "suffix"),
+                summary=summary)
+
+
+_TERSOFF_REFUSAL = ("atomistic workflows run in-process and take seconds; stability.workers sets how many "
+                    "MD runs go at once")
+
+BUILTIN = {k.name: k for k in (
+    _compression("opal", "opalflow.opal.spec:OpalWorkflow", "opalflow.opal.scene:SCENE",
+                 "inverse opal (packing, pores, coating, substrate) compressed by a plate"),
+    _compression("lattice", "opalflow.lattice.spec:LatticeWorkflow", "opalflow.lattice.scene:SCENE",
+                 "regular lattice of bonded spheres compressed by a plate (analytic checks)"),
+    _compression("datafile", "opalflow.datafile.spec:DatafileWorkflow", "opalflow.datafile.scene:SCENE",
+                 "your own bpm/sphere data file compressed by a plate"),
+    Kind("tersoff_properties", "opalflow.tersoff.spec:TersoffWorkflow", "opalflow.tersoff.workflow:run_properties",
+         refusal=_TERSOFF_REFUSAL, summary="lattice constant, cohesive energy, elastic constants of a .tersoff file"),
+    Kind("tersoff_fit", "opalflow.tersoff.spec:TersoffWorkflow", "opalflow.tersoff.workflow:run_fit",
+         refusal=_TERSOFF_REFUSAL, summary="fit of a Tersoff set to target properties (loss eq. 13)"),
+    Kind("tersoff_stability", "opalflow.tersoff.spec:TersoffWorkflow", "opalflow.tersoff.workflow:run_stability",
+         refusal=_TERSOFF_REFUSAL, summary="MD stability of a Tersoff set under four boundary conditions"),
+    Kind("study", "opalflow.studies.spec:StudyWorkflow", "opalflow.studies.run:run",
+         refusal="a study sets study.np and study.workers; rerunning it resumes it (finished jobs are kept)",
+         summary="many compression jobs from one base workflow: the paper's studies"),
+)}
+
+_REGISTERED: dict[str, Kind] = {}
+
+
+def register(kind: Kind) -> Kind:
+    """Make ``kind`` available to this process (replaces a kind of the same name)."""
+    _REGISTERED[kind.name] = kind
+    return kind
+
+
+def _plugins() -> dict[str, metadata.EntryPoint]:
+    return {ep.name: ep for ep in metadata.entry_points(group=ENTRY_POINT_GROUP)}
+
+
+def kinds() -> dict[str, Kind]:
+    """Every kind known to this process: registered, built-in and installed plugins."""
+    found = {name: ep.load() for name, ep in _plugins().items()}
+    return {**found, **BUILTIN, **_REGISTERED}
+
+
+def get(name: str) -> Kind:
+    """The kind of that name; SpecError listing the known ones if there is none."""
+    if name in _REGISTERED:
+        return _REGISTERED[name]
+    if name in BUILTIN:
+        return BUILTIN[name]
+    plugin = _plugins().get(name)
+    if plugin is not None:
+        return plugin.load()
+    raise SpecError("kind", name, f"must be one of {', '.join(kinds())}")
+
+
+# ----------------------------------------------------------------------------- specs
+def spec_from_dict(raw: dict) -> WorkflowSpec:
+    """The validated spec of a raw workflow table (kind picks the class).
+
+    Sections and top-level keys that only other kinds read are left out, so that ``--set kind=...``
+    can switch a workflow file to another kind; a key that no kind reads is refused.
+    """
+    name = raw.get("kind", DEFAULT_KIND)
+    if not isinstance(name, str):
+        raise SpecError("kind", name, "must be a string")
+    cls = get(name).spec_class()
+    own = set(cls.__dataclass_fields__)
+    others = {f for k in kinds().values() for f in k.spec_class().__dataclass_fields__} - own
+    spec = convert(cls, {k: v for k, v in raw.items() if k not in others})
+    spec.validate()
+    return spec
+
+
+def load_spec(path: str | Path, overrides: list[str] | None = None) -> WorkflowSpec:
+    """Read, override and validate a workflow file."""
+    return spec_from_dict(apply_overrides(read_toml(path), overrides or []))

@@ -1,0 +1,72 @@
+"""Spec of the studies (kind = "study"): the ``[study]`` section."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from opalflow.spec import WorkflowSpec, check, check_name
+
+STUDIES = ("calibration", "bulk", "coating", "porosity", "convergence")
+
+
+@dataclass
+class StudySpec:
+    """A study (kind = "study"): many compression jobs made from one base workflow (Dosta et al.)."""
+
+    type: str = "calibration"
+    base: str = "quickstart"
+    paper_base: str = "opal_fcc"
+    paper_scale: bool = False
+    set: list[str] = field(default_factory=list)
+    workers: int = 0
+    np: int = 1
+    # calibration (eqs. 18-19)
+    target_E_GPa: float = 1.7
+    target_strength_MPa: float = 41.3
+    tolerance: float = 0.005
+    max_runs: int = 8
+    jacobian: str = "decoupled"
+    fd_step: float = 0.1
+    start_E_GPa: float = 0.0
+    start_strength_MPa: float = 0.0
+    # bulk (K_E), coating, porosity, convergence
+    diameters_nm: list[float] = field(default_factory=lambda: [60.0, 45.0])
+    thicknesses_nm: list[float] = field(default_factory=lambda: [0.0, 10.0, 20.0, 34.0])
+    porosities: list[float] = field(default_factory=lambda: [0.30, 0.36, 0.42, 0.49, 0.55, 0.62])
+    seeds: list[int] = field(default_factory=lambda: [1, 2, 3])
+    cells: list[list[int]] = field(default_factory=lambda: [[1, 1], [2, 1], [2, 2]])
+
+
+@dataclass
+class StudyWorkflow(WorkflowSpec):
+    """A study: many compression jobs made from one base workflow (Dosta et al.)."""
+
+    study: StudySpec = field(default_factory=StudySpec)
+
+    def validate(self) -> None:
+        """The [study] section; the jobs' own specs are validated when the study builds them."""
+        super().validate()
+        st = self.study
+        check(st.type in STUDIES, "study.type", st.type, f"must be one of {', '.join(STUDIES)}")
+        for where, name in (("study.base", st.base), ("study.paper_base", st.paper_base)):
+            check_name(where, name)
+        check(st.workers >= 0, "study.workers", st.workers, "must be >= 0 (jobs at once; 0: cores / np)")
+        check(st.np >= 1, "study.np", st.np, "must be >= 1 (MPI processes per job)")
+        check(st.target_E_GPa > 0, "study.target_E_GPa", st.target_E_GPa, "must be > 0")
+        check(st.target_strength_MPa > 0, "study.target_strength_MPa", st.target_strength_MPa, "must be > 0")
+        check(0 < st.tolerance < 0.5, "study.tolerance", st.tolerance, "must be in (0, 0.5) (relative)")
+        check(2 <= st.max_runs <= 100, "study.max_runs", st.max_runs, "must be in [2, 100]")
+        check(st.jacobian in ("decoupled", "full"), "study.jacobian", st.jacobian, "must be 'decoupled' or 'full'")
+        check(0.001 <= st.fd_step <= 0.5, "study.fd_step", st.fd_step, "must be in [0.001, 0.5] (relative step, eq. 19)")
+        check(st.start_E_GPa >= 0, "study.start_E_GPa", st.start_E_GPa, "must be >= 0 (0: the material's)")
+        check(st.start_strength_MPa >= 0, "study.start_strength_MPa", st.start_strength_MPa,
+              "must be >= 0 (0: the material's)")
+        check(len(st.diameters_nm) >= 1 and all(d > 0 for d in st.diameters_nm), "study.diameters_nm",
+              st.diameters_nm, "must be a non-empty list of diameters > 0")
+        check(all(0 <= t < 200 for t in st.thicknesses_nm), "study.thicknesses_nm", st.thicknesses_nm,
+              "must be thicknesses in [0, 200) nm")
+        check(len(st.porosities) >= 1 and all(0 < p <= 0.66 for p in st.porosities), "study.porosities",
+              st.porosities, "must be porosities in (0, 0.66]")
+        check(len(st.seeds) >= 1 and all(s >= 0 for s in st.seeds) and len(set(st.seeds)) == len(st.seeds),
+              "study.seeds", st.seeds, "must be distinct seeds >= 0")
+        check(len(st.cells) >= 1 and all(len(c) == 2 and min(c) >= 1 for c in st.cells), "study.cells",
+              st.cells, "must be [cells_x, cells_y] pairs >= 1")

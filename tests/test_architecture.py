@@ -1,0 +1,229 @@
+"""The house rules: no import circles, a spec core and shared modules that know no track, one
+place that switches on the workflow kind, and a new track added without editing a module."""
+import ast
+import json
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+import opalflow
+from opalflow import registry
+from opalflow.cli import main
+
+PACKAGE = Path(opalflow.__file__).resolve().parent
+#: track packages: each owns its spec sections, their validation and its runner
+TRACKS = ("bpm", "opal", "lattice", "datafile", "tersoff", "studies")
+#: modules every track may use; they import no track
+SHARED = ("spec", "registry", "structure", "units", "materials", "store", "resources", "neighbors",
+          "version", "lammps", "analysis")
+
+
+def module_name(path: Path) -> str:
+    parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def modules() -> dict[str, Path]:
+    return {module_name(p): p for p in PACKAGE.rglob("*.py")}
+
+
+def imports(name: str, path: Path, known: set[str]) -> set[str]:
+    """opalflow modules that ``name`` imports anywhere in its file (inside functions too).
+
+    ``from opalflow.x import y`` is an import of ``opalflow.x.y`` when that is a module, else
+    of ``opalflow.x``; relative imports are resolved against the module's package.
+    """
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            targets = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = package.split(".")[:len(package.split(".")) - node.level + 1]
+                base = ".".join(anchor + ([base] if base else []))
+            targets = [f"{base}.{a.name}" if f"{base}.{a.name}" in known else base for a in node.names]
+        else:
+            continue
+        found |= {t for t in targets if t in known and t != name}
+    return found
+
+
+def import_graph() -> dict[str, set[str]]:
+    mods = modules()
+    known = set(mods)
+    return {name: imports(name, path, known) for name, path in mods.items()}
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components with more than one module (Tarjan)."""
+    index, low, stack, on, out = {}, {}, [], set(), []
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in graph:
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_no_import_circles():
+    graph = import_graph()
+    assert len(graph) > 30 and "opalflow.registry" in graph["opalflow.cli"]
+    assert cycles(graph) == []
+
+
+def test_the_circle_finder_finds_a_circle():
+    assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert cycles({"a": {"b"}, "b": set()}) == []
+
+
+def test_spec_core_and_shared_modules_import_no_track():
+    graph = import_graph()
+    tracks = tuple(f"opalflow.{t}" for t in TRACKS)
+    for name, deps in graph.items():
+        if any(name == f"opalflow.{s}" or name.startswith(f"opalflow.{s}.") for s in SHARED):
+            assert not [d for d in deps if d.startswith(tracks)], f"{name} imports a track"
+    assert graph["opalflow.spec"] == set()
+
+
+def test_tracks_import_only_the_pipeline_of_other_tracks():
+    """A scene may build on the compression pipeline (opalflow.bpm); no track imports another."""
+    graph = import_graph()
+    for track in TRACKS:
+        others = tuple(f"opalflow.{t}" for t in TRACKS if t not in (track, "bpm"))
+        for name, deps in graph.items():
+            if name.startswith(f"opalflow.{track}"):
+                assert not [d for d in deps if d.startswith(others)], f"{name} imports another track"
+
+
+def test_only_the_registry_switches_on_kind():
+    hits = [f"{p.relative_to(PACKAGE)}:{n}" for p in PACKAGE.rglob("*.py")
+            for n, line in enumerate(p.read_text().splitlines(), 1) if "kind ==" in line or "kind.startswith" in line]
+    assert all(h.startswith("registry.py:") for h in hits), hits
+
+
+def test_every_shipped_workflow_names_a_registered_kind():
+    for path in (PACKAGE.parent / "workflows").glob("*.toml"):
+        spec = registry.load_spec(path)
+        assert isinstance(spec, registry.get(spec.kind).spec_class())
+
+
+# ----------------------------------------------------------------------------- a new track
+TOY = '''
+"""A throwaway track: counts to ``toy.n`` and reports the sum."""
+import json
+import time
+from dataclasses import dataclass, field
+
+from opalflow.registry import Kind
+from opalflow.spec import WorkflowSpec, check
+
+
+@dataclass
+class ToySpec:
+    n: int = 3
+
+
+@dataclass
+class ToyWorkflow(WorkflowSpec):
+    toy: ToySpec = field(default_factory=ToySpec)
+
+    def validate(self):
+        super().validate()
+        check(1 <= self.toy.n <= 100, "toy.n", self.toy.n, "must be in [1, 100]")
+
+
+def run(spec, out, say=print):
+    t0 = time.perf_counter()
+    out.mkdir(parents=True, exist_ok=True)
+    total = sum(range(1, spec.toy.n + 1))
+    say(f"toy: summed 1..{spec.toy.n}")
+    summary = {"sum": total, "headline": f"sum = {total}", "wall_s": time.perf_counter() - t0}
+    (out / "summary.json").write_text(json.dumps(summary))
+    (out / "report.md").write_text(summary["headline"] + "\\n")
+    return summary
+
+
+KIND = Kind("toy", spec="toytrack:ToyWorkflow", run="toytrack:run", summary="sum of 1..n (a test track)")
+'''
+
+
+@pytest.fixture
+def toytrack(tmp_path, monkeypatch):
+    """A package ``toytrack`` outside opalflow, on the path, with an entry point in opalflow.kinds."""
+    site = tmp_path / "site"
+    (site / "toytrack").mkdir(parents=True)
+    (site / "toytrack" / "__init__.py").write_text(textwrap.dedent(TOY))
+    dist = site / "toytrack-0.1.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: toytrack\nVersion: 0.1\n")
+    (dist / "entry_points.txt").write_text(f"[{registry.ENTRY_POINT_GROUP}]\ntoy = toytrack:KIND\n")
+    (tmp_path / "toy.toml").write_text('name = "toy_sum"\nkind = "toy"\n[toy]\nn = 10\n')
+    monkeypatch.syspath_prepend(str(site))
+    return tmp_path
+
+
+def test_a_new_track_registered_at_run_time_runs_through_the_cli(toytrack, capsys, monkeypatch):
+    monkeypatch.setattr(registry, "_REGISTERED", {})
+    from toytrack import KIND
+
+    registry.register(KIND)
+    out = toytrack / "run"
+    assert main(["run", str(toytrack / "toy.toml"), "--out", str(out)]) == 0
+    assert capsys.readouterr().out.startswith("sum = 55, ")
+    assert json.loads((out / "summary.json").read_text())["sum"] == 55
+    # its spec is checked like any other, and it refuses the options it does not take
+    assert main(["run", str(toytrack / "toy.toml"), "--out", str(toytrack / "bad"), "--set", "toy.n=0"]) == 2
+    assert capsys.readouterr().err.strip() == "error: toy.n = 0: must be in [1, 100]"
+    assert main(["run", str(toytrack / "toy.toml"), "--out", str(toytrack / "bad"), "--np", "2"]) == 2
+    assert not (toytrack / "bad").exists()
+
+
+def test_a_new_track_installed_as_a_plugin_runs_through_python_m_opalflow(toytrack):
+    env_path = str(toytrack / "site")
+    proc = subprocess.run([sys.executable, "-m", "opalflow", "run", str(toytrack / "toy.toml"), "--out",
+                           str(toytrack / "plugin_run")], capture_output=True, text=True,
+                          env={**os.environ, "PYTHONPATH": env_path})
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.startswith("sum = 55, ")
+    info = subprocess.run([sys.executable, "-m", "opalflow", "info"], capture_output=True, text=True,
+                          env={**os.environ, "PYTHONPATH": env_path})
+    assert any(line.split()[:1] == ["toy"] for line in info.stdout.splitlines())
+
+
+def test_architecture_doc_names_what_exists():
+    """docs/architecture.md: every opalflow path it names exists, and every package is described."""
+    import re
+
+    doc = (PACKAGE.parent / "docs" / "architecture.md").read_text()
+    named = set(re.findall(r"`(opalflow/[A-Za-z0-9_/.]*)", doc))
+    assert len(named) > 10
+    missing = [n for n in named if not (PACKAGE.parent / n.split("<")[0]).exists() and "<" not in n]
+    assert missing == []
+    packages = {p.parent.name for p in PACKAGE.glob("*/__init__.py")}
+    assert {p for p in packages if f"`opalflow/{p}/`" not in doc} == set()
