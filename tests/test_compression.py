@@ -214,3 +214,91 @@ def test_opal_run_carries_its_structure_statistics(tmp_path, quick_spec, quick_s
     stats = structure_statistics(quick_structure)
     assert info["structure"] == pytest.approx({k: stats[k] for k in STRUCTURE_KEYS})
     assert 0.3 < info["structure"]["porosity"] < 0.9
+
+
+# ----------------------------------------------------------------------------- resume while bonds break
+#: opal_quick with weak bonds: about 30 bonds broken at the middle restart file, 130 more after it
+BREAKING = ["compression.strain_max=0.012", "compression.restart_every_strain=0.004",
+            "compression.snapshot_strains=[0.01]", "materials.silica.bond_strength_MPa=30.0"]
+
+
+@pytest.fixture(scope="module")
+def breaking_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("breaking") / "whole"
+    argv = ["run", "opal_quick", "--out", str(out)]
+    for s in BREAKING:
+        argv += ["--set", s]
+    assert main(argv) == 0
+    return out
+
+
+def interrupted(whole, dest, rows_past_restart: int = 7):
+    """``whole`` as a kill leaves it: the inputs, the restart files up to the middle one, and the curve
+    rows some way past it (written before the kill, after the restart file)."""
+    dest.mkdir()
+    (dest / "snapshots").mkdir()
+    for name in ("data.lmp", "in.lmp", "resume.lmp", "run.sh", "run.json"):
+        (dest / name).write_bytes((whole / name).read_bytes())
+    steps = sorted(int(p.name.split(".")[1]) for p in whole.glob("restart.*.bin"))
+    restart = steps[len(steps) // 2]
+    for step in steps:
+        if step <= restart:
+            (dest / f"restart.{step}.bin").write_bytes((whole / f"restart.{step}.bin").read_bytes())
+    every = json.loads((whole / "run.json").read_text())["output_every_steps"]
+    lines = (whole / "curve.txt").read_text().splitlines(keepends=True)
+    (dest / "curve.txt").write_text("".join(
+        line for line in lines if line.startswith("#") or int(line.split()[0]) <= restart + rows_past_restart * every))
+    return restart
+
+
+def assert_same_curve(whole, resumed, restart):
+    a = np.loadtxt(whole / "curve.txt", comments="#")
+    b = np.loadtxt(resumed / "curve.txt", comments="#")
+    assert np.all(np.diff(b[:, 0]) > 0), "each step once, in order"
+    assert np.array_equal(a[:, 0], b[:, 0])
+    before = a[:, 0] <= restart
+    assert np.array_equal(a[before], b[before])
+    # restarts of granular runs are not bit-exact (velocities at the half step); the curve after the
+    # restart agrees to 1e-3 of each column's range
+    scale = np.ptp(a, axis=0) + 1e-30
+    assert np.all(np.abs(a - b) <= 1e-3 * scale)
+
+
+def test_breaking_run_resumes_to_the_same_curve(breaking_run, tmp_path):
+    """A run killed while bonds break resumes (--resume) to the uninterrupted curve, point by point."""
+    whole = breaking_run
+    out = tmp_path / "resumed"
+    restart = interrupted(whole, out)
+    curve = np.loadtxt(whole / "curve.txt", comments="#")
+    bonds = json.loads((whole / "run.json").read_text())["n_bonds"]
+    broken_at_restart = bonds - np.interp(restart, curve[:, 0], curve[:, 4])
+    assert broken_at_restart >= 10 and bonds - curve[-1, 4] >= broken_at_restart + 50
+    assert main(["run", "--out", str(out), "--resume"]) == 0
+    assert_same_curve(whole, out, restart)
+    a = json.loads((whole / "summary.json").read_text())
+    b = json.loads((out / "summary.json").read_text())
+    assert b["complete"] and b["youngs_modulus_GPa"] == pytest.approx(a["youngs_modulus_GPa"], rel=0.01)
+    assert b["strength_MPa"] == pytest.approx(a["strength_MPa"], rel=0.01)
+    assert abs(b["broken_bonds"] - a["broken_bonds"]) <= 0.02 * a["broken_bonds"]
+
+
+def test_breaking_run_resumes_with_run_sh(breaking_run, tmp_path):
+    """bash run.sh resume (LAMMPS alone) continues the same way; analyze reads the whole curve."""
+    out = tmp_path / "alone"
+    restart = interrupted(breaking_run, out)
+    env = {k: v for k, v in os.environ.items() if k != "LD_LIBRARY_PATH"}
+    proc = subprocess.run(["bash", str(out / "run.sh"), "resume"], capture_output=True, text=True, env=env)
+    assert proc.returncode == 0, proc.stdout[-2000:]
+    assert_same_curve(breaking_run, out, restart)
+    assert main(["analyze", str(out)]) == 0
+    assert json.loads((out / "summary.json").read_text())["complete"]
+
+
+def test_analyze_marks_a_run_that_stopped_early(breaking_run, tmp_path, capsys):
+    out = tmp_path / "stopped"
+    interrupted(breaking_run, out)
+    assert main(["analyze", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["complete"] is False and summary["steps"] < summary["steps_planned"]
+    assert capsys.readouterr().out.startswith("INCOMPLETE run (stopped at step ")
+    assert "**Incomplete run**" in (out / "report.md").read_text()

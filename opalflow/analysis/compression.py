@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from opalflow.store import write_text_atomic
+
 CURVE_COLUMNS = ["step", "plate_dz_nm", "plate_fz_pN", "substrate_fz_pN", "intact_bonds", "ke_zJ", "top_z_nm"]
 
 
@@ -25,6 +27,17 @@ def read_curve(path: Path) -> dict[str, np.ndarray]:
     _, last = np.unique(steps[::-1], return_index=True)
     rows = rows[::-1][last]
     return {name: rows[:, k] for k, name in enumerate(CURVE_COLUMNS)}
+
+
+def trim_curve(path: Path, last_step: int) -> None:
+    """Keep the header and the rows up to ``last_step`` (the step of the restart file a run resumes
+    from): the resumed run appends the rest, so each step is in the file once, in order."""
+    if not path.exists():
+        return
+    lines = path.read_text().splitlines(keepends=True)
+    keep = [line for line in lines if line.startswith("#") or not line.strip()
+            or int(line.split()[0]) <= last_step]
+    write_text_atomic(path, "".join(keep))
 
 
 @dataclass

@@ -183,7 +183,9 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
     steps_per_strain = height / v / dt
     steps = int(math.ceil(c.strain_max * steps_per_strain))
     every = max(1, int(round(c.output_every_strain * steps_per_strain)))
-    restart_every = max(every, int(round(c.restart_every_strain * steps_per_strain)))
+    # restart files at whole output intervals: a run resumed from one writes its first averaged
+    # curve row one interval later, so no row is lost or written twice
+    restart_every = every * max(1, int(round(c.restart_every_strain * steps_per_strain / every)))
     snaps = sorted({max(1, int(round(e * steps_per_strain))) for e in c.snapshot_strains})
 
     omega1, modulus_affine = fundamental_mode(data, coeffs, height, area, masses, r0)
@@ -224,7 +226,9 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
             elif b == "system":
                 parts.append(render("system_restart", ghost_cutoff=common["ghost_cutoff"],
                                     restart_file="restart.*.bin"))
-            elif b not in ("groups", "bonds", "contacts"):  # stored in restart files
+            elif b != "groups":  # groups are stored in restart files
+                # bonds and contacts are given again: pair granular read back from a restart file
+                # blows up the first contacts of pairs whose bond broke (see templates/system_restart.lmp)
                 parts.append(blocks[b])
         return title + "\n".join(parts)
 

@@ -99,8 +99,11 @@ def build(spec: BpmWorkflow, out: Path, say=print) -> dict:
 def execute(out: Path, *, np_: int = 1, resume: bool = False, label: str = "", suffix: str | None = None) -> float:
     """Run the deck of a prepared folder; returns LAMMPS wall seconds."""
     info = json.loads((out / "run.json").read_text())
-    if resume and not list(out.glob("restart.*.bin")):
-        raise SpecError("--resume", str(out), "no restart file in the folder; run without --resume")
+    if resume:
+        steps = [int(p.name.split(".")[1]) for p in out.glob("restart.*.bin") if p.name.split(".")[1].isdigit()]
+        if not steps:
+            raise SpecError("--resume", str(out), "no restart file in the folder; run without --resume")
+        mech.trim_curve(out / "curve.txt", max(steps))     # LAMMPS reads the newest restart file
     if np_ > 1:
         return run_subprocess(out, np=np_, total_steps=info["steps"], resume=resume, label=label, suffix=suffix)
     script = (out / ("resume.lmp" if resume else "in.lmp")).read_text()
@@ -173,6 +176,9 @@ def analyze(out: Path, wall_s: float | None = None, lammps_s: float | None = Non
         "youngs_modulus_specimen_GPa": fit_top.modulus_MPa / 1e3,
         "strength_MPa": float(stress[peak]), "strain_at_peak": float(strain[peak]),
         "timestep_s": info["timestep_s"], "steps": int(curve["step"][-1]),
+        # the last averaged row lies within one output interval of the last step of a whole run
+        "complete": bool(curve["step"][-1] > info["steps"] - info["output_every_steps"]),
+        "steps_planned": info["steps"],
         "wall_s": wall_s, "lammps_s": lammps_s,
         "broken_bonds": int(broken[-1]), "n_particles": info["n_particles"], "n_bonds": n_bonds0,
         "stress_by_material": {f"{v['strain']:.4f}": v["by_material"] for v in snapshots.values()},
@@ -188,6 +194,9 @@ def analyze(out: Path, wall_s: float | None = None, lammps_s: float | None = Non
                                 "error": (summary[k] - v) / v} for k, (v, src) in refs.items()}
     if extra:
         summary.update(extra)
+    if not summary["complete"]:
+        summary["headline"] = (f"INCOMPLETE run (stopped at step {summary['steps']} of {info['steps']}): "
+                               + summary["headline"])
 
     _write_h5(out, info, curve, strain, stress, stress_plate, stress_substrate, broken, snapshots,
               histograms, summary)
@@ -268,6 +277,11 @@ def _plots(out, strain, stress, stress_plate, stress_substrate, fit, snapshots, 
 
 def _report(info, summary, fit) -> str:
     lines = [f"# {info['workflow']}: uniaxial compression", "",
+             *([f"**Incomplete run**: the output stops at step {summary['steps']} of {info['steps']} "
+                f"(strain {summary['steps'] / info['steps'] * info['spec']['compression']['strain_max']:.4f} of "
+                f"{info['spec']['compression']['strain_max']:g}); the figures below cover only that part. "
+                "`python -m opalflow run --out DIR --resume` continues it from its newest restart file.", ""]
+               if not summary["complete"] else []),
              f"{info['n_particles']} particles, {info['n_bonds']} bonds; time step {summary['timestep_s']:.3g} s "
              f"({summary['steps']} steps); plate {info['plate_speed_m_s']:g} m/s; "
              + (f"wall {summary['wall_s']:.1f} s (LAMMPS {summary['lammps_s']:.1f} s)."

@@ -225,7 +225,15 @@ cd "$(dirname "$0")"
 export LD_LIBRARY_PATH="{folder or ''}${{LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}}"
 mkdir -p snapshots
 input=in.lmp
-[ "${{1:-}}" = resume ] && input=resume.lmp
+if [ "${{1:-}}" = resume ]; then
+  input=resume.lmp
+  # LAMMPS reads the newest restart file; curve.txt keeps its rows up to that step and the
+  # resumed run appends the rest, so every step is in it once, in order
+  last=$(ls restart.*.bin | sed -n 's/^restart\\.\\([0-9]*\\)\\.bin$/\\1/p' | sort -n | tail -1)
+  if [ -f curve.txt ]; then
+    awk -v last="$last" '/^#/ || $1 <= last' curve.txt > curve.txt.tmp && mv curve.txt.tmp curve.txt
+  fi
+fi
 args=(-nocite -in "$input" -log log.lammps)
 [ -n "${{SUFFIX:-}}" ] && args+=(-sf "$SUFFIX")
 if [ "${{NP:-1}}" -gt 1 ]; then
