@@ -81,3 +81,50 @@ def test_same_spec_same_bytes_other_seed_other_file(tmp_path):
     a, b, c = ((tmp_path / f"{n}.lmp").read_bytes() for n in "abc")
     assert a == b
     assert a != c
+
+
+def _malformed(good: bytes) -> dict[str, bytes]:
+    text = good.decode()
+    lines = text.splitlines(keepends=True)
+    first = next(k for k, line in enumerate(lines) if len(line.split()) == 8 and line.split()[0] == "1")
+
+    def row(change) -> bytes:
+        words = lines[first].split()
+        change(words)
+        return "".join(lines[:first] + [" ".join(words) + "\n"] + lines[first + 1:]).encode()
+
+    return {
+        "empty": b"",
+        "garbage": bytes(range(256)) * 40,
+        "truncated": good[: len(good) // 2],
+        "atomic_style": text.replace("Atoms # bpm/sphere", "Atoms # atomic").encode(),
+        "no_box": "".join(line for line in lines if "xlo" not in line).encode(),
+        "text_in_atoms": row(lambda w: w.__setitem__(3, "sixty")),
+        "short_atom_line": row(lambda w: w.pop()),
+        "negative_diameter": row(lambda w: w.__setitem__(3, "-60.0")),
+        "duplicate_id": row(lambda w: w.__setitem__(0, "2")),
+        "bond_to_nobody": text.rstrip("\n").rsplit("\n", 1)[0].encode() + b"\n99999 1 1 999999\n",
+    }
+
+
+def test_every_malformed_data_file_is_one_line_naming_it(tmp_path, capsys):
+    """kind = "datafile" with a broken file: exit 2, one error line naming the file and what is wrong, no
+    traceback, nothing written."""
+    from opalflow.bpm.pipeline import build_structure
+    from opalflow.cli import main
+
+    spec = load_spec(WORKFLOWS / "lattice_sc.toml")
+    write_data(tmp_path / "good.lmp", build_structure(spec))
+    cases = _malformed((tmp_path / "good.lmp").read_bytes())
+    for name, content in cases.items():
+        path = tmp_path / f"{name}.lmp"
+        path.write_bytes(content)
+        out = tmp_path / f"run_{name}"
+        code = main(["build", "lattice_sc", "--out", str(out), "--set", "kind=datafile",
+                     "--set", f'datafile.path="{path}"', "--set", 'datafile.materials=["silica","substrate"]'])
+        err = capsys.readouterr().err.strip().splitlines()
+        assert code == 2, name
+        # after the progress line 'building ...': one error line, the last
+        assert [line for line in err if "error" in line.lower()] == err[-1:], (name, err)
+        assert err[-1].startswith(f"error: data file {path}: "), (name, err)
+        assert not out.exists(), name

@@ -20,6 +20,8 @@ from opalflow.structure import Structure
 def read_scene(spec: DatafileWorkflow, progress=None) -> Structure:
     d = spec.datafile
     s = read_data(d.path, periodic=(d.periodic_sides, d.periodic_sides, False))
+    if s.n_bonds == 0:
+        raise SpecError("datafile.path", d.path, "has no bonds: a bonded-particle scene needs a Bonds section")
     n_types = int(s.types.max())
     if len(d.materials) != n_types:
         raise SpecError("datafile.materials", d.materials, f"must name all {n_types} atom types of {d.path}")

@@ -15,10 +15,12 @@ from __future__ import annotations
 
 import os
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
 
+from opalflow.spec import InputError
 from opalflow.structure import Structure
 
 DECIMALS = 6
@@ -117,17 +119,39 @@ def write_data(path: str | os.PathLike, s: Structure, title: str = "opalflow") -
     os.replace(tmp, path)
 
 
-SECTION = re.compile(rb"^(Atoms|Velocities|Bonds|Masses|Pair Coeffs|PairIJ Coeffs|Bond Coeffs)\b.*$",
+SECTION = re.compile(rb"^(Atoms|Velocities|Bonds|Masses|Pair Coeffs|PairIJ Coeffs|Bond Coeffs)\b(.*)$",
                      re.MULTILINE)
+COUNT = re.compile(r"^\s*(\d+)\s+(atoms|bonds)\s*$", re.MULTILINE)
 
 
-def _table(body: bytes, ncol: int) -> np.ndarray:
+class DataFileError(InputError):
+    """A data file that is not a readable bpm/sphere data file (one line: the file and what is wrong)."""
+
+    def __init__(self, path, what: str):
+        super().__init__(f"data file {path}: {what}")
+
+
+def _table(path, name: str, body: bytes, ncol: int, expected: int | None) -> np.ndarray:
     """Whitespace-separated numbers (comments stripped) as an (n, ncol) float64 array."""
     if b"#" in body:
         body = re.sub(rb"#[^\n]*", b"", body)
-    values = np.fromstring(body.decode("ascii"), sep=" ")  # C parser; exact strtod
-    if values.size % ncol:
-        raise ValueError(f"section has {values.size} numbers, not a multiple of {ncol}")
+    lines = [line for line in body.splitlines() if line.strip()]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DeprecationWarning)
+        try:
+            values = np.fromstring(body.decode("ascii"), sep=" ")  # C parser; exact strtod
+        except (DeprecationWarning, UnicodeDecodeError, ValueError):
+            values = None
+    if values is None or not np.all(np.isfinite(values)):
+        raise DataFileError(path, f"the {name} section holds text that is not a finite number")
+    if values.size % ncol or len(lines) * ncol != values.size:
+        raise DataFileError(path, f"the {name} section needs {ncol} numbers on every line; it has "
+                                  f"{values.size} numbers on {len(lines)} lines"
+                                  + (" (atom style bpm/sphere: id mol type diameter density x y z)"
+                                     if name == "Atoms" else " (id type atom1 atom2)"))
+    if expected is not None and len(lines) != expected:
+        raise DataFileError(path, f"the header declares {expected} {name.lower()} but the section has "
+                                  f"{len(lines)} lines (a truncated file?)")
     return values.reshape(-1, ncol)
 
 
@@ -135,36 +159,72 @@ def read_data(path: str | os.PathLike, periodic=(True, True, False)) -> Structur
     """Read a bpm/sphere data file written by opalflow or LAMMPS (``write_data``).
 
     ``periodic`` is not stored in data files; pass the boundary of the deck.
-    Sections other than Atoms and Bonds (Velocities, Coeffs) are skipped.
+    Sections other than Atoms and Bonds (Velocities, Coeffs) are skipped.  Anything that is not a
+    whole bpm/sphere data file raises :class:`DataFileError` naming the file and what is wrong.
     """
-    raw = Path(path).read_bytes()
+    try:
+        raw = Path(path).read_bytes()
+    except OSError as exc:
+        raise DataFileError(path, f"cannot be read ({exc.strerror})") from None
     marks = list(SECTION.finditer(raw))
     if not marks or not any(m.group(1) == b"Atoms" for m in marks):
-        raise ValueError(f"{path}: no Atoms section")
-    header_text = raw[: marks[0].start()].decode()
-    box = np.zeros((3, 2))
+        raise DataFileError(path, "no Atoms section: not a LAMMPS data file")
+    try:
+        header_text = raw[: marks[0].start()].decode()
+    except UnicodeDecodeError:
+        raise DataFileError(path, "the header is not text") from None
+    box = np.full((3, 2), np.nan)
     type_names: list[str] = []
     for line in header_text.splitlines()[1:]:
         if line.startswith("# atom types:"):
-            type_names = [t.split("=", 1)[1] for t in line.split(":", 1)[1].split()]
+            type_names = [t.split("=", 1)[1] for t in line.split(":", 1)[1].split() if "=" in t]
         parts = line.split("#")[0].split()
         if len(parts) == 4 and parts[-1] in ("xhi", "yhi", "zhi"):
-            box["xyz".index(parts[-1][0])] = [float(parts[0]), float(parts[1])]
-    bodies = {}
+            try:
+                box["xyz".index(parts[-1][0])] = [float(parts[0]), float(parts[1])]
+            except ValueError:
+                raise DataFileError(path, f"box line {line.strip()!r} needs two numbers") from None
+    if not np.all(np.isfinite(box)) or np.any(box[:, 1] <= box[:, 0]):
+        raise DataFileError(path, "the header needs 'xlo xhi', 'ylo yhi' and 'zlo zhi' lines with lo < hi")
+    counts = {word: int(n) for n, word in COUNT.findall(header_text)}
+    bodies, styles = {}, {}
     for k, m in enumerate(marks):
         end = marks[k + 1].start() if k + 1 < len(marks) else len(raw)
         bodies[m.group(1).decode()] = raw[m.end():end]
-    atoms = _table(bodies["Atoms"], 8)
+        styles[m.group(1).decode()] = m.group(2).decode(errors="replace").strip().lstrip("#").strip()
+    if styles["Atoms"] not in ("", "bpm/sphere"):
+        raise DataFileError(path, f"atom style {styles['Atoms']!r}; opalflow reads bpm/sphere "
+                                  "(id mol type diameter density x y z)")
+    atoms = _table(path, "Atoms", bodies["Atoms"], 8, counts.get("atoms"))
     atoms = atoms[np.argsort(atoms[:, 0], kind="stable")]
+    ids = atoms[:, 0]
+    if len(ids) == 0:
+        raise DataFileError(path, "the Atoms section is empty")
+    if np.any(ids < 1) or np.any(ids != np.round(ids)) or np.any(np.diff(ids) == 0):
+        raise DataFileError(path, "atom ids must be distinct integers >= 1")
+    if np.any(atoms[:, 2] < 1) or np.any(atoms[:, 2] != np.round(atoms[:, 2])):
+        raise DataFileError(path, "atom types must be integers >= 1")
+    if np.any(atoms[:, 3] <= 0) or np.any(atoms[:, 4] <= 0):
+        raise DataFileError(path, "every diameter and density must be > 0 (bpm/sphere: column 4 diameter, 5 density)")
     bonds = np.zeros((0, 2), np.int64)
     bond_types = np.zeros(0, np.int32)
     if "Bonds" in bodies:
-        braw = _table(bodies["Bonds"], 4).astype(np.int64)
+        braw = _table(path, "Bonds", bodies["Bonds"], 4, counts.get("bonds"))
+        if np.any(braw != np.round(braw)) or np.any(braw[:, 1] < 1):
+            raise DataFileError(path, "bond lines must be integers 'id type atom1 atom2' with type >= 1")
+        braw = braw.astype(np.int64)
         braw = braw[np.argsort(braw[:, 0], kind="stable")]
-        id_to_index = np.empty(int(atoms[:, 0].max()) + 1, np.int64)
-        id_to_index[atoms[:, 0].astype(np.int64)] = np.arange(len(atoms))
-        bonds = id_to_index[braw[:, 2:4]]
+        id_to_index = np.full(int(ids.max()) + 1, -1, np.int64)
+        id_to_index[ids.astype(np.int64)] = np.arange(len(atoms))
+        ends = braw[:, 2:4]
+        if np.any(ends < 1) or np.any(ends > ids.max()) or np.any(id_to_index[np.clip(ends, 0, None)] < 0):
+            raise DataFileError(path, "a bond names an atom id that is not in the Atoms section")
+        if np.any(ends[:, 0] == ends[:, 1]):
+            raise DataFileError(path, "a bond joins an atom to itself")
+        bonds = id_to_index[ends]
         bond_types = braw[:, 1].astype(np.int32)
+    elif counts.get("bonds"):
+        raise DataFileError(path, f"the header declares {counts['bonds']} bonds but there is no Bonds section")
     return Structure(
         positions=atoms[:, 5:8], diameters=atoms[:, 3], types=atoms[:, 2].astype(np.int32),
         densities=atoms[:, 4], box_lo=box[:, 0], box_hi=box[:, 1],
