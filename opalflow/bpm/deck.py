@@ -24,6 +24,8 @@ from opalflow.spec import SpecError
 from opalflow.structure import Structure
 
 DIAMOND = "diamond"
+#: more steps than this is a time step far too small for the scene, not a run to start
+MAX_STEPS = 10**10
 
 
 @dataclass
@@ -182,6 +184,10 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
     v = c.plate_speed_m_s                       # m/s = nm/ns
     steps_per_strain = height / v / dt
     steps = int(math.ceil(c.strain_max * steps_per_strain))
+    if steps > MAX_STEPS:
+        raise SpecError("compression.timestep_s", c.timestep_s,
+                        f"gives {steps:.3g} steps to strain {c.strain_max:g} (at most {MAX_STEPS:.0e}); "
+                        "use 0 for the estimated time step")
     every = max(1, int(round(c.output_every_strain * steps_per_strain)))
     # restart files at whole output intervals: a run resumed from one writes its first averaged
     # curve row one interval later, so no row is lost or written twice

@@ -103,8 +103,8 @@ class BpmWorkflow(WorkflowSpec):
         for i, e in enumerate(c.snapshot_strains):
             check(0 < e <= c.strain_max, f"compression.snapshot_strains[{i}]", e,
                   f"must be in (0, strain_max = {c.strain_max:g}]")
-        check(c.restart_every_strain > 0, "compression.restart_every_strain", c.restart_every_strain,
-              "must be > 0 (restart files every this much strain)")
+        check(0 < c.restart_every_strain <= 1, "compression.restart_every_strain", c.restart_every_strain,
+              "must be in (0, 1] (restart files every this much strain; >= strain_max: none)")
 
 
 def check_material(where: str, value: str, also: tuple[str, ...] = ()) -> None:

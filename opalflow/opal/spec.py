@@ -9,6 +9,8 @@ from opalflow.bpm.spec import BoundarySpec, BpmWorkflow, check_material
 from opalflow.spec import SpecError, check
 
 ARRANGEMENTS = ("fcc", "random", "none")
+#: the largest sample opalflow builds (the paper's largest has 3.4 million particles)
+MAX_PARTICLES = 5e7
 
 #: the uncoated silica opal's experiment (do Rosario et al. [57], Dosta et al. 3.1.2)
 EXPERIMENT_SILICA_OPAL = {"youngs_modulus_GPa": (1.7, "experiment, do Rosario et al. via Dosta et al. 3.1.2"),
@@ -96,9 +98,9 @@ class OpalWorkflow(BpmWorkflow):
               f"must be > 2 particle diameters ({2 * k.diameter_nm:g} nm)")
         check(p.spacing_nm >= 0.75 * p.diameter_nm, "pores.spacing_nm", p.spacing_nm,
               f"must be >= 0.75 x pores.diameter_nm ({0.75 * p.diameter_nm:g} nm)")
-        check(p.layers >= 1, "pores.layers", p.layers, "must be >= 1")
-        check(p.cells_x >= 1, "pores.cells_x", p.cells_x, "must be >= 1")
-        check(p.cells_y >= 1, "pores.cells_y", p.cells_y, "must be >= 1")
+        check(1 <= p.layers <= 100, "pores.layers", p.layers, "must be in [1, 100]")
+        check(1 <= p.cells_x <= 100, "pores.cells_x", p.cells_x, "must be in [1, 100]")
+        check(1 <= p.cells_y <= 100, "pores.cells_y", p.cells_y, "must be in [1, 100]")
         check(p.seed >= 0, "pores.seed", p.seed, "must be >= 0")
         if p.arrangement == "random":
             check(p.porosity is not None, "pores.porosity", p.porosity,
@@ -112,6 +114,11 @@ class OpalWorkflow(BpmWorkflow):
             raise SpecError("pores.porosity", p.porosity,
                             "only allowed with arrangement = 'random' (fcc porosity follows from the lattice)")
         lx, ly, h = sample_box_nm(self)
+        height = h + self.substrate.layers * k.diameter_nm
+        n_est = k.solid_fraction * lx * ly * height / (math.pi / 6 * k.diameter_nm**3)
+        check(n_est <= MAX_PARTICLES, "packing.diameter_nm", k.diameter_nm,
+              f"a {lx:.4g} x {ly:.4g} x {height:.4g} nm sample of these particles holds ~{n_est:.2g}; at most "
+              f"{MAX_PARTICLES:.0e} (larger particles or fewer cells and layers)")
         if p.arrangement != "none":
             check(p.diameter_nm <= min(lx, ly, h), "pores.diameter_nm", p.diameter_nm,
                   f"pores larger than the box ({lx:.0f} x {ly:.0f} x {h:.0f} nm); "

@@ -1,0 +1,193 @@
+"""Spec fuzzing: every field of every workflow kind mutated, seeded.
+
+Each case is refused with one line that names a field (exit 2, nothing written), or it is valid;
+never another exception, and no string from a spec reaches a LAMMPS deck unless it is a name
+([A-Za-z0-9_]+).
+"""
+import dataclasses
+import json
+import math
+import random
+import re
+from collections import Counter
+
+import pytest
+
+from opalflow import registry
+from opalflow.bpm.pipeline import build_structure
+from opalflow.bpm.deck import compression_deck
+from opalflow.cli import main
+from opalflow.resources import WORKFLOWS
+from opalflow.spec import InputError, read_toml
+
+#: the base workflow of each kind
+BASES = {"opal": "opal_quick", "lattice": "lattice_sc", "datafile": "lattice_sc",
+         "tersoff_properties": "tersoff_properties", "tersoff_fit": "tersoff_fit",
+         "tersoff_stability": "tersoff_stability", "study": "calibrate_silica"}
+METACHARACTERS = ["a$b", "${x}", "a&b", "a#b", "a;b", "{x}", 'a"b', "a'b", "a\nshell rm -rf /",
+                  "silica; shell ls", "x\tpair_style zero", ""]
+VALUES = [None, "x", "random", 0, 1, -1, 2, 7, 2**62, -(2**62), 0.0, 0.5, -0.5, 1e-300, 1e308, -1e308,
+          math.nan, math.inf, -math.inf, True, False, [], [0.01], [1, 2], ["a"], [[1]], {}, {"a": 1}]
+NAME = re.compile(r"[A-Za-z0-9_]+")
+
+
+def fields(cls, prefix=()):
+    """Dotted paths of every leaf field of a spec class."""
+    out = []
+    for f in dataclasses.fields(cls):
+        default = f.default_factory() if f.default_factory is not dataclasses.MISSING else f.default
+        if dataclasses.is_dataclass(default):
+            out += fields(type(default), prefix + (f.name,))
+        else:
+            out.append(prefix + (f.name,))
+    return out
+
+
+def base_raw(kind: str, datafile: str) -> dict:
+    raw = read_toml(WORKFLOWS / f"{BASES[kind]}.toml")
+    raw["kind"] = kind
+    if kind == "datafile":
+        raw["datafile"] = {"path": datafile, "materials": ["silica", "substrate"]}
+    return raw
+
+
+def put(raw: dict, path: tuple, value) -> dict:
+    node = raw
+    for key in path[:-1]:
+        nxt = node.get(key)
+        if not isinstance(nxt, dict):
+            nxt = node[key] = {}
+        node = nxt
+    if value is None:
+        node.pop(path[-1], None)
+    else:
+        node[path[-1]] = value
+    return raw
+
+
+def mutations(rng: random.Random, kind: str, n: int, datafile: str):
+    """n mutated raw specs of ``kind``: (the paths changed, the raw table)."""
+    paths = fields(registry.get(kind).spec_class())
+    for _ in range(n):
+        raw = base_raw(kind, datafile)
+        what = rng.random()
+        if what < 0.08:                                   # unknown key in a section or at the top
+            path = rng.choice(paths)[:-1] + ("colour",)
+            yield [path], put(raw, path, 1)
+        elif what < 0.12:                                 # a section that is no section, or an unknown one
+            key = rng.choice(["nonsense", paths[-1][0]])
+            raw[key] = rng.choice([1, "x", [1]])
+            yield [(key,)], raw
+        else:                                             # one to three fields get odd values
+            changed = rng.sample(paths, rng.choice([1, 1, 1, 2, 3]))
+            for path in changed:
+                raw = put(raw, path, rng.choice(VALUES + METACHARACTERS) if rng.random() < 0.8
+                          else rng.choice(METACHARACTERS))
+            yield changed, raw
+
+
+def field_exists(spec_cls, where: str) -> bool:
+    """Does a refusal's field ('packing.seed', 'study.cells[1]', 'materials.silica.x', 'kind') name a
+    field of the spec (a check across fields names the one it holds against the other)?"""
+    name = re.sub(r"\[\d+\]", "", where).split(".")
+    top = {f.name for f in dataclasses.fields(spec_cls)}
+    return name[0] in top or where in ("kind", "workflow")
+
+
+@pytest.fixture(scope="module")
+def datafile(tmp_path_factory):
+    from opalflow.lammps.datafile import write_data
+
+    path = tmp_path_factory.mktemp("fuzz") / "lattice.lmp"
+    write_data(path, build_structure(registry.load_spec(WORKFLOWS / "lattice_sc.toml")))
+    return str(path)
+
+
+def test_fuzzed_specs_are_refused_in_one_line_or_valid(datafile):
+    rng = random.Random(20261123)
+    outcomes, examples = Counter(), []
+    for kind in BASES:
+        cls = registry.get(kind).spec_class()
+        for changed, raw in mutations(rng, kind, 500, datafile):
+            try:
+                spec = registry.spec_from_dict(json.loads(json.dumps(raw, allow_nan=True)))
+            except InputError as exc:
+                msg = str(exc)
+                assert "\n" not in msg, (kind, changed, msg)
+                where = msg.split(" = ", 1)[0]
+                mutated = re.sub(r"\[\d+\]", "", where) in {".".join(path) for path in changed}
+                assert mutated or field_exists(cls, where), (kind, changed, msg)
+                outcomes["refused, names a mutated field" if mutated else "refused, names another field"] += 1
+                if not mutated and len(examples) < 6:
+                    examples.append((changed, msg[:160]))
+                continue
+            outcomes["valid"] += 1
+            if kind in ("lattice", "datafile"):
+                outcomes["valid, deck built" if check_deck(spec, raw) else "valid, deck refused in one line"] += 1
+    print(dict(outcomes), *examples, sep="\n")
+    assert sum(v for k, v in outcomes.items() if k.startswith("refused")) > 1000
+    assert outcomes["valid, deck built"] > 30
+
+
+def strings(value):
+    if isinstance(value, str):
+        yield value
+    elif isinstance(value, dict):
+        for v in value.values():
+            yield from strings(v)
+    elif isinstance(value, list):
+        for v in value:
+            yield from strings(v)
+
+
+def check_deck(spec, raw) -> bool:
+    """A valid lattice or data-file spec builds a deck (or is refused in one line), and no string of the
+    spec that is not a name is in it."""
+    try:
+        deck = compression_deck(spec, build_structure(spec))
+    except InputError as exc:
+        assert "\n" not in str(exc)
+        return False
+    text = deck.in_lmp + deck.resume_lmp
+    for s in strings(raw):
+        if s and not NAME.fullmatch(s):
+            assert s not in text, (s, raw)
+    return True
+
+
+def toml_literal(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return "nan" if math.isnan(value) else ("inf" if value == math.inf else "-inf" if value == -math.inf
+                                                else repr(value))
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, list):
+        return "[" + ", ".join(toml_literal(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{k} = {toml_literal(v)}" for k, v in value.items()) + "}"
+    return str(value)
+
+
+@pytest.mark.parametrize("kind", ["opal", "lattice", "tersoff_properties", "study"])
+def test_fuzzed_set_through_the_cli(kind, tmp_path, capsys):
+    """Through 'python -m opalflow build' with --set: refused -> exit 2, one line, nothing written."""
+    rng = random.Random(hash(kind) % 1000)
+    cls = registry.get(kind).spec_class()
+    paths = fields(cls)
+    refused = 0
+    for n in range(25):
+        path = rng.choice(paths)
+        value = rng.choice([v for v in VALUES + METACHARACTERS if v is not None])
+        out = tmp_path / f"case{n}"
+        code = main(["build", BASES[kind], "--out", str(out), "--set", f"kind={kind}",
+                     "--set", f"{'.'.join(path)}={toml_literal(value)}"])
+        err = capsys.readouterr().err.strip().splitlines()
+        if code == 2:
+            refused += 1
+            assert [line for line in err if line.startswith("error:")] == err[-1:], (path, value, err)
+            assert not out.exists(), (path, value)
+        else:
+            assert code == 0 and kind in ("opal", "lattice") and (out / "in.lmp").exists(), (path, value, code)
+    assert refused >= 10
