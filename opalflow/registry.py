@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from opalflow.spec import SpecError, WorkflowSpec, apply_overrides, convert, read_toml
+from opalflow.store import folder_lock
 
 #: CLI options a kind may take, besides --out and --set, and the runner's keyword for each
 OPTIONS = {"np": "np_", "suffix": "suffix", "resume": "resume"}
@@ -84,12 +85,14 @@ class Kind:
             raise SpecError("/".join(f"--{o}" for o in OPTIONS), self.name,
                             self.refusal or f"it takes only {', '.join(self.options) or 'none of them'}")
         values = {"np": np_, "resume": resume, "suffix": suffix}
-        return resolve(self.run)(spec, out, say=say, **{OPTIONS[o]: values[o] for o in self.options})
+        with folder_lock(out):
+            return resolve(self.run)(spec, out, say=say, **{OPTIONS[o]: values[o] for o in self.options})
 
     def build_workflow(self, spec: WorkflowSpec, out: Path, *, say=print) -> dict:
         if not self.build:
             raise SpecError("kind", self.name, "has no deck of its own to build (it runs several or none): use 'run'")
-        return resolve(self.build)(spec, out, say=say)
+        with folder_lock(out):
+            return resolve(self.build)(spec, out, say=say)
 
     def analyze_folder(self, folder: Path) -> dict:
         if not self.analyze:

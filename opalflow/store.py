@@ -1,14 +1,20 @@
 """Results on disk: every file is written under a temporary name, then renamed.
 
-A finished result is therefore never replaced by a half-written one.
+A finished result is therefore never replaced by a half-written one, and a run folder is
+held by one process at a time (:func:`folder_lock`).
 """
 from __future__ import annotations
 
 import json
 import os
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
+
+from opalflow.spec import InputError
+
+LOCK_FILE = ".opalflow.lock"
 
 
 def _default(obj):
@@ -28,6 +34,51 @@ def write_text_atomic(path: str | os.PathLike, text: str) -> None:
 
 def write_json_atomic(path: str | os.PathLike, data: dict) -> None:
     write_text_atomic(path, json.dumps(data, indent=2, default=_default) + "\n")
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+@contextmanager
+def folder_lock(folder: str | os.PathLike):
+    """Hold ``folder`` for this process: ``.opalflow.lock`` holds the owner's pid.
+
+    A second run into a folder that a live process holds is refused (InputError, one line); the
+    lock of a process that died (killed, machine restarted) is taken over.  A folder this call
+    created is removed again if nothing else was written into it (a run refused on its input).
+    """
+    folder = Path(folder)
+    created = not folder.exists()
+    folder.mkdir(parents=True, exist_ok=True)
+    lock = folder / LOCK_FILE
+    while True:
+        try:
+            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+            break
+        except FileExistsError:
+            try:
+                pid = int(lock.read_text().split()[0])
+            except (OSError, ValueError, IndexError):
+                pid = 0
+            if pid and _alive(pid):
+                raise InputError(f"--out = {str(folder)!r}: in use by a running opalflow (pid {pid}, "
+                                 f"{lock}); wait for it or choose another folder") from None
+            lock.unlink(missing_ok=True)                    # stale: its owner is gone
+    with os.fdopen(fd, "w") as f:
+        f.write(f"{os.getpid()}\n")
+    try:
+        yield folder
+    finally:
+        lock.unlink(missing_ok=True)
+        if created and not any(folder.iterdir()):
+            folder.rmdir()
 
 
 def new_figure(*args, **kwargs):

@@ -12,6 +12,9 @@ from opalflow.materials import OVERRIDABLE, material_names
 from opalflow.spec import WorkflowSpec, check, check_name, is_number
 
 SIDES = ("periodic", "open")
+#: allowed range of each material property a workflow may override (far around any ceramic's)
+PROPERTY_RANGES = {"density_kg_m3": (1.0, 1e5), "bond_youngs_modulus_GPa": (1e-6, 1e4),
+                   "bond_poisson_ratio": (-0.99, 0.499), "bond_strength_MPa": (1e-6, 1e6)}
 
 
 @dataclass
@@ -81,7 +84,9 @@ class BpmWorkflow(WorkflowSpec):
             for key, value in props.items():
                 check(key in OVERRIDABLE, f"materials.{mname}.{key}", value,
                       f"unknown key; allowed: {', '.join(OVERRIDABLE)}")
-                check(is_number(value) and value > 0, f"materials.{mname}.{key}", value, "must be a number > 0")
+                lo, hi = PROPERTY_RANGES[key]
+                check(is_number(value) and lo <= value <= hi, f"materials.{mname}.{key}", value,
+                      f"must be a number in [{lo:g}, {hi:g}]")
         check_material("material", self.material)
         b = self.bonds
         check(1.0 <= b.cutoff_factor <= 3.0, "bonds.cutoff_factor", b.cutoff_factor,

@@ -43,7 +43,7 @@ class LatticeWorkflow(BpmWorkflow):
         lat = self.lattice
         check(lat.arrangement in LATTICES, "lattice.arrangement", lat.arrangement,
               f"must be one of {', '.join(LATTICES)}")
-        check(lat.spacing_nm > 0, "lattice.spacing_nm", lat.spacing_nm, "must be > 0")
+        check(0 < lat.spacing_nm <= 1e5, "lattice.spacing_nm", lat.spacing_nm, "must be in (0, 1e5] nm")
         for axis in "xyz":
             n = getattr(lat, f"cells_{axis}")
             check(2 <= n <= 200, f"lattice.cells_{axis}", n, "must be in [2, 200]")

@@ -1,0 +1,56 @@
+"""Faults: two runs into one folder, stale locks, killed runs, broken inputs -> one clear line, and
+finished results untouched."""
+import json
+import os
+import subprocess
+import sys
+import time
+
+from opalflow.cli import main
+from opalflow.store import LOCK_FILE
+
+
+def test_a_second_run_into_a_running_folder_is_refused(tmp_path, capsys):
+    """Two real runs into one --out: the second is refused in one line while the first runs; the first
+    finishes and leaves no lock."""
+    out = tmp_path / "run"
+    first = subprocess.Popen([sys.executable, "-m", "opalflow", "run", "lattice_sc", "--out", str(out)],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 60
+    while time.time() < deadline and not (out / LOCK_FILE).exists():
+        time.sleep(0.01)
+    assert main(["run", "lattice_sc", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"error: --out = '{out}': in use by a running opalflow (pid "
+                                               f"{first.pid}")
+    stdout, stderr = first.communicate(timeout=300)
+    assert first.returncode == 0, stderr[-2000:]
+    assert stdout.startswith("E = ") and not (out / LOCK_FILE).exists()
+    assert json.loads((out / "summary.json").read_text())["complete"]
+
+
+def test_the_lock_of_a_dead_run_is_taken_over(tmp_path):
+    out = tmp_path / "run"
+    out.mkdir()
+    dead = subprocess.Popen(["true"])
+    dead.wait()
+    (out / LOCK_FILE).write_text(f"{dead.pid}\n")
+    assert main(["build", "lattice_sc", "--out", str(out)]) == 0
+    assert (out / "in.lmp").exists() and not (out / LOCK_FILE).exists()
+
+
+def test_a_refused_run_leaves_no_folder_behind(tmp_path, capsys):
+    """The lock does not leave an empty folder when the input is refused after it was taken."""
+    out = tmp_path / "run"
+    assert main(["build", "opal_quick", "--out", str(out), "--set", "pores.arrangement=random",
+                 "--set", "pores.porosity=0.6", "--set", "pores.porosity_tolerance=0.001"]) == 2
+    assert capsys.readouterr().err.strip().splitlines()[-1].startswith("error: pores.porosity = 0.6")
+    assert not out.exists()
+
+
+def test_own_live_pid_is_not_mistaken_for_a_stale_lock(tmp_path, capsys):
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / LOCK_FILE).write_text(f"{os.getpid()}\n")
+    assert main(["build", "lattice_sc", "--out", str(out)]) == 2
+    assert "in use by a running opalflow" in capsys.readouterr().err
