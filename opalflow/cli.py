@@ -1,4 +1,4 @@
-"""Command line: ``python -m opalflow info | list | build | run | analyze``; what each kind does comes from
+"""Command line: ``python -m opalflow info | list | build | run | check | analyze``; what each kind does comes from
 :mod:`opalflow.registry`."""
 from __future__ import annotations
 
@@ -100,6 +100,19 @@ def cmd_run(args) -> int:
     return 0
 
 
+def cmd_check(args) -> int:
+    """A short run of the scene's real deck judged for numerical stability (exit 1 if unstable)."""
+    if args.steps < 100:
+        raise SpecError("--steps", args.steps, "must be >= 100")
+    if not 0 < args.timestep_factor <= 100:
+        raise SpecError("--timestep-factor", args.timestep_factor, "must be in (0, 100]")
+    spec = registry.load_spec(workflow_path(args.workflow), args.set)
+    summary = registry.get(spec.kind).check_workflow(spec, _out_folder(args.out), say=_say, steps=args.steps,
+                                                     timestep_factor=args.timestep_factor, bisect=args.bisect)
+    print(f"{summary['headline']} -> {args.out}/stability.md")
+    return 0 if summary["passed"] else 1
+
+
 def _run_json(out: Path, field: str) -> dict:
     """The run.json of a prepared run folder."""
     path = out / "run.json"
@@ -137,6 +150,15 @@ def parser() -> argparse.ArgumentParser:
                    help="accelerator styles (-sf) where the LAMMPS build has them; bpm bonds have none")
     r.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
     r.set_defaults(func=cmd_run)
+    c = sub.add_parser("check", help="numerical stability of a bonded-particle scene: a short run of its deck")
+    c.add_argument("workflow", help="workflow file or name in workflows/")
+    c.add_argument("--out", required=True, help="folder for the check's runs, stability.json and stability.md")
+    c.add_argument("--steps", type=int, default=3000, help="time steps of each short run (default 3000)")
+    c.add_argument("--timestep-factor", type=float, default=1.0,
+                   help="run at this multiple of the deck's time step (3: a deliberately unstable run)")
+    c.add_argument("--bisect", action="store_true", help="also find the largest stable time step by bisection")
+    c.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
+    c.set_defaults(func=cmd_check)
     a = sub.add_parser("analyze", help="analyze a run folder's LAMMPS output (e.g. after bash run.sh)")
     a.add_argument("folder")
     a.set_defaults(func=cmd_analyze)

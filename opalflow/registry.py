@@ -57,6 +57,9 @@ class Kind:
         everything ``run`` writes before it runs (``python -m opalflow build``); "" if none.
     analyze : ``"module:function"`` called as ``analyze(folder)`` -> summary dict: the results of
         a run folder whose deck ran outside opalflow (``python -m opalflow analyze``); "" if none.
+    check : ``"module:function"`` called as ``check(spec, out, say=..., steps=..., timestep_factor=...,
+        bisect=...)`` -> summary dict: a short run judged for numerical stability
+        (``python -m opalflow check``); "" if none.
     scene : ``"module:attribute"`` of the :class:`opalflow.bpm.scene.Scene` that the compression
         pipeline builds the structure with; "" for kinds that are not bonded-particle scenes.
     options : the names in :data:`OPTIONS` it takes.
@@ -69,6 +72,7 @@ class Kind:
     run: str
     build: str = ""
     analyze: str = ""
+    check: str = ""
     scene: str = ""
     options: tuple[str, ...] = ()
     refusal: str = ""
@@ -94,6 +98,12 @@ class Kind:
         with folder_lock(out):
             return resolve(self.build)(spec, out, say=say)
 
+    def check_workflow(self, spec: WorkflowSpec, out: Path, *, say=print, **options) -> dict:
+        if not self.check:
+            raise SpecError("kind", self.name, "has no stability check (bonded-particle scenes have one)")
+        with folder_lock(out):
+            return resolve(self.check)(spec, out, say=say, **options)
+
     def analyze_folder(self, folder: Path) -> dict:
         if not self.analyze:
             raise SpecError("folder", str(folder), f"a {self.name} run has no analysis of its own: its run "
@@ -104,7 +114,8 @@ class Kind:
 def _compression(name: str, spec: str, scene: str, summary: str) -> Kind:
     """A bonded-particle scene compressed by a plate: the pipeline of :mod:`opalflow.bpm`."""
     return Kind(name, spec, run="opalflow.bpm.pipeline:run_workflow", build="opalflow.bpm.pipeline:build",
-                analyze="opalflow.bpm.pipeline:analyze_folder", scene=scene, options=("np", "resume", "suffix"),
+                analyze="opalflow.bpm.pipeline:analyze_folder",
+                check="opalflow.bpm.stability:check_workflow", scene=scene, options=("np", "resume", "suffix"),
                 summary=summary)
 
 

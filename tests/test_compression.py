@@ -302,3 +302,22 @@ def test_analyze_marks_a_run_that_stopped_early(breaking_run, tmp_path, capsys):
     assert summary["complete"] is False and summary["steps"] < summary["steps_planned"]
     assert capsys.readouterr().out.startswith("INCOMPLETE run (stopped at step ")
     assert "**Incomplete run**" in (out / "report.md").read_text()
+
+
+# ----------------------------------------------------------------------------- stability check
+def test_stability_check_passes_at_the_estimated_timestep(tmp_path, capsys):
+    out = tmp_path / "check"
+    assert main(["check", "opal_quick", "--out", str(out), "--steps", "1500"]) == 0
+    summary = json.loads((out / "stability.json").read_text())
+    assert summary["passed"] and set(summary["run"]["criteria"]) == {
+        "finite", "no lost particles", "energy account", "kinetic energy bounded"}
+    assert "| energy account | pass |" in (out / "stability.md").read_text()
+
+
+def test_stability_check_catches_a_timestep_three_times_the_estimate(tmp_path, capsys):
+    """A deliberately unstable run (--timestep-factor 3) fails, naming the criterion and its figures."""
+    out = tmp_path / "check"
+    assert main(["check", "opal_quick", "--out", str(out), "--steps", "1500", "--timestep-factor", "3"]) == 1
+    summary = json.loads((out / "stability.json").read_text())
+    assert not summary["passed"] and "energy account" in summary["failed"]
+    assert "FAIL  energy account: max(KE - W_in) = " in capsys.readouterr().err
