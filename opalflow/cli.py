@@ -118,7 +118,13 @@ def _run_json(out: Path, field: str) -> dict:
     path = out / "run.json"
     if not path.exists():
         raise SpecError(field, str(out), "no run.json: this folder holds no prepared run")
-    return json.loads(path.read_text())
+    try:
+        info = json.loads(path.read_text())
+        info["spec"]["kind"]
+    except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError) as exc:
+        raise SpecError(field, str(out), f"run.json is damaged ({type(exc).__name__}: {exc}); build the "
+                        "folder again") from None
+    return info
 
 
 def cmd_analyze(args) -> int:

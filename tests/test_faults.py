@@ -54,3 +54,19 @@ def test_own_live_pid_is_not_mistaken_for_a_stale_lock(tmp_path, capsys):
     (out / LOCK_FILE).write_text(f"{os.getpid()}\n")
     assert main(["build", "lattice_sc", "--out", str(out)]) == 2
     assert "in use by a running opalflow" in capsys.readouterr().err
+
+
+def test_damaged_run_folder_files_are_one_line(tmp_path, capsys):
+    """A damaged run.json or curve.txt: analyze and --resume say so in one line, exit 2."""
+    out = tmp_path / "run"
+    assert main(["build", "lattice_sc", "--out", str(out)]) == 0
+    (out / "curve.txt").write_text("# averages\n# step ...\n12 0.1 nonsense\n")
+    capsys.readouterr()
+    assert main(["analyze", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "curve.txt is damaged" in err[0]
+    (out / "run.json").write_text('{"workflow": "lattice_sc", "spec": ')      # cut off mid-write
+    for argv in (["analyze", str(out)], ["run", "--out", str(out), "--resume"]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "run.json is damaged" in err[0], err

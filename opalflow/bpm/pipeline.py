@@ -319,6 +319,10 @@ def analyze_folder(out: Path) -> dict:
     """The results of a run folder whose deck ran outside opalflow (``bash run.sh``)."""
     if not (out / "run.json").exists() or not (out / "curve.txt").exists():
         raise SpecError("folder", str(out), "needs run.json and curve.txt (a built folder after 'bash run.sh')")
+    try:
+        mech.read_curve(out / "curve.txt")
+    except ValueError as exc:
+        raise SpecError("folder", str(out), f"curve.txt is damaged or empty ({str(exc).splitlines()[0]})") from None
     return analyze(out)
 
 
