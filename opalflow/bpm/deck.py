@@ -9,6 +9,7 @@ the materials present.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -156,7 +157,9 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
         coeffs.append(bond_coefficients(mat, spec.bonds.radius_factor * r, L, m, 0.4 * m * r * r,
                                         spec.bonds.damping_ratio, spec.materials))
     plate = contact_properties(DIAMOND)
-    contacts = {k + 1: contact_properties(particle_material(n, spec.material))
+    given = {k: v for k, v in (("friction", spec.contacts.friction), ("restitution", spec.contacts.restitution))
+             if v is not None}
+    contacts = {k + 1: dataclasses.replace(contact_properties(particle_material(n, spec.material)), **given)
                 for k, n in enumerate(s.type_names)}
     plate_E = {t: plate_contact_E(cp, plate) for t, cp in contacts.items()}
     estimate = estimate_timestep(data, coeffs, contacts if spec.contacts.enabled else {},

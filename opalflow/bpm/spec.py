@@ -30,9 +30,12 @@ class BondsSpec:
 
 @dataclass
 class ContactsSpec:
-    """Hertz-Mindlin contacts between unbonded particles (pair_style granular)."""
+    """Hertz-Mindlin contacts between unbonded particles (pair_style granular); friction and restitution
+    replace every material's (data/materials.toml) when given."""
 
     enabled: bool = True
+    friction: float | None = None
+    restitution: float | None = None
 
 
 @dataclass
@@ -95,6 +98,12 @@ class BpmWorkflow(WorkflowSpec):
               "must be in (0, 2] (bond radius / particle radius)")
         check(1 <= b.length_bins <= 100, "bonds.length_bins", b.length_bins, "must be in [1, 100]")
         check(0 <= b.damping_ratio <= 2.0, "bonds.damping_ratio", b.damping_ratio, "must be in [0, 2]")
+        k = self.contacts
+        if k.friction is not None:
+            check(0 <= k.friction <= 10, "contacts.friction", k.friction, "must be in [0, 10] (sliding friction)")
+        if k.restitution is not None:
+            check(0 < k.restitution <= 1, "contacts.restitution", k.restitution,
+                  "must be in (0, 1] (coefficient of restitution)")
         c = self.compression
         check(0 < c.strain_max <= 0.5, "compression.strain_max", c.strain_max, "must be in (0, 0.5]")
         check(0 < c.plate_speed_m_s <= 100, "compression.plate_speed_m_s", c.plate_speed_m_s,
@@ -117,3 +126,34 @@ def check_material(where: str, value: str, also: tuple[str, ...] = ()) -> None:
     check_name(where, value)
     known = (*material_names(), *also)
     check(value in known, where, value, f"unknown material; known: {', '.join(known)}")
+
+
+@dataclass
+class MatrixSpec:
+    """Rows of the stability matrix: label -> {workflow = "NAME", set = ["section.key=value", ...]}."""
+
+    steps: int = 1500
+    rows: dict = field(default_factory=dict)
+
+
+@dataclass
+class StabilityMatrixWorkflow(WorkflowSpec):
+    """The stability check (opalflow.bpm.stability) over corner cases of bonded-particle scenes."""
+
+    matrix: MatrixSpec = field(default_factory=MatrixSpec)
+
+    def validate(self) -> None:
+        super().validate()
+        m = self.matrix
+        check(100 <= m.steps <= 10**6, "matrix.steps", m.steps, "must be in [100, 1e6] (time steps of each run)")
+        check(len(m.rows) >= 1, "matrix.rows", m.rows, "must hold at least one row")
+        for label, row in m.rows.items():
+            where = f"matrix.rows.{label}"
+            check_name(where, label)
+            check(isinstance(row, dict) and set(row) <= {"workflow", "set"} and "workflow" in row, where, row,
+                  "must be a table {workflow = \"NAME\", set = [\"section.key=value\", ...]}")
+            check(isinstance(row["workflow"], str), f"{where}.workflow", row["workflow"], "must be a workflow name")
+            check_name(f"{where}.workflow", row["workflow"])
+            sets = row.get("set", [])
+            check(isinstance(sets, list) and all(isinstance(x, str) and "=" in x for x in sets), f"{where}.set",
+                  sets, "must be a list of \"section.key=value\" strings")

@@ -82,8 +82,8 @@ class OpalWorkflow(BpmWorkflow):
         check(k.diameter_nm > 0, "packing.diameter_nm", k.diameter_nm, "must be > 0")
         check(0.05 <= k.solid_fraction <= 0.64, "packing.solid_fraction", k.solid_fraction,
               "must be in [0.05, 0.64] (random close packing of spheres is about 0.64)")
-        check(0 <= k.diameter_std_nm <= k.diameter_nm / 4, "packing.diameter_std_nm", k.diameter_std_nm,
-              f"must be in [0, diameter_nm/4 = {k.diameter_nm / 4:g}]")
+        check(0 <= k.diameter_std_nm <= 0.3 * k.diameter_nm, "packing.diameter_std_nm", k.diameter_std_nm,
+              f"must be in [0, 0.3 diameter_nm = {0.3 * k.diameter_nm:g}] (sizes are cut at +-3 std)")
         check(1 <= k.size_bins <= 64, "packing.size_bins", k.size_bins, "must be in [1, 64]")
         check(k.seed >= 0, "packing.seed", k.seed, "must be >= 0")
         check(k.tile_nm == 0 or k.tile_nm >= 8 * k.diameter_nm, "packing.tile_nm", k.tile_nm,
