@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import errno
 import json
 import sys
 import tomllib
@@ -178,3 +179,9 @@ def main(argv: list[str] | None = None) -> int:
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:
+        if exc.errno not in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT):
+            raise
+        print(f"error: cannot write {exc.filename or 'a result file'}: {exc.strerror}; files written before "
+              "are intact (every result is written under a temporary name, then renamed)", file=sys.stderr)
+        return 1

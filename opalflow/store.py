@@ -25,11 +25,25 @@ def _default(obj):
     raise TypeError(f"cannot store {type(obj).__name__} in JSON")
 
 
-def write_text_atomic(path: str | os.PathLike, text: str) -> None:
+@contextmanager
+def atomic_path(path: str | os.PathLike, tmp_name: str | None = None):
+    """A temporary path to write ``path`` to; renamed to ``path`` when the block ends without error,
+    removed when it fails (a full disk, say), so the earlier file stays as it was."""
     path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
+    tmp = path.with_name(tmp_name or path.name + ".tmp")
+    try:
+        yield tmp
+    except BaseException as exc:
+        tmp.unlink(missing_ok=True)
+        if isinstance(exc, OSError) and not exc.filename:
+            raise OSError(exc.errno, exc.strerror, str(path)) from None
+        raise
     os.replace(tmp, path)
+
+
+def write_text_atomic(path: str | os.PathLike, text: str) -> None:
+    with atomic_path(path) as tmp:
+        tmp.write_text(text)
 
 
 def write_json_atomic(path: str | os.PathLike, data: dict) -> None:
@@ -97,7 +111,8 @@ def save_figure(fig, path: str | os.PathLike) -> None:
 
     path = Path(path)
     fig.tight_layout()
-    tmp = path.with_name(path.stem + ".tmp.png")
-    fig.savefig(tmp, dpi=120)
-    tmp.replace(path)
-    plt.close(fig)
+    try:
+        with atomic_path(path, path.stem + ".tmp.png") as tmp:
+            fig.savefig(tmp, dpi=120)
+    finally:
+        plt.close(fig)

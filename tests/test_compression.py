@@ -321,3 +321,22 @@ def test_stability_check_catches_a_timestep_three_times_the_estimate(tmp_path, c
     summary = json.loads((out / "stability.json").read_text())
     assert not summary["passed"] and "energy account" in summary["failed"]
     assert "FAIL  energy account: max(KE - W_in) = " in capsys.readouterr().err
+
+
+def test_stability_matrix_writes_one_row_per_case(tmp_path, capsys):
+    """The matrix machinery on a small lattice: each row checked at the deck's dt and bisected."""
+    wf = tmp_path / "m.toml"
+    wf.write_text('name = "m"\nkind = "stability_matrix"\n[matrix]\nsteps = 300\n[matrix.rows]\n'
+                  'lattice = { workflow = "lattice_sc", set = ["lattice.cells_z=6"] }\n'
+                  'bad = { workflow = "lattice_sc", set = ["lattice.cells_z=1"] }\n')
+    out = tmp_path / "out"
+    assert main(["run", str(wf), "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    good, bad = summary["rows"]
+    assert good["passed"] and 0.3 < good["ratio"] <= 1.0 and good["timestep_stable_max_s"] > good["timestep_s"]
+    assert bad["error"].startswith("lattice.cells_z = 1")
+    report = (out / "report.md").read_text()
+    assert "| lattice | `lattice_sc` `lattice.cells_z=6` |" in report and "refused: lattice.cells_z" in report
+    wf.write_text('name = "m"\nkind = "stability_matrix"\n[matrix.rows]\nx = { workflow = "a;b" }\n')
+    assert main(["run", str(wf), "--out", str(tmp_path / "refused")]) == 2
+    assert capsys.readouterr().err.strip().splitlines()[-1].startswith("error: matrix.rows.x.workflow = 'a;b'")

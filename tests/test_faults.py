@@ -70,3 +70,41 @@ def test_damaged_run_folder_files_are_one_line(tmp_path, capsys):
         assert main(argv) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "run.json is damaged" in err[0], err
+
+
+def _small_disk(path, size_kb: int):
+    """A tmpfs of size_kb mounted at path (root only), or skip."""
+    import pytest
+
+    if os.geteuid() != 0:
+        pytest.skip("mounting a small tmpfs needs root")
+    path.mkdir()
+    proc = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size_kb}k", "tmpfs", str(path)],
+                          capture_output=True, text=True)
+    if proc.returncode:
+        pytest.skip(f"cannot mount a tmpfs here: {proc.stderr.strip()}")
+
+
+def test_a_full_disk_while_writing_results_keeps_the_earlier_ones(tmp_path, capsys):
+    """analyze on a disk with room for the run folder but not for new results: one error line, exit 1,
+    the earlier results byte for byte, no temporary file left."""
+    import shutil
+
+    src = tmp_path / "run"
+    assert main(["run", "lattice_sc", "--out", str(src)]) == 0
+    pages = sum(-(-f.stat().st_size // 4096) for f in src.rglob("*") if f.is_file())   # tmpfs counts pages
+    disk = tmp_path / "disk"
+    _small_disk(disk, 4 * (pages + 6))        # the folder and 24 KiB: less than a new results.h5 (~40 KiB)
+    try:
+        out = disk / "run"
+        shutil.copytree(src, out)
+        before = {f.name: f.read_bytes() for f in out.iterdir() if f.is_file()}
+        capsys.readouterr()
+        assert main(["analyze", str(out)]) == 1
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len([line for line in err if line.startswith("error:")]) == 1, err
+        assert err[-1].startswith(f"error: cannot write {out}/") and "files written before are intact" in err[-1]
+        after = {f.name: f.read_bytes() for f in out.iterdir() if f.is_file()}
+        assert after == before
+    finally:
+        subprocess.run(["umount", str(disk)], check=False)

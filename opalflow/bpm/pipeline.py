@@ -11,6 +11,7 @@ temporary names and renamed, so a failed run never replaces earlier results.
 from __future__ import annotations
 
 import dataclasses
+import io
 import json
 import subprocess
 import time
@@ -27,7 +28,7 @@ from opalflow.lammps.datafile import write_data
 from opalflow.lammps.engine import lammps_info, run_in_process, run_script_sh, run_subprocess
 from opalflow.resources import ROOT
 from opalflow.spec import SpecError
-from opalflow.store import new_figure, save_figure, write_json_atomic, write_text_atomic
+from opalflow.store import atomic_path, new_figure, save_figure, write_json_atomic, write_text_atomic
 from opalflow.structure import Structure
 from opalflow.version import __version__
 
@@ -210,34 +211,43 @@ def _write_h5(out, info, curve, strain, stress, stress_plate, stress_substrate, 
               histograms, summary):
     import h5py
 
-    tmp = out / "results.h5.tmp"
-    with h5py.File(tmp, "w") as h:
-        c = h.create_group("curve")
-        for k, v in curve.items():
-            c[k] = v
-        c["strain"], c["stress_MPa"], c["stress_substrate_MPa"], c["broken_bonds"] = \
-            strain, stress, stress_substrate, broken
-        c["stress_plate_MPa"] = stress_plate
-        c["strain_specimen"] = (info["top_z0_nm"] - curve["top_z_nm"]) / info["height_nm"]
-        for step, snap in snapshots.items():
-            g = h.create_group(f"snapshots/{step}")
-            g.attrs["strain"] = snap["strain"]
-            g["id"], g["type"], g["sigma_MPa"] = snap["id"], snap["type"], snap["sigma_MPa"]
-            g["position_nm"] = snap["position_nm"]
-        for step, hist in histograms.items():
-            g = h.create_group(f"bond_strain_histograms/{step}")
-            g.attrs["strain"] = hist["strain"]
-            g["fraction"], g["edges"] = hist["fraction"], hist["edges"]
-        p = h.create_group("provenance")
-        p.attrs["spec"] = json.dumps(info["spec"])
-        p.attrs["opalflow_version"] = __version__
-        p.attrs["lammps_version"] = lammps_info()["version"]
-        p.attrs["git_commit"] = git_commit()
-        p.attrs["seeds"] = json.dumps({name: section["seed"] for name, section in info["spec"].items()
-                                       if isinstance(section, dict) and "seed" in section})
-        p.attrs["run"] = json.dumps({k: v for k, v in info.items() if k != "spec"})
-        h.attrs["summary"] = json.dumps(summary, default=float)
-    tmp.replace(out / "results.h5")
+    # the file is made in memory and written by Python: a full disk is then a plain OSError before the
+    # rename (HDF5 writing to a full disk itself reports it only at close, or not at all)
+    buffer = io.BytesIO()
+    with h5py.File(buffer, "w") as h:
+        _fill_h5(h, info, curve, strain, stress, stress_plate, stress_substrate, broken, snapshots, histograms,
+                 summary)
+    with atomic_path(out / "results.h5") as tmp:
+        tmp.write_bytes(buffer.getvalue())
+
+
+def _fill_h5(h, info, curve, strain, stress, stress_plate, stress_substrate, broken, snapshots, histograms,
+             summary):
+    c = h.create_group("curve")
+    for k, v in curve.items():
+        c[k] = v
+    c["strain"], c["stress_MPa"], c["stress_substrate_MPa"], c["broken_bonds"] = \
+        strain, stress, stress_substrate, broken
+    c["stress_plate_MPa"] = stress_plate
+    c["strain_specimen"] = (info["top_z0_nm"] - curve["top_z_nm"]) / info["height_nm"]
+    for step, snap in snapshots.items():
+        g = h.create_group(f"snapshots/{step}")
+        g.attrs["strain"] = snap["strain"]
+        g["id"], g["type"], g["sigma_MPa"] = snap["id"], snap["type"], snap["sigma_MPa"]
+        g["position_nm"] = snap["position_nm"]
+    for step, hist in histograms.items():
+        g = h.create_group(f"bond_strain_histograms/{step}")
+        g.attrs["strain"] = hist["strain"]
+        g["fraction"], g["edges"] = hist["fraction"], hist["edges"]
+    p = h.create_group("provenance")
+    p.attrs["spec"] = json.dumps(info["spec"])
+    p.attrs["opalflow_version"] = __version__
+    p.attrs["lammps_version"] = lammps_info()["version"]
+    p.attrs["git_commit"] = git_commit()
+    p.attrs["seeds"] = json.dumps({name: section["seed"] for name, section in info["spec"].items()
+                                   if isinstance(section, dict) and "seed" in section})
+    p.attrs["run"] = json.dumps({k: v for k, v in info.items() if k != "spec"})
+    h.attrs["summary"] = json.dumps(summary, default=float)
 
 
 def _plots(out, strain, stress, stress_plate, stress_substrate, fit, snapshots, histograms, type_names):
