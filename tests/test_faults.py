@@ -4,7 +4,10 @@ import json
 import os
 import subprocess
 import sys
+import tempfile
 import time
+
+import pytest
 
 from opalflow.cli import main
 from opalflow.store import LOCK_FILE
@@ -72,19 +75,23 @@ def test_damaged_run_folder_files_are_one_line(tmp_path, capsys):
         assert len(err) == 1 and "run.json is damaged" in err[0], err
 
 
-def _small_disk(path, size_kb: int):
-    """A tmpfs of size_kb mounted at path (root only), or skip."""
-    import pytest
-
+def _can_mount_tmpfs() -> bool:
+    """Root and allowed to mount a tmpfs (a small disk to fill)."""
     if os.geteuid() != 0:
-        pytest.skip("mounting a small tmpfs needs root")
-    path.mkdir()
-    proc = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size_kb}k", "tmpfs", str(path)],
-                          capture_output=True, text=True)
-    if proc.returncode:
-        pytest.skip(f"cannot mount a tmpfs here: {proc.stderr.strip()}")
+        return False
+    probe = tempfile.mkdtemp()
+    try:
+        if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", probe], capture_output=True).returncode:
+            return False
+        subprocess.run(["umount", probe], check=False)
+        return True
+    except OSError:
+        return False
+    finally:
+        os.rmdir(probe)
 
 
+@pytest.mark.skipif(not _can_mount_tmpfs(), reason="filling a small disk needs root and a mountable tmpfs")
 def test_a_full_disk_while_writing_results_keeps_the_earlier_ones(tmp_path, capsys):
     """analyze on a disk with room for the run folder but not for new results: one error line, exit 1,
     the earlier results byte for byte, no temporary file left."""
@@ -94,7 +101,9 @@ def test_a_full_disk_while_writing_results_keeps_the_earlier_ones(tmp_path, caps
     assert main(["run", "lattice_sc", "--out", str(src)]) == 0
     pages = sum(-(-f.stat().st_size // 4096) for f in src.rglob("*") if f.is_file())   # tmpfs counts pages
     disk = tmp_path / "disk"
-    _small_disk(disk, 4 * (pages + 6))        # the folder and 24 KiB: less than a new results.h5 (~40 KiB)
+    disk.mkdir()
+    # a tmpfs with room for the folder and 24 KiB more: less than a new results.h5 (~40 KiB)
+    subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={4 * (pages + 6)}k", "tmpfs", str(disk)], check=True)
     try:
         out = disk / "run"
         shutil.copytree(src, out)
