@@ -15,14 +15,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from opalflow.version import __version__
 from opalflow.bpm.spec import BpmWorkflow
 from opalflow.bpm.timestep import TimestepEstimate, estimate_timestep
 from opalflow.lammps.syntax import name, num, render
-from opalflow.materials import (BondCoefficients, ContactProperties, bond_coefficients,
-                                contact_properties)
+from opalflow.materials import BondCoefficients, ContactProperties, bond_coefficients, contact_properties
 from opalflow.spec import SpecError
 from opalflow.structure import Structure
+from opalflow.version import __version__
 
 DIAMOND = "diamond"
 #: more steps than this is a time step far too small for the scene, not a run to start

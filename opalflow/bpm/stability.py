@@ -26,7 +26,6 @@ from pathlib import Path
 import numpy as np
 
 from opalflow.bpm.deck import compression_deck
-from opalflow.bpm.scene import Scene
 from opalflow.bpm.spec import BpmWorkflow
 from opalflow.lammps.datafile import write_data
 from opalflow.lammps.engine import EngineError, script_commands, session

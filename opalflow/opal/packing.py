@@ -34,9 +34,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from opalflow.neighbors import pairs_within, separations
 from opalflow.lammps.engine import new_lammps
 from opalflow.lammps.syntax import num
+from opalflow.neighbors import pairs_within, separations
 
 CHUNK_STEPS = 200
 MAX_STEPS = 40_000

@@ -21,6 +21,7 @@ from opalflow.opal.windows import coating_surface_distance, window_openings
 from opalflow.structure import Structure, quantize
 from opalflow.units import NM3_PER_UM3, density_from_nano, density_to_nano
 
+
 def _random_pores(spec: OpalWorkflow, packing, substrate, box_xy, z0, height, progress):
     """Place random pores and take as many as bring the macro-porosity closest to the target.
 
