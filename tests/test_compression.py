@@ -4,6 +4,7 @@ import math
 import os
 import signal
 import subprocess
+import sys
 import time
 
 import h5py
@@ -340,3 +341,47 @@ def test_stability_matrix_writes_one_row_per_case(tmp_path, capsys):
     wf.write_text('name = "m"\nkind = "stability_matrix"\n[matrix.rows]\nx = { workflow = "a;b" }\n')
     assert main(["run", str(wf), "--out", str(tmp_path / "refused")]) == 2
     assert capsys.readouterr().err.strip().splitlines()[-1].startswith("error: matrix.rows.x.workflow = 'a;b'")
+
+
+def test_resume_skips_a_restart_file_cut_short_by_the_kill(breaking_run, tmp_path):
+    """A run killed while writing a restart file leaves it truncated: --resume sets it aside
+    (restart.N.damaged) and continues from the one before, to the same curve."""
+    out = tmp_path / "cut"
+    restart = interrupted(breaking_run, out)
+    newest = out / f"restart.{restart}.bin"
+    newest.write_bytes(newest.read_bytes()[: newest.stat().st_size // 2])
+    earlier = max(int(p.name.split(".")[1]) for p in out.glob("restart.*.bin") if p != newest)
+    assert main(["run", "--out", str(out), "--resume"]) == 0
+    assert (out / f"restart.{restart}.damaged").exists()
+    assert_same_curve(breaking_run, out, earlier)
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_run_killed_at_a_random_step_resumes_to_the_same_curve(breaking_run, tmp_path, seed):
+    """SIGKILL of 'python -m opalflow run' at a seeded random point while bonds break, then --resume."""
+    import random
+
+    info = json.loads((breaking_run / "run.json").read_text())
+    restart_every = info["restart_every_steps"]
+    kill_at = random.Random(seed).randint(restart_every + 1, info["steps"] - info["output_every_steps"])
+    out = tmp_path / "killed"
+    argv = [sys.executable, "-m", "opalflow", "run", "opal_quick", "--out", str(out)]
+    for s in BREAKING:
+        argv += ["--set", s]
+    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    deadline = time.time() + 120
+    last = 0
+    while time.time() < deadline and proc.poll() is None and last < kill_at:
+        time.sleep(0.05)
+        rows = [line for line in (out / "curve.txt").read_text().splitlines() if line[:1].isdigit()] \
+            if (out / "curve.txt").exists() else []
+        last = int(rows[-1].split()[0]) if rows else 0
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert 0 < last < info["steps"], "killed before the end"
+    assert main(["run", "--out", str(out), "--resume"]) == 0
+    assert_same_curve(breaking_run, out, restart_every)
+    a = json.loads((breaking_run / "summary.json").read_text())
+    b = json.loads((out / "summary.json").read_text())
+    assert b["strength_MPa"] == pytest.approx(a["strength_MPa"], rel=0.01)
+    assert b["youngs_modulus_GPa"] == pytest.approx(a["youngs_modulus_GPa"], rel=0.01)

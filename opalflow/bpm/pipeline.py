@@ -25,7 +25,7 @@ from opalflow.bpm.deck import CompressionDeck, compression_deck
 from opalflow.bpm.scene import Scene
 from opalflow.bpm.spec import BpmWorkflow
 from opalflow.lammps.datafile import write_data
-from opalflow.lammps.engine import lammps_info, run_in_process, run_script_sh, run_subprocess
+from opalflow.lammps.engine import EngineError, lammps_info, run_in_process, run_script_sh, run_subprocess, session
 from opalflow.resources import ROOT
 from opalflow.spec import SpecError
 from opalflow.store import atomic_path, new_figure, save_figure, write_json_atomic, write_text_atomic
@@ -101,16 +101,34 @@ def execute(out: Path, *, np_: int = 1, resume: bool = False, label: str = "", s
     """Run the deck of a prepared folder; returns LAMMPS wall seconds."""
     info = json.loads((out / "run.json").read_text())
     if resume:
-        steps = [int(p.name.split(".")[1]) for p in out.glob("restart.*.bin") if p.name.split(".")[1].isdigit()]
-        if not steps:
-            raise SpecError("--resume", str(out), "no restart file in the folder; run without --resume")
-        mech.trim_curve(out / "curve.txt", max(steps))     # LAMMPS reads the newest restart file
+        step = newest_readable_restart(out)
+        if step is None:
+            raise SpecError("--resume", str(out), "no readable restart file in the folder; run without --resume")
+        mech.trim_curve(out / "curve.txt", step)     # LAMMPS reads the newest restart file
     if np_ > 1:
         return run_subprocess(out, np=np_, total_steps=info["steps"], resume=resume, label=label, suffix=suffix)
     script = (out / ("resume.lmp" if resume else "in.lmp")).read_text()
     return run_in_process(out, script, every=info["output_every_steps"],
                           strain_per_step=info["plate_speed_m_s"] * info["timestep_s"] * 1e9 / info["height_nm"],
                           suffix=suffix, label=label)
+
+
+def newest_readable_restart(out: Path) -> int | None:
+    """Step of the newest restart file LAMMPS can read; newer ones that it cannot (a run killed while
+    writing one) are renamed ``restart.N.damaged`` so that ``read_restart restart.*.bin`` skips them
+    (LAMMPS's wildcard matches any name that holds ``restart.N.bin``)."""
+    files = sorted(((int(p.name.split(".")[1]), p) for p in out.glob("restart.*.bin")
+                    if p.name.split(".")[1].isdigit()), reverse=True)
+    for step, path in files:
+        try:
+            with session(out, log="restart_probe.log") as lmp:
+                lmp.command(f"read_restart {path.name}")
+            return step
+        except EngineError:
+            path.rename(path.with_suffix(".damaged"))
+        finally:
+            (out / "restart_probe.log").unlink(missing_ok=True)
+    return None
 
 
 def boundary_stresses(curve: dict, area: float) -> tuple[np.ndarray, np.ndarray]:
