@@ -3,6 +3,8 @@
 :class:`BpmWorkflow` is the workflow spec a scene extends with its own sections (the opal's
 packing and pores, the lattice's array, the user's data file): the matrix ``material``,
 ``[materials.<name>]`` overrides, ``[bonds]``, ``[contacts]`` and ``[compression]``.
+:class:`StabilityMatrixWorkflow` (kind ``stability_matrix``) runs the pipeline's stability check
+over rows of such workflows.
 """
 from __future__ import annotations
 

@@ -25,12 +25,13 @@ from pathlib import Path
 
 import numpy as np
 
-from opalflow.bpm.deck import compression_deck
+from opalflow.bpm.deck import CompressionDeck, compression_deck
+from opalflow.bpm.pipeline import scene_of
 from opalflow.bpm.spec import BpmWorkflow
 from opalflow.lammps.datafile import write_data
 from opalflow.lammps.engine import EngineError, script_commands, session
 from opalflow.lammps.syntax import num, render
-from opalflow.structure import Structure
+from opalflow.store import write_json_atomic, write_text_atomic
 
 
 @dataclass
@@ -66,10 +67,9 @@ def check_script(deck, factor: float, every: int) -> str:
                          every=num(every))
 
 
-def run_check(spec: BpmWorkflow, s: Structure, folder: Path, *, factor: float = 1.0, steps: int = 3000,
+def run_check(deck: CompressionDeck, folder: Path, *, factor: float = 1.0, steps: int = 3000,
               tolerance: float = 0.02, ke_growth: float = 100.0) -> StabilityResult:
-    """Run ``steps`` steps of the scene's deck at ``factor`` x the estimated time step in ``folder``."""
-    deck = compression_deck(spec, s)
+    """Run ``steps`` steps of a scene's deck at ``factor`` x its time step in ``folder``."""
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "snapshots").mkdir(exist_ok=True)
     write_data(folder / "data.lmp", deck.structure)
@@ -124,14 +124,14 @@ def run_check(spec: BpmWorkflow, s: Structure, folder: Path, *, factor: float = 
     return StabilityResult(dt_s, factor, int(step[-1]) if len(step) else 0, passed, criteria, seconds, samples)
 
 
-def bisect_timestep(spec: BpmWorkflow, s: Structure, folder: Path, *, steps: int, low: float = 1.0,
+def bisect_timestep(deck: CompressionDeck, folder: Path, *, steps: int, low: float = 1.0,
                     high: float = 4.0, iterations: int = 6, say=print) -> tuple[float, list[StabilityResult]]:
     """Largest passing time-step factor in [low, high] (relative to the estimate's limit x safety) by
     bisection; ``high`` is doubled until it fails (up to 64)."""
     runs = []
 
     def ok(f: float) -> bool:
-        r = run_check(spec, s, folder / f"factor_{f:.4f}", factor=f, steps=steps)
+        r = run_check(deck, folder / f"factor_{f:.4f}", factor=f, steps=steps)
         runs.append(r)
         say(f"  dt = {r.timestep_s:.3g} s (x{f:.3f}): {'pass' if r.passed else 'FAIL: ' + r.failed()}")
         return r.passed
@@ -156,16 +156,13 @@ def check_workflow(spec: BpmWorkflow, out: Path, *, say=print, steps: int = 3000
     """``python -m opalflow check``: the criteria at the deck's time step (x ``timestep_factor``) and,
     with ``bisect``, the largest stable time step beside the estimate; writes stability.json and
     stability.md into ``out``."""
-    from opalflow.bpm.pipeline import scene_of
-    from opalflow.store import write_json_atomic, write_text_atomic
-
     t0 = time.perf_counter()
     s = scene_of(spec).build(spec, say)
     deck = compression_deck(spec, s)
     say(f"stability check of {spec.name}: {s.n_particles} particles, {s.n_bonds} bonds, {steps} steps at "
         f"dt = {deck.dt_ns * timestep_factor * 1e-9:.3g} s (estimate x{timestep_factor:g}; the estimated limit is "
         f"{deck.timestep.limit_ns * 1e-9:.3g} s, stiffest: {deck.timestep.stiffest})")
-    result = run_check(spec, s, out / "run", factor=timestep_factor, steps=steps)
+    result = run_check(deck, out / "run", factor=timestep_factor, steps=steps)
     for name, (ok, figures) in result.criteria.items():
         say(f"  {'pass' if ok else 'FAIL'}  {name}: {figures}")
     summary = {"workflow": spec.name, "passed": result.passed, "failed": result.failed(),
@@ -174,7 +171,7 @@ def check_workflow(spec: BpmWorkflow, out: Path, *, say=print, steps: int = 3000
                "stiffest_mode": deck.timestep.stiffest, "steps": result.steps, "run": result.as_dict()}
     if bisect:
         say("bisection of the largest stable time step:")
-        best, runs = bisect_timestep(spec, s, out / "bisection", steps=steps, say=say)
+        best, runs = bisect_timestep(deck, out / "bisection", steps=steps, say=say)
         dt_max = best * deck.dt_ns * 1e-9
         summary.update({"timestep_stable_max_s": dt_max,
                         "estimate_over_bisected": deck.timestep.limit_ns * 1e-9 / dt_max if dt_max else None,
