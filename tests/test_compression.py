@@ -385,3 +385,35 @@ def test_run_killed_at_a_random_step_resumes_to_the_same_curve(breaking_run, tmp
     b = json.loads((out / "summary.json").read_text())
     assert b["strength_MPa"] == pytest.approx(a["strength_MPa"], rel=0.01)
     assert b["youngs_modulus_GPa"] == pytest.approx(a["youngs_modulus_GPa"], rel=0.01)
+
+
+def test_run_sh_killed_at_a_random_step_resumes_with_run_sh(breaking_run, tmp_path):
+    """SIGKILL of 'bash run.sh' (LAMMPS alone) at a seeded random point while bonds break, then
+    'bash run.sh resume' and analyze: the same curve."""
+    import random
+    import shutil
+
+    info = json.loads((breaking_run / "run.json").read_text())
+    kill_at = random.Random(3).randint(info["restart_every_steps"] + 1, info["steps"] - info["output_every_steps"])
+    out = tmp_path / "alone"
+    out.mkdir()
+    (out / "snapshots").mkdir()
+    for name in ("data.lmp", "in.lmp", "resume.lmp", "run.sh", "run.json"):
+        shutil.copy(breaking_run / name, out / name)
+    env = {k: v for k, v in os.environ.items() if k != "LD_LIBRARY_PATH"}
+    proc = subprocess.Popen(["bash", str(out / "run.sh")], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            env=env, start_new_session=True)
+    deadline, last = time.time() + 120, 0
+    while time.time() < deadline and proc.poll() is None and last < kill_at:
+        time.sleep(0.05)
+        rows = [line for line in (out / "curve.txt").read_text().splitlines() if line[:1].isdigit()] \
+            if (out / "curve.txt").exists() else []
+        last = int(rows[-1].split()[0]) if rows else 0
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert 0 < last < info["steps"]
+    resumed = subprocess.run(["bash", str(out / "run.sh"), "resume"], capture_output=True, text=True, env=env)
+    assert resumed.returncode == 0, resumed.stdout[-2000:]
+    assert_same_curve(breaking_run, out, info["restart_every_steps"])
+    assert main(["analyze", str(out)]) == 0
+    assert json.loads((out / "summary.json").read_text())["complete"]
