@@ -3,6 +3,7 @@ import json
 import os
 import signal
 import subprocess
+import time
 import sys
 
 import numpy as np
@@ -165,3 +166,29 @@ def test_a_failed_job_does_not_end_the_sweep(tmp_path):
     assert "LAMMPS failed" in res["bad"]["failed"]
     assert "youngs_modulus_GPa" in res["a20"]
     assert sweep.finished(bad, tmp_path / "study") is None and (bad.folder(tmp_path / "study") / "log.lammps").exists()
+
+
+def test_sweep_killed_at_random_times_completes_to_the_same_results(tmp_path):
+    """SIGKILL of a sweep at three seeded random times (between jobs or inside a LAMMPS run), then a
+    rerun: every job completes with the numbers of an uninterrupted sweep, finished jobs untouched."""
+    import random
+
+    driver = tmp_path / "driver.py"
+    driver.write_text(DRIVER.format(lattice=LATTICE))
+    whole = tmp_path / "whole"
+    subprocess.run([sys.executable, str(driver), str(whole)], capture_output=True, check=True)
+    reference = {p.parent.name: json.loads(p.read_text())["youngs_modulus_GPa"]
+                 for p in whole.glob("jobs/*/summary.json")}
+    rng = random.Random(7)
+    for n in range(3):
+        root = tmp_path / f"killed{n}"
+        proc = subprocess.Popen([sys.executable, str(driver), str(root)], stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL, start_new_session=True)
+        time.sleep(rng.uniform(1.0, 4.0))
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+        before = {p.parent.name: p.stat().st_mtime_ns for p in root.glob("jobs/*/summary.json")}
+        subprocess.run([sys.executable, str(driver), str(root)], capture_output=True, check=True)
+        after = {p.parent.name: json.loads(p.read_text())["youngs_modulus_GPa"] for p in root.glob("jobs/*/summary.json")}
+        assert after == pytest.approx(reference, rel=1e-4)   # a job resumed from its restart file: not bit-exact
+        assert all((root / "jobs" / k / "summary.json").stat().st_mtime_ns == v for k, v in before.items())
