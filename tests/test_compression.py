@@ -343,15 +343,21 @@ def test_stability_matrix_writes_one_row_per_case(tmp_path, capsys):
     assert capsys.readouterr().err.strip().splitlines()[-1].startswith("error: matrix.rows.x.workflow = 'a;b'")
 
 
-def test_resume_skips_a_restart_file_cut_short_by_the_kill(breaking_run, tmp_path):
-    """A run killed while writing a restart file leaves it truncated: --resume sets it aside
-    (restart.N.damaged) and continues from the one before, to the same curve."""
+@pytest.mark.parametrize("how", ["--resume", "run.sh resume"])
+def test_resume_skips_a_restart_file_cut_short_by_the_kill(breaking_run, tmp_path, how):
+    """A run killed while writing a restart file leaves it truncated: --resume and run.sh resume set it
+    aside (restart.N.damaged) and continue from the one before, to the same curve."""
     out = tmp_path / "cut"
     restart = interrupted(breaking_run, out)
     newest = out / f"restart.{restart}.bin"
     newest.write_bytes(newest.read_bytes()[: newest.stat().st_size // 2])
     earlier = max(int(p.name.split(".")[1]) for p in out.glob("restart.*.bin") if p != newest)
-    assert main(["run", "--out", str(out), "--resume"]) == 0
+    if how == "--resume":
+        assert main(["run", "--out", str(out), "--resume"]) == 0
+    else:
+        env = {k: v for k, v in os.environ.items() if k != "LD_LIBRARY_PATH"}
+        proc = subprocess.run(["bash", str(out / "run.sh"), "resume"], capture_output=True, text=True, env=env)
+        assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
     assert (out / f"restart.{restart}.damaged").exists()
     assert_same_curve(breaking_run, out, earlier)
 

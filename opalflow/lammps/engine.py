@@ -227,9 +227,21 @@ mkdir -p snapshots
 input=in.lmp
 if [ "${{1:-}}" = resume ]; then
   input=resume.lmp
-  # LAMMPS reads the newest restart file; curve.txt keeps its rows up to that step and the
-  # resumed run appends the rest, so every step is in it once, in order
-  last=$(ls restart.*.bin | sed -n 's/^restart\\.\\([0-9]*\\)\\.bin$/\\1/p' | sort -n | tail -1)
+  # LAMMPS reads the newest restart file (read_restart restart.*.bin): one it cannot read (a kill cut
+  # it short) is set aside as restart.N.damaged, so the run continues from the one before
+  last=""
+  for step in $( (ls restart.*.bin 2>/dev/null || true) | sed -n 's/^restart\\.\\([0-9]*\\)\\.bin$/\\1/p' | sort -rn); do
+    if echo "read_restart restart.$step.bin" | "{lmp}" -nocite -log none -screen none > /dev/null 2>&1; then
+      last=$step
+      break
+    fi
+    mv "restart.$step.bin" "restart.$step.damaged"
+  done
+  if [ -z "$last" ]; then
+    echo "run.sh: no readable restart file to resume from" >&2
+    exit 2
+  fi
+  # curve.txt keeps its rows up to that step and the resumed run appends the rest: each step once
   if [ -f curve.txt ]; then
     awk -v last="$last" '/^#/ || $1 <= last' curve.txt > curve.txt.tmp && mv curve.txt.tmp curve.txt
   fi
