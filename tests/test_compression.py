@@ -362,21 +362,15 @@ def test_resume_skips_a_restart_file_cut_short_by_the_kill(breaking_run, tmp_pat
     assert_same_curve(breaking_run, out, earlier)
 
 
-@pytest.mark.parametrize("seed", [1, 2])
-def test_run_killed_at_a_random_step_resumes_to_the_same_curve(breaking_run, tmp_path, seed):
-    """SIGKILL of 'python -m opalflow run' at a seeded random point while bonds break, then --resume."""
+def kill_at_random_step(argv, out, info, seed, env=None) -> int:
+    """Start ``argv`` and SIGKILL it (its whole process group) once curve.txt in ``out`` reaches a
+    seeded random step after the first restart file; returns the last curve step written."""
     import random
 
-    info = json.loads((breaking_run / "run.json").read_text())
-    restart_every = info["restart_every_steps"]
-    kill_at = random.Random(seed).randint(restart_every + 1, info["steps"] - info["output_every_steps"])
-    out = tmp_path / "killed"
-    argv = [sys.executable, "-m", "opalflow", "run", "opal_quick", "--out", str(out)]
-    for s in BREAKING:
-        argv += ["--set", s]
-    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
-    deadline = time.time() + 120
-    last = 0
+    kill_at = random.Random(seed).randint(info["restart_every_steps"] + 1, info["steps"] - info["output_every_steps"])
+    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env,
+                            start_new_session=True)
+    deadline, last = time.time() + 120, 0
     while time.time() < deadline and proc.poll() is None and last < kill_at:
         time.sleep(0.05)
         rows = [line for line in (out / "curve.txt").read_text().splitlines() if line[:1].isdigit()] \
@@ -385,8 +379,20 @@ def test_run_killed_at_a_random_step_resumes_to_the_same_curve(breaking_run, tmp
     os.killpg(proc.pid, signal.SIGKILL)
     proc.wait()
     assert 0 < last < info["steps"], "killed before the end"
+    return last
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_run_killed_at_a_random_step_resumes_to_the_same_curve(breaking_run, tmp_path, seed):
+    """SIGKILL of 'python -m opalflow run' at a seeded random point while bonds break, then --resume."""
+    info = json.loads((breaking_run / "run.json").read_text())
+    out = tmp_path / "killed"
+    argv = [sys.executable, "-m", "opalflow", "run", "opal_quick", "--out", str(out)]
+    for s in BREAKING:
+        argv += ["--set", s]
+    kill_at_random_step(argv, out, info, seed)
     assert main(["run", "--out", str(out), "--resume"]) == 0
-    assert_same_curve(breaking_run, out, restart_every)
+    assert_same_curve(breaking_run, out, info["restart_every_steps"])
     a = json.loads((breaking_run / "summary.json").read_text())
     b = json.loads((out / "summary.json").read_text())
     assert b["strength_MPa"] == pytest.approx(a["strength_MPa"], rel=0.01)
@@ -396,28 +402,16 @@ def test_run_killed_at_a_random_step_resumes_to_the_same_curve(breaking_run, tmp
 def test_run_sh_killed_at_a_random_step_resumes_with_run_sh(breaking_run, tmp_path):
     """SIGKILL of 'bash run.sh' (LAMMPS alone) at a seeded random point while bonds break, then
     'bash run.sh resume' and analyze: the same curve."""
-    import random
     import shutil
 
     info = json.loads((breaking_run / "run.json").read_text())
-    kill_at = random.Random(3).randint(info["restart_every_steps"] + 1, info["steps"] - info["output_every_steps"])
     out = tmp_path / "alone"
     out.mkdir()
     (out / "snapshots").mkdir()
     for name in ("data.lmp", "in.lmp", "resume.lmp", "run.sh", "run.json"):
         shutil.copy(breaking_run / name, out / name)
     env = {k: v for k, v in os.environ.items() if k != "LD_LIBRARY_PATH"}
-    proc = subprocess.Popen(["bash", str(out / "run.sh")], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                            env=env, start_new_session=True)
-    deadline, last = time.time() + 120, 0
-    while time.time() < deadline and proc.poll() is None and last < kill_at:
-        time.sleep(0.05)
-        rows = [line for line in (out / "curve.txt").read_text().splitlines() if line[:1].isdigit()] \
-            if (out / "curve.txt").exists() else []
-        last = int(rows[-1].split()[0]) if rows else 0
-    os.killpg(proc.pid, signal.SIGKILL)
-    proc.wait()
-    assert 0 < last < info["steps"]
+    kill_at_random_step(["bash", str(out / "run.sh")], out, info, 3, env=env)
     resumed = subprocess.run(["bash", str(out / "run.sh"), "resume"], capture_output=True, text=True, env=env)
     assert resumed.returncode == 0, resumed.stdout[-2000:]
     assert_same_curve(breaking_run, out, info["restart_every_steps"])

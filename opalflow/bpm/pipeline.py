@@ -154,7 +154,10 @@ def analyze(out: Path, wall_s: float | None = None, lammps_s: float | None = Non
             extra: dict | None = None) -> dict:
     """Curves, modulus, strength, particle stresses -> results.h5, summary.json, report.md, plots."""
     info = json.loads((out / "run.json").read_text())
-    curve = mech.read_curve(out / "curve.txt")
+    try:
+        curve = mech.read_curve(out / "curve.txt")
+    except ValueError as exc:
+        raise SpecError("folder", str(out), f"curve.txt is damaged or empty ({str(exc).splitlines()[0]})") from None
     height, area = info["height_nm"], info["area_nm2"]
     strain = -curve["plate_dz_nm"] / height
     stress_plate, stress_substrate = boundary_stresses(curve, area)
@@ -347,10 +350,6 @@ def analyze_folder(out: Path) -> dict:
     """The results of a run folder whose deck ran outside opalflow (``bash run.sh``)."""
     if not (out / "run.json").exists() or not (out / "curve.txt").exists():
         raise SpecError("folder", str(out), "needs run.json and curve.txt (a built folder after 'bash run.sh')")
-    try:
-        mech.read_curve(out / "curve.txt")
-    except ValueError as exc:
-        raise SpecError("folder", str(out), f"curve.txt is damaged or empty ({str(exc).splitlines()[0]})") from None
     return analyze(out)
 
 
