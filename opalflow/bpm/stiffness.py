@@ -1,0 +1,126 @@
+"""The linearised bond network: stiffness and damping of ``bond_style bpm/rotational`` at the reference
+state, 6 degrees of freedom per particle (displacement u and small rotation theta).
+
+Derived from LAMMPS's own BondBPMRotational (src/BPM/bond_bpm_rotational.cpp, 22 Jul 2025):
+``elastic_forces`` and ``damping_forces`` expanded to first order about the reference state (bond
+vector R = L n with n pointing from particle j to particle i, i the lower atom id; quaternions at
+rest).  With du = u_i - u_j, P = I - n n^T and, for ``normalize yes``, a_r = kr / L, a_s = ks / L:
+
+- ``Fr = Kr (r - r0)`` along rb / r                           -> a_r n n^T du
+- ``Fs = Ks r gamma s`` (rb = bond vector in j's frame)        -> a_s (P du + L n x theta_j)
+- ``Fsp = -Ks r theta / 2 (cos phi, sin phi, 0)`` (rotated by mq) -> a_s L / 2 n x (theta_i - theta_j)
+- ``Ts = Ks r^2 gamma t / 2``                                   -> a_s L / 2 n x (P du + L n x theta_j)
+- ``Tsp = Ks r^2 theta / 4 (sin phi, -cos phi, 0)``             -> -a_s L^2 / 4 P (theta_i - theta_j)
+- ``Tb = Kb theta (-sin phi, cos phi, 0)``, ``Tt = Kt psi z``  -> B (theta_i - theta_j),
+  B = kb P + kt n n^T
+
+so the bond force F (``force1on2``) and the shear torque Ts are
+
+    F  = a_r n n^T du + a_s P du + a_s L / 2 n x (theta_i + theta_j)
+    Ts = a_s L / 2 n x du - a_s L^2 / 4 P (theta_i + theta_j)
+
+and ``compute`` applies f_i -= F, f_j += F, tau_i += Ts - B dtheta, tau_j += Ts + B dtheta.  A rigid
+motion of the pair gives no force; the 12 x 12 matrix is symmetric (checked in tests/test_stiffness.py
+against LAMMPS's forces and torques for small random displacements and rotations).  The smoothing
+factor 1 - B^4 of ``smooth yes`` is 1 to fourth order and leaves the linearisation unchanged.
+
+``damping_forces`` has the same form in the velocities, with a_r = gamma_n, a_s = gamma_s,
+B = gamma_r L / 2 P + gamma_t / 2 n n^T.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from opalflow.materials import BondCoefficients
+from opalflow.structure import Structure
+
+
+@dataclass
+class BondNetwork:
+    """Linear bonds between particles i and j (i < j): unit vector n = (x_i - x_j) / L and the four
+    coefficients of the linearised bond (see the module docstring)."""
+
+    n_particles: int
+    i: np.ndarray
+    j: np.ndarray
+    n: np.ndarray
+    L: np.ndarray
+    a_r: np.ndarray
+    a_s: np.ndarray
+    bend: np.ndarray
+    twist: np.ndarray
+
+    def forces(self, u: np.ndarray, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Forces and torques (N, 3) of the bonds for displacements u and rotations theta (N, 3):
+        minus the stiffness (or damping) matrix times (u, theta)."""
+        i, j, n, L = self.i, self.j, self.n, self.L
+        du = u[i] - u[j]
+        sum_t = theta[i] + theta[j]
+        d_t = theta[i] - theta[j]
+        n_du = np.einsum("ij,ij->i", n, du)[:, None]
+        half = (0.5 * self.a_s * L)[:, None]
+        F = (self.a_r[:, None] - self.a_s[:, None]) * n_du * n + self.a_s[:, None] * du \
+            + half * np.cross(n, sum_t)
+        n_st = np.einsum("ij,ij->i", n, sum_t)[:, None]
+        Ts = half * np.cross(n, du) - (0.5 * half * L[:, None]) * (sum_t - n_st * n)
+        n_dt = np.einsum("ij,ij->i", n, d_t)[:, None]
+        Bd = self.bend[:, None] * (d_t - n_dt * n) + self.twist[:, None] * n_dt * n
+        f = np.zeros((self.n_particles, 3))
+        tau = np.zeros((self.n_particles, 3))
+        for k in range(3):
+            f[:, k] = np.bincount(j, F[:, k], self.n_particles) - np.bincount(i, F[:, k], self.n_particles)
+            tau[:, k] = np.bincount(i, Ts[:, k] - Bd[:, k], self.n_particles) \
+                + np.bincount(j, Ts[:, k] + Bd[:, k], self.n_particles)
+        return f, tau
+
+    def matvec(self, x: np.ndarray) -> np.ndarray:
+        """The matrix times x = (u_1, theta_1, u_2, theta_2, ...) (6 per particle)."""
+        x = x.reshape(self.n_particles, 6)
+        f, tau = self.forces(x[:, :3], x[:, 3:])
+        return -np.hstack([f, tau]).ravel()
+
+    def diagonal(self) -> np.ndarray:
+        """The diagonal of the matrix (6 per particle), for Jacobi preconditioning and bounds."""
+        n, L = self.n, self.L
+        nn = n**2
+        tr = (self.a_r[:, None] - self.a_s[:, None]) * nn + self.a_s[:, None]
+        rot = 0.25 * (self.a_s * L**2)[:, None] * (1 - nn) + self.bend[:, None] * (1 - nn) + self.twist[:, None] * nn
+        d = np.zeros((self.n_particles, 6))
+        for k in range(3):
+            d[:, k] = np.bincount(self.i, tr[:, k], self.n_particles) + np.bincount(self.j, tr[:, k], self.n_particles)
+            d[:, 3 + k] = np.bincount(self.i, rot[:, k], self.n_particles) + np.bincount(self.j, rot[:, k],
+                                                                                           self.n_particles)
+        return d.ravel()
+
+
+def _geometry(s: Structure, L0: np.ndarray | None):
+    i = np.minimum(s.bonds[:, 0], s.bonds[:, 1])
+    j = np.maximum(s.bonds[:, 0], s.bonds[:, 1])
+    d = s.minimum_image(s.positions[i] - s.positions[j])
+    L = np.linalg.norm(d, axis=1) if L0 is None else L0
+    return i, j, d / np.linalg.norm(d, axis=1)[:, None], L
+
+
+def stiffness_network(s: Structure, coeffs: list[BondCoefficients], L0: np.ndarray | None = None) -> BondNetwork:
+    """The tangent stiffness of ``s``'s bonds (types 1-based into ``coeffs``; ``normalize yes``)."""
+    i, j, n, L = _geometry(s, L0)
+    t = s.bond_types - 1
+    pick = lambda name: np.array([getattr(c, name) for c in coeffs], float)[t]  # noqa: E731
+    return BondNetwork(s.n_particles, i, j, n, L, pick("kr") / L, pick("ks") / L, pick("kb"), pick("kt"))
+
+
+def damping_network(s: Structure, coeffs: list[BondCoefficients], L0: np.ndarray | None = None) -> BondNetwork:
+    """The bond damping matrix of ``s`` (BondBPMRotational::damping_forces, linear in the velocities)."""
+    i, j, n, L = _geometry(s, L0)
+    t = s.bond_types - 1
+    pick = lambda name: np.array([getattr(c, name) for c in coeffs], float)[t]  # noqa: E731
+    return BondNetwork(s.n_particles, i, j, n, L, pick("gn"), pick("gs"), 0.5 * pick("gr") * L, 0.5 * pick("gt"))
+
+
+def mass_diagonal(s: Structure) -> np.ndarray:
+    """Mass and moment of inertia of each particle (solid spheres), 6 per particle, as K's dofs."""
+    m = s.densities * np.pi / 6 * s.diameters**3
+    inertia = 0.1 * m * s.diameters**2
+    return np.repeat(np.column_stack([m, inertia]), 3, axis=1).ravel()

@@ -1,0 +1,117 @@
+"""The linearised bpm/rotational bond network (opalflow/bpm/stiffness.py) against LAMMPS itself:
+forces and torques of small random displacements and rotations, symmetry, rigid-body modes."""
+import numpy as np
+import pytest
+
+from opalflow.bpm.stiffness import damping_network, mass_diagonal, stiffness_network
+from opalflow.lammps.datafile import write_data
+from opalflow.lammps.engine import session
+from opalflow.lammps.syntax import num
+from opalflow.materials import bond_coefficients
+from opalflow.structure import Structure
+
+
+def cluster(seed: int = 4) -> tuple[Structure, list]:
+    """Six particles of 60 nm in a random cluster, bonded to their neighbours within 1.3 d, two bond
+    types of different stiffness (bonds in every direction, unequal lengths)."""
+    rng = np.random.default_rng(seed)
+    d = 60.0
+    x = np.array([[0, 0, 0], [1, 0, 0], [0.5, 0.85, 0], [0.5, 0.3, 0.8], [1.5, 0.6, 0.4], [-0.4, 0.7, 0.6]]) * d
+    x += rng.normal(0, 3.0, x.shape) + 500.0
+    pairs = [(a, b) for a in range(6) for b in range(a + 1, 6) if np.linalg.norm(x[a] - x[b]) < 1.3 * d]
+    s = Structure(positions=x, diameters=np.full(6, d), types=np.ones(6), densities=np.full(6, 2.2e-3),
+                  box_lo=np.zeros(3), box_hi=np.full(3, 1000.0), periodic=np.zeros(3, bool), bonds=pairs,
+                  bond_types=[1 + k % 2 for k in range(len(pairs))], type_names=["silica"],
+                  bond_type_names=["a", "b"])
+    coeffs = [bond_coefficients("silica", 0.6 * d / 2, 62.0, 0.25, 200.0, 0.3),
+              bond_coefficients("silica", 0.4 * d / 2, 58.0, 0.25, 200.0, 0.7)]
+    return s, coeffs
+
+
+def quaternion(rot: np.ndarray) -> np.ndarray:
+    angle = np.linalg.norm(rot, axis=1)
+    axis = rot / np.where(angle > 0, angle, 1)[:, None]
+    return np.column_stack([np.cos(angle / 2), np.sin(angle / 2)[:, None] * axis])
+
+
+def lammps_response(tmp_path, s, coeffs, u, theta, v=None, omega=None):
+    """Forces and torques LAMMPS's bpm/rotational gives at x + u, rotations theta and velocities v, omega;
+    with velocities, less those it gives at rest: ``acos`` of a cosine that rounds to 1 - 1e-16 makes a
+    shear angle of ~1.5e-8 rad in a random direction at rest (elastic_forces), ~1.5e-8 ks per bond (a
+    displaced bond has none: its angle is far from 0)."""
+    write_data(tmp_path / "data.lmp", s)
+    lines = ["units nano", "atom_style bpm/sphere", "boundary f f f", "newton on off",
+             "comm_modify vel yes cutoff 200", "special_bonds lj 0.0 1.0 1.0 coul 1.0 1.0 1.0",
+             "read_data data.lmp", "bond_style bpm/rotational normalize yes smooth yes break yes",
+             *(f"bond_coeff {t + 1} " + " ".join(num(x) for x in c.values()) for t, c in enumerate(coeffs)),
+             "pair_style zero 200.0", "pair_coeff * *", "run 0"]
+    with session(tmp_path) as lmp:
+        for line in lines:
+            lmp.command(line)          # bond reference states are stored at this first run
+        ids = lmp.numpy.extract_atom("id").copy()
+        order = np.argsort(ids)
+        f0 = lmp.numpy.extract_atom("f")[order].copy()
+        tau0 = lmp.numpy.extract_atom("torque")[order].copy()
+        x = lmp.numpy.extract_atom("x")
+        q = lmp.numpy.extract_atom("quat")
+        x[order] += u
+        q[order] = quaternion(theta)
+        if v is not None:
+            lmp.numpy.extract_atom("v")[order] = v
+            lmp.numpy.extract_atom("omega")[order] = omega
+        lmp.command("run 0")
+        f = lmp.numpy.extract_atom("f")[order].copy()
+        tau = lmp.numpy.extract_atom("torque")[order].copy()
+    if v is not None:
+        f, tau = f - f0, tau - tau0
+    return f, tau
+
+
+def test_stiffness_is_lammps_linearisation(tmp_path):
+    s, coeffs = cluster()
+    net = stiffness_network(s, coeffs)
+    assert net.i.size >= 9
+    rng = np.random.default_rng(1)
+    eps = 1e-5
+    u = rng.normal(0, 1.0, (6, 3)) * 60.0 * eps
+    theta = rng.normal(0, 1.0, (6, 3)) * eps
+    f_lmp, tau_lmp = lammps_response(tmp_path, s, coeffs, u, theta)
+    f, tau = net.forces(u, theta)
+    scale_f, scale_t = np.abs(f_lmp).max(), np.abs(tau_lmp).max()
+    assert scale_f > 0 and scale_t > 0
+    # second-order terms are eps ~ 1e-5 of the first-order ones
+    assert np.abs(f - f_lmp).max() < 1e-4 * scale_f
+    assert np.abs(tau - tau_lmp).max() < 1e-4 * scale_t
+
+
+def test_damping_is_lammps_linearisation(tmp_path):
+    """At the reference positions, forces are the damping matrix times the velocities alone."""
+    s, coeffs = cluster()
+    net = damping_network(s, coeffs)
+    rng = np.random.default_rng(2)
+    v = rng.normal(0, 1.0, (6, 3))
+    omega = rng.normal(0, 0.02, (6, 3))
+    zero = np.zeros((6, 3))
+    f_lmp, tau_lmp = lammps_response(tmp_path, s, coeffs, zero, zero, v, omega)
+    f, tau = net.forces(v, omega)
+    # the data file holds positions to ~1e-9 relative: bond directions differ by that much
+    assert np.abs(f - f_lmp).max() < 1e-7 * np.abs(f_lmp).max()
+    assert np.abs(tau - tau_lmp).max() < 1e-7 * np.abs(tau_lmp).max()
+
+
+@pytest.mark.parametrize("which", [stiffness_network, damping_network])
+def test_matrix_is_symmetric_with_six_rigid_body_modes(which):
+    s, coeffs = cluster()
+    net = which(s, coeffs)
+    K = np.column_stack([net.matvec(e) for e in np.eye(36)])
+    assert np.allclose(K, K.T, atol=1e-12 * np.abs(K).max())
+    assert np.allclose(np.diag(K), net.diagonal())
+    # rigid translations and rotations: u = t + w x (x - c), theta = w
+    c = s.positions.mean(axis=0)
+    for k in range(6):
+        t, w = np.eye(6)[k, :3], np.eye(6)[k, 3:]
+        u = t + np.cross(w, s.positions - c)
+        x = np.hstack([u, np.tile(w, (6, 1))]).ravel()
+        assert np.abs(K @ x).max() < 1e-10 * np.abs(K).max() * np.abs(x).max()
+    eig = np.linalg.eigvalsh(K / np.sqrt(np.outer(mass_diagonal(s), mass_diagonal(s))))
+    assert np.sum(np.abs(eig) < 1e-9 * eig.max()) == 6 and eig.min() > -1e-9 * eig.max()
