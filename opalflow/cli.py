@@ -107,9 +107,12 @@ def cmd_check(args) -> int:
         raise SpecError("--steps", args.steps, "must be >= 100")
     if not 0 < args.timestep_factor <= 100:
         raise SpecError("--timestep-factor", args.timestep_factor, "must be in (0, 100]")
+    if args.strain is not None and not 0 < args.strain <= 0.9:
+        raise SpecError("--strain", args.strain, "must be in (0, 0.9] (compress the sample this far)")
     spec = registry.load_spec(workflow_path(args.workflow), args.set)
     summary = registry.get(spec.kind).check_workflow(spec, _out_folder(args.out), say=_say, steps=args.steps,
-                                                     timestep_factor=args.timestep_factor, bisect=args.bisect)
+                                                     timestep_factor=args.timestep_factor, bisect=args.bisect,
+                                                     strain=args.strain)
     print(f"{summary['headline']} -> {args.out}/stability.md")
     return 0 if summary["passed"] else 1
 
@@ -163,6 +166,8 @@ def parser() -> argparse.ArgumentParser:
     c.add_argument("--steps", type=int, default=3000, help="time steps of each short run (default 3000)")
     c.add_argument("--timestep-factor", type=float, default=1.0,
                    help="run at this multiple of the deck's time step (3: a deliberately unstable run)")
+    c.add_argument("--strain", type=float, default=None,
+                   help="instead of --steps, run until the plate has compressed the sample this far (e.g. 0.5)")
     c.add_argument("--bisect", action="store_true", help="also find the largest stable time step by bisection")
     c.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
     c.set_defaults(func=cmd_check)

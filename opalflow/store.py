@@ -41,13 +41,45 @@ def atomic_path(path: str | os.PathLike, tmp_name: str | None = None):
     os.replace(tmp, path)
 
 
+@contextmanager
+def staged_files(folder: str | os.PathLike):
+    """Write a set of files all or none: ``stage(name)`` gives the temporary path ``.staged.NAME`` to
+    write ``folder/NAME`` to; when the block ends without error they are renamed in the order staged
+    (stage the file that marks a finished result last), when it fails they are removed, so a full
+    disk never leaves new results beside old ones."""
+    folder = Path(folder)
+    staged: list[str] = []
+
+    def stage(name: str) -> Path:
+        staged.append(name)
+        return folder / f".staged.{name}"
+
+    try:
+        yield stage
+    except BaseException as exc:
+        for name in staged:
+            (folder / f".staged.{name}").unlink(missing_ok=True)
+        if isinstance(exc, OSError) and (exc.filename or staged):
+            # a write that fails at close names no file: it is the one staged last
+            name = Path(exc.filename).name.removeprefix(".staged.") if exc.filename else staged[-1]
+            raise OSError(exc.errno, exc.strerror, str(folder / name)) from None
+        raise
+    for name in staged:
+        os.replace(folder / f".staged.{name}", folder / name)
+
+
+def json_text(data: dict) -> str:
+    """``data`` as indented JSON (numpy arrays and scalars as lists and numbers)."""
+    return json.dumps(data, indent=2, default=_default) + "\n"
+
+
 def write_text_atomic(path: str | os.PathLike, text: str) -> None:
     with atomic_path(path) as tmp:
         tmp.write_text(text)
 
 
 def write_json_atomic(path: str | os.PathLike, data: dict) -> None:
-    write_text_atomic(path, json.dumps(data, indent=2, default=_default) + "\n")
+    write_text_atomic(path, json_text(data))
 
 
 def _alive(pid: int) -> bool:

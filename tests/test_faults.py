@@ -75,6 +75,26 @@ def test_damaged_run_folder_files_are_one_line(tmp_path, capsys):
         assert len(err) == 1 and "run.json is damaged" in err[0], err
 
 
+def test_damaged_results_are_made_again_by_analyze(tmp_path, capsys):
+    """A results.h5 cut short and a summary.json of garbage (a crash while copying, say): analyze reads
+    neither, writes both whole again, the same numbers as before."""
+    import h5py
+
+    out = tmp_path / "run"
+    assert main(["run", "lattice_sc", "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    h5 = (out / "results.h5").read_bytes()
+    (out / "results.h5").write_bytes(h5[: len(h5) // 3])
+    (out / "summary.json").write_bytes(b"\x00\xff{garbage")
+    capsys.readouterr()
+    assert main(["analyze", str(out)]) == 0
+    again = json.loads((out / "summary.json").read_text())
+    assert again["youngs_modulus_GPa"] == summary["youngs_modulus_GPa"]
+    with h5py.File(out / "results.h5") as h:
+        assert len(h["curve/stress_MPa"]) == len(h["curve/strain"]) > 10
+    assert not list(out.glob(".staged.*"))
+
+
 def _can_mount_tmpfs() -> bool:
     """Root and allowed to mount a tmpfs (a small disk to fill)."""
     if os.geteuid() != 0:

@@ -149,6 +149,20 @@ def test_summary_json_of_a_study_is_written_last(tmp_path):
     assert sweep.finished(job, tmp_path) is None
 
 
+@pytest.mark.parametrize("damage", [b'{"youngs_modulus_GPa": 0.', b"\x89HDF\r\n\x1a\n\xff\xfe", b"[1, 2]", b""])
+def test_a_damaged_job_summary_is_run_again(tmp_path, damage):
+    """A job whose summary.json is cut short, binary, of the wrong shape or empty is not finished: the
+    rerun runs it again (no traceback) and gets the numbers of the first run."""
+    job = lattice_jobs((20.0,))[0]
+    first = sweep.run_jobs([job], tmp_path, workers=1, say=lambda m: None)["a20"]
+    (job.folder(tmp_path) / "summary.json").write_bytes(damage)
+    (job.folder(tmp_path) / "job.json").write_bytes(damage[:3])
+    assert sweep.finished(job, tmp_path) is None
+    again = sweep.run_jobs([job], tmp_path, workers=1, say=lambda m: None)["a20"]
+    assert again["youngs_modulus_GPa"] == pytest.approx(first["youngs_modulus_GPa"], rel=1e-9)
+    assert sweep.finished(job, tmp_path)["strength_MPa"] == pytest.approx(first["strength_MPa"], rel=1e-9)
+
+
 def test_a_failed_job_does_not_end_the_sweep(tmp_path):
     """A job whose LAMMPS run fails (an atom outside the box) is reported, left unfinished, and the
     other jobs complete."""

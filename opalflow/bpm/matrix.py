@@ -32,12 +32,13 @@ def run_matrix(spec: StabilityMatrixWorkflow, out: Path, say=print) -> dict:
         try:
             job = load_spec(WORKFLOWS / f"{row['workflow']}.toml", sets)
             s = check_workflow(job, out / "rows" / label, say=lambda m, lb=label: say(f"[{lb}] {m}"),
-                               steps=spec.matrix.steps, bisect=True)
+                               steps=spec.matrix.steps, strain=row.get("strain"), bisect=True)
         except InputError as exc:
             rows.append({"label": label, "workflow": row["workflow"], "set": sets, "error": str(exc)})
             say(f"[{label}] refused: {exc}")
             continue
-        rows.append({"label": label, "workflow": row["workflow"], "set": sets, "passed": s["passed"],
+        rows.append({"label": label, "workflow": row["workflow"], "set": sets, "strain": row.get("strain"),
+                     "steps": s["steps"], "passed": s["passed"],
                      "failed": s["failed"], "timestep_s": s["timestep_estimate_s"],
                      "timestep_limit_estimate_s": s["timestep_limit_estimate_s"],
                      "timestep_stable_max_s": s["timestep_stable_max_s"], "ratio": s["estimate_over_bisected"],
@@ -51,13 +52,15 @@ def run_matrix(spec: StabilityMatrixWorkflow, out: Path, say=print) -> dict:
                            f"bisected limit in [0.5, 1] for {len(in_range)} of {len(done)}"}
     lines = [f"# Stability matrix ({spec.name})", "",
              f"Each row: the stability check (`python -m opalflow check`, criteria in opalflow/bpm/stability.py) "
-             f"over {spec.matrix.steps} time steps at the deck's time step, and the largest stable time step by "
+             f"over {spec.matrix.steps} time steps (or up to the strain given) at the deck's time step, and the largest stable time step by "
              "bisection. Ratio = the estimator's stability limit / the bisected one (the deck runs at "
              "`timestep_safety` = 0.8 of the limit).", "",
              "| row | workflow and overrides | dt of the deck (s) | estimated limit (s) | bisected limit (s) | "
              "ratio | stiffest mode | at the deck's dt | time (s) |", "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         what = f"`{r['workflow']}` " + " ".join(f"`{x}`" for x in r["set"])
+        if r.get("strain"):
+            what += f" to strain {r['strain']:g}"
         if "error" in r:
             lines.append(f"| {r['label']} | {what} | - | - | - | - | - | refused: {r['error']} | - |")
             continue

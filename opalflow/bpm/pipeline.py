@@ -28,7 +28,7 @@ from opalflow.lammps.datafile import write_data
 from opalflow.lammps.engine import EngineError, lammps_info, run_in_process, run_script_sh, run_subprocess, session
 from opalflow.resources import ROOT
 from opalflow.spec import SpecError
-from opalflow.store import atomic_path, new_figure, save_figure, write_json_atomic, write_text_atomic
+from opalflow.store import json_text, new_figure, save_figure, staged_files, write_json_atomic, write_text_atomic
 from opalflow.structure import Structure
 from opalflow.version import __version__
 
@@ -220,15 +220,19 @@ def analyze(out: Path, wall_s: float | None = None, lammps_s: float | None = Non
         summary["headline"] = (f"INCOMPLETE run (stopped at step {summary['steps']} of {info['steps']}): "
                                + summary["headline"])
 
-    _write_h5(out, info, curve, strain, stress, stress_plate, stress_substrate, broken, snapshots,
-              histograms, summary)
-    write_json_atomic(out / "summary.json", summary)
-    _plots(out, strain, stress, stress_plate, stress_substrate, fit, snapshots, histograms, info["type_names"])
-    write_text_atomic(out / "report.md", _report(info, summary, fit))
+    # all results or none (a full disk leaves the earlier set whole); summary.json, the mark of a
+    # finished run, is renamed last
+    with staged_files(out) as stage:
+        _write_h5(stage("results.h5"), info, curve, strain, stress, stress_plate, stress_substrate, broken,
+                  snapshots, histograms, summary)
+        _plots(stage, strain, stress, stress_plate, stress_substrate, fit, snapshots, histograms,
+               info["type_names"])
+        stage("report.md").write_text(_report(info, summary, fit))
+        stage("summary.json").write_text(json_text(summary))
     return summary
 
 
-def _write_h5(out, info, curve, strain, stress, stress_plate, stress_substrate, broken, snapshots,
+def _write_h5(path, info, curve, strain, stress, stress_plate, stress_substrate, broken, snapshots,
               histograms, summary):
     import h5py
 
@@ -238,8 +242,7 @@ def _write_h5(out, info, curve, strain, stress, stress_plate, stress_substrate, 
     with h5py.File(buffer, "w") as h:
         _fill_h5(h, info, curve, strain, stress, stress_plate, stress_substrate, broken, snapshots, histograms,
                  summary)
-    with atomic_path(out / "results.h5") as tmp:
-        tmp.write_bytes(buffer.getvalue())
+    path.write_bytes(buffer.getvalue())
 
 
 def _fill_h5(h, info, curve, strain, stress, stress_plate, stress_substrate, broken, snapshots, histograms,
@@ -271,7 +274,7 @@ def _fill_h5(h, info, curve, strain, stress, stress_plate, stress_substrate, bro
     h.attrs["summary"] = json.dumps(summary, default=float)
 
 
-def _plots(out, strain, stress, stress_plate, stress_substrate, fit, snapshots, histograms, type_names):
+def _plots(stage, strain, stress, stress_plate, stress_substrate, fit, snapshots, histograms, type_names):
     fig, ax = new_figure(figsize=(5, 3.6))
     ax.plot(100 * strain, stress_plate, lw=0.6, color="0.6", label="plate")
     ax.plot(100 * strain, stress_substrate, lw=0.6, color="0.8", label="substrate")
@@ -281,7 +284,7 @@ def _plots(out, strain, stress, stress_plate, stress_substrate, fit, snapshots, 
     ax.set_xlabel("strain (%)")
     ax.set_ylabel("stress (MPa)")
     ax.legend()
-    save_figure(fig, out / "stress_strain.png")
+    save_figure(fig, stage("stress_strain.png"))
     if snapshots:
         step, snap = list(snapshots.items())[-1]
         fig, axes = new_figure(1, 2, figsize=(8, 3.4))
@@ -294,7 +297,7 @@ def _plots(out, strain, stress, stress_plate, stress_substrate, fit, snapshots, 
             ax.set_xlabel(f"{label} (MPa) at strain {100 * snap['strain']:.2f} %")
             ax.set_ylabel("fraction")
         axes[0].legend()
-        save_figure(fig, out / "stress_hist.png")
+        save_figure(fig, stage("stress_hist.png"))
     if histograms:
         fig, ax = new_figure(figsize=(5, 3.4))
         for hist in histograms.values():
@@ -303,7 +306,7 @@ def _plots(out, strain, stress, stress_plate, stress_substrate, fit, snapshots, 
         ax.set_xlabel("bond strain (%)")
         ax.set_ylabel("fraction of bonds")
         ax.legend()
-        save_figure(fig, out / "bond_strain.png")
+        save_figure(fig, stage("bond_strain.png"))
 
 
 def _report(info, summary, fit) -> str:

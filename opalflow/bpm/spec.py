@@ -132,7 +132,8 @@ def check_material(where: str, value: str, also: tuple[str, ...] = ()) -> None:
 
 @dataclass
 class MatrixSpec:
-    """Rows of the stability matrix: label -> {workflow = "NAME", set = ["section.key=value", ...]}."""
+    """Rows of the stability matrix: label -> {workflow = "NAME", set = ["section.key=value", ...], strain = S}
+    (``strain``: run each check until the plate has compressed the sample by S instead of ``steps``)."""
 
     steps: int = 1500
     rows: dict = field(default_factory=dict)
@@ -152,10 +153,13 @@ class StabilityMatrixWorkflow(WorkflowSpec):
         for label, row in m.rows.items():
             where = f"matrix.rows.{label}"
             check_name(where, label)
-            check(isinstance(row, dict) and set(row) <= {"workflow", "set"} and "workflow" in row, where, row,
-                  "must be a table {workflow = \"NAME\", set = [\"section.key=value\", ...]}")
+            check(isinstance(row, dict) and set(row) <= {"workflow", "set", "strain"} and "workflow" in row, where,
+                  row, "must be a table {workflow = \"NAME\", set = [\"section.key=value\", ...], strain = S}")
             check(isinstance(row["workflow"], str), f"{where}.workflow", row["workflow"], "must be a workflow name")
             check_name(f"{where}.workflow", row["workflow"])
             sets = row.get("set", [])
             check(isinstance(sets, list) and all(isinstance(x, str) and "=" in x for x in sets), f"{where}.set",
                   sets, "must be a list of \"section.key=value\" strings")
+            if "strain" in row:
+                check(is_number(row["strain"]) and 0 < row["strain"] <= 0.9, f"{where}.strain", row["strain"],
+                      "must be a number in (0, 0.9] (compress each check this far)")

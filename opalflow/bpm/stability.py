@@ -1,7 +1,9 @@
 """Numerical stability of a bonded-particle scene: a short run of its real deck, with criteria that can fail.
 
 The scene's deck (``in.lmp`` without its run block) runs ``steps`` time steps at the chosen time step
-(the estimate times ``timestep_factor``) and is judged by
+(the estimate times ``timestep_factor``), or as many as the plate needs to compress the sample to
+``strain`` (a check of the dense, contact-dominated state: the whole path runs at that time step, so
+the energy account below still starts from rest), and is judged by
 
 - **finite**: every reported value is finite;
 - **no lost particles**: LAMMPS stops on a lost atom (``thermo_modify lost error``);
@@ -67,9 +69,16 @@ def check_script(deck, factor: float, every: int) -> str:
                          every=num(every))
 
 
+def steps_to_strain(deck: CompressionDeck, strain: float, factor: float = 1.0) -> int:
+    """Time steps at ``factor`` x the deck's time step for the plate to compress the sample by ``strain``."""
+    return int(math.ceil(strain * deck.height_nm / deck.plate_speed_nm_ns / (deck.dt_ns * factor)))
+
+
 def run_check(deck: CompressionDeck, folder: Path, *, factor: float = 1.0, steps: int = 3000,
-              tolerance: float = 0.02, ke_growth: float = 100.0) -> StabilityResult:
-    """Run ``steps`` steps of a scene's deck at ``factor`` x its time step in ``folder``."""
+              strain: float | None = None, tolerance: float = 0.02, ke_growth: float = 100.0) -> StabilityResult:
+    """Run ``steps`` steps (or up to ``strain``) of a scene's deck at ``factor`` x its time step in ``folder``."""
+    if strain:
+        steps = steps_to_strain(deck, strain, factor)
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "snapshots").mkdir(exist_ok=True)
     write_data(folder / "data.lmp", deck.structure)
@@ -124,14 +133,14 @@ def run_check(deck: CompressionDeck, folder: Path, *, factor: float = 1.0, steps
     return StabilityResult(dt_s, factor, int(step[-1]) if len(step) else 0, passed, criteria, seconds, samples)
 
 
-def bisect_timestep(deck: CompressionDeck, folder: Path, *, steps: int, low: float = 1.0,
+def bisect_timestep(deck: CompressionDeck, folder: Path, *, steps: int, strain: float | None = None, low: float = 1.0,
                     high: float = 4.0, iterations: int = 6, say=print) -> tuple[float, list[StabilityResult]]:
     """Largest passing time-step factor in [low, high] (relative to the estimate's limit x safety) by
     bisection; ``high`` is doubled until it fails (up to 64)."""
     runs = []
 
     def ok(f: float) -> bool:
-        r = run_check(deck, folder / f"factor_{f:.4f}", factor=f, steps=steps)
+        r = run_check(deck, folder / f"factor_{f:.4f}", factor=f, steps=steps, strain=strain)
         runs.append(r)
         say(f"  dt = {r.timestep_s:.3g} s (x{f:.3f}): {'pass' if r.passed else 'FAIL: ' + r.failed()}")
         return r.passed
@@ -152,26 +161,30 @@ def bisect_timestep(deck: CompressionDeck, folder: Path, *, steps: int, low: flo
 
 
 def check_workflow(spec: BpmWorkflow, out: Path, *, say=print, steps: int = 3000, timestep_factor: float = 1.0,
-                   bisect: bool = False) -> dict:
-    """``python -m opalflow check``: the criteria at the deck's time step (x ``timestep_factor``) and,
-    with ``bisect``, the largest stable time step beside the estimate; writes stability.json and
-    stability.md into ``out``."""
+                   bisect: bool = False, strain: float | None = None) -> dict:
+    """``python -m opalflow check``: the criteria at the deck's time step (x ``timestep_factor``) over
+    ``steps`` steps or up to ``strain`` and, with ``bisect``, the largest stable time step beside the
+    estimate; writes stability.json and stability.md into ``out``."""
     t0 = time.perf_counter()
     s = scene_of(spec).build(spec, say)
     deck = compression_deck(spec, s)
-    say(f"stability check of {spec.name}: {s.n_particles} particles, {s.n_bonds} bonds, {steps} steps at "
+    if strain:
+        steps = steps_to_strain(deck, strain, timestep_factor)
+    upto = f" (to strain {strain:g})" if strain else ""
+    say(f"stability check of {spec.name}: {s.n_particles} particles, {s.n_bonds} bonds, {steps} steps{upto} at "
         f"dt = {deck.dt_ns * timestep_factor * 1e-9:.3g} s (estimate x{timestep_factor:g}; the estimated limit is "
         f"{deck.timestep.limit_ns * 1e-9:.3g} s, stiffest: {deck.timestep.stiffest})")
-    result = run_check(deck, out / "run", factor=timestep_factor, steps=steps)
+    result = run_check(deck, out / "run", factor=timestep_factor, steps=steps, strain=strain)
     for name, (ok, figures) in result.criteria.items():
         say(f"  {'pass' if ok else 'FAIL'}  {name}: {figures}")
     summary = {"workflow": spec.name, "passed": result.passed, "failed": result.failed(),
                "timestep_s": result.timestep_s, "timestep_factor": timestep_factor,
                "timestep_estimate_s": deck.dt_ns * 1e-9, "timestep_limit_estimate_s": deck.timestep.limit_ns * 1e-9,
-               "stiffest_mode": deck.timestep.stiffest, "steps": result.steps, "run": result.as_dict()}
+               "stiffest_mode": deck.timestep.stiffest, "steps": result.steps, "strain": strain,
+               "run": result.as_dict()}
     if bisect:
         say("bisection of the largest stable time step:")
-        best, runs = bisect_timestep(deck, out / "bisection", steps=steps, say=say)
+        best, runs = bisect_timestep(deck, out / "bisection", steps=steps, strain=strain, say=say)
         dt_max = best * deck.dt_ns * 1e-9
         summary.update({"timestep_stable_max_s": dt_max,
                         "estimate_over_bisected": deck.timestep.limit_ns * 1e-9 / dt_max if dt_max else None,
@@ -180,7 +193,7 @@ def check_workflow(spec: BpmWorkflow, out: Path, *, say=print, steps: int = 3000
         say(f"largest stable dt found {dt_max:.3g} s; estimated limit {deck.timestep.limit_ns * 1e-9:.3g} s "
             f"(ratio {summary['estimate_over_bisected']:.2f}); the deck uses {deck.dt_ns * 1e-9:.3g} s")
     verdict = "stable" if result.passed else f"UNSTABLE ({result.failed()})"
-    summary["headline"] = f"{spec.name}: {verdict} at dt = {result.timestep_s:.3g} s over {result.steps} steps"
+    summary["headline"] = f"{spec.name}: {verdict} at dt = {result.timestep_s:.3g} s over {result.steps} steps{upto}"
     summary["wall_s"] = time.perf_counter() - t0
     lines = [f"# Stability check: {spec.name}", "", summary["headline"] + ".", "",
              "| criterion | result | figures |", "|---|---|---|"]

@@ -50,9 +50,10 @@ def finished(job: Job, root: Path) -> dict | None:
         meta = json.loads((folder / "job.json").read_text())
         if meta["hash"] != job.key:
             return None
-        return json.loads((folder / "summary.json").read_text())
-    except (FileNotFoundError, json.JSONDecodeError, KeyError):
+        summary = json.loads((folder / "summary.json").read_text())
+    except (OSError, ValueError, KeyError, TypeError):   # missing, cut short, binary: run it again
         return None
+    return summary if isinstance(summary, dict) else None
 
 
 def _run_job(args) -> tuple[str, dict]:
