@@ -118,6 +118,7 @@ class CompressionDeck:
     omega1_per_ns: float = 0.0
     viscous_gamma: float = 0.0
     top_z0_nm: float = 0.0
+    top_layer: np.ndarray | None = None     # the top particle layer (LAMMPS group "top")
 
     def info(self) -> dict:
         return {
@@ -245,7 +246,7 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
                            restart_every=restart_every, snapshot_steps=snaps, height_nm=height,
                            area_nm2=area, plate_z0_nm=top, plate_speed_nm_ns=v, blocks=wanted,
                            modulus_affine_MPa=modulus_affine, omega1_per_ns=omega1, viscous_gamma=gamma,
-                           top_z0_nm=top_z0)
+                           top_z0_nm=top_z0, top_layer=top_group)
 
 
 def fundamental_mode(s: Structure, coeffs: list[BondCoefficients], height: float, area: float,

@@ -19,10 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from opalflow import registry
 from opalflow.analysis import compression as mech
 from opalflow.bpm.deck import CompressionDeck, compression_deck
-from opalflow.bpm.scene import Scene
+from opalflow.bpm.scene import scene_of, solid_fraction
 from opalflow.bpm.spec import BpmWorkflow
 from opalflow.lammps.datafile import write_data
 from opalflow.lammps.engine import EngineError, lammps_info, run_in_process, run_script_sh, run_subprocess, session
@@ -33,18 +32,9 @@ from opalflow.structure import Structure
 from opalflow.version import __version__
 
 
-def scene_of(spec: BpmWorkflow) -> Scene:
-    """The scene registered for the spec's kind."""
-    return registry.resolve(registry.get(spec.kind).scene)
-
-
 def build_structure(spec: BpmWorkflow, progress=None) -> Structure:
     """The scene's structure."""
     return scene_of(spec).build(spec, progress)
-
-
-def solid_fraction(s: Structure) -> float:
-    return float(s.meta.get("packing_solid_fraction", s.meta.get("solid_fraction", 1.0)))
 
 
 def prepare(spec: BpmWorkflow, out: Path, progress=None) -> CompressionDeck:
@@ -358,7 +348,14 @@ def analyze_folder(out: Path) -> dict:
 
 def run_workflow(spec: BpmWorkflow, out: Path, *, np_: int = 1, resume: bool = False, say=print,
                  suffix: str | None = None) -> dict:
-    """prepare (unless resuming) -> execute -> analyze; the rate check runs a half-speed twin."""
+    """prepare (unless resuming) -> execute -> analyze; the rate check runs a half-speed twin.
+    ``compression.method = "static"``: one linear solve instead (opalflow.bpm.static_run)."""
+    if spec.compression.method == "static":
+        if resume or np_ > 1 or suffix:
+            raise SpecError("compression.method", "static", "a static solve has no --resume, --np or --suffix")
+        from opalflow.bpm.static_run import run_static
+
+        return run_static(spec, out, say=say)
     t = time.perf_counter()
     if not resume:
         deck = prepare(spec, out, progress=say)

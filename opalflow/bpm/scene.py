@@ -4,6 +4,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from opalflow import registry
 from opalflow.structure import Structure
 
 
@@ -23,3 +24,13 @@ class Scene:
     statistics: Callable[[Structure], dict] | None = None
     run_keys: tuple[str, ...] = ()
     describe: Callable[[dict], str] | None = None
+
+
+def scene_of(spec) -> Scene:
+    """The scene registered for the spec's kind."""
+    return registry.resolve(registry.get(spec.kind).scene)
+
+
+def solid_fraction(s: Structure) -> float:
+    """The packing's solid fraction (before pores), 1 where the scene does not say."""
+    return float(s.meta.get("packing_solid_fraction", s.meta.get("solid_fraction", 1.0)))

@@ -40,6 +40,12 @@ class ContactsSpec:
     restitution: float | None = None
 
 
+#: how a compression is computed: a LAMMPS run, or the linear solve of opalflow.bpm.static
+METHODS = ("dynamic", "static")
+#: solvers of the static method (opalflow.bpm.static.SOLVERS)
+STATIC_SOLVERS = ("amg", "cg")
+
+
 @dataclass
 class CompressionSpec:
     """Uniaxial compression by a rigid plate moving down at constant speed."""
@@ -53,6 +59,8 @@ class CompressionSpec:
     snapshot_strains: list[float] = field(default_factory=lambda: [0.01, 0.02])
     restart_every_strain: float = 0.005
     check_rate: bool = False
+    method: str = "dynamic"          # dynamic: LAMMPS; static: one linear solve (E and stresses only)
+    solver: str = "amg"              # static: amg (pyamg + CG) or cg (matrix-free, block Jacobi)
 
 
 @dataclass
@@ -119,6 +127,11 @@ class BpmWorkflow(WorkflowSpec):
         for i, e in enumerate(c.snapshot_strains):
             check(0 < e <= c.strain_max, f"compression.snapshot_strains[{i}]", e,
                   f"must be in (0, strain_max = {c.strain_max:g}]")
+        check(c.method in METHODS, "compression.method", c.method, f"must be one of {', '.join(METHODS)}")
+        check(c.solver in STATIC_SOLVERS, "compression.solver", c.solver,
+              f"must be one of {', '.join(STATIC_SOLVERS)} (static method)")
+        check(not (c.method == "static" and c.check_rate), "compression.check_rate", c.check_rate,
+              "must be false with method = \"static\" (a static solve has no loading rate)")
         check(0 < c.restart_every_strain <= 1, "compression.restart_every_strain", c.restart_every_strain,
               "must be in (0, 1] (restart files every this much strain; >= strain_max: none)")
 

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from opalflow.bpm.deck import CompressionDeck, compression_deck
-from opalflow.bpm.pipeline import scene_of
+from opalflow.bpm.scene import scene_of
 from opalflow.bpm.spec import BpmWorkflow
 from opalflow.lammps.datafile import write_data
 from opalflow.lammps.engine import EngineError, script_commands, session

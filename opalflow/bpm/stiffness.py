@@ -52,6 +52,14 @@ class BondNetwork:
     bend: np.ndarray
     twist: np.ndarray
 
+    def bond_forces(self, u: np.ndarray, theta: np.ndarray) -> np.ndarray:
+        """The force F of each bond (M, 3), LAMMPS's ``force1on2``: -F on particle i, +F on j."""
+        i, j, n = self.i, self.j, self.n
+        du = u[i] - u[j]
+        n_du = np.einsum("ij,ij->i", n, du)[:, None]
+        return (self.a_r[:, None] - self.a_s[:, None]) * n_du * n + self.a_s[:, None] * du \
+            + (0.5 * self.a_s * self.L)[:, None] * np.cross(n, theta[i] + theta[j])
+
     def forces(self, u: np.ndarray, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Forces and torques (N, 3) of the bonds for displacements u and rotations theta (N, 3):
         minus the stiffness (or damping) matrix times (u, theta)."""
@@ -59,10 +67,8 @@ class BondNetwork:
         du = u[i] - u[j]
         sum_t = theta[i] + theta[j]
         d_t = theta[i] - theta[j]
-        n_du = np.einsum("ij,ij->i", n, du)[:, None]
         half = (0.5 * self.a_s * L)[:, None]
-        F = (self.a_r[:, None] - self.a_s[:, None]) * n_du * n + self.a_s[:, None] * du \
-            + half * np.cross(n, sum_t)
+        F = self.bond_forces(u, theta)
         n_st = np.einsum("ij,ij->i", n, sum_t)[:, None]
         Ts = half * np.cross(n, du) - (0.5 * half * L[:, None]) * (sum_t - n_st * n)
         n_dt = np.einsum("ij,ij->i", n, d_t)[:, None]

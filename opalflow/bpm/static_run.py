@@ -1,0 +1,190 @@
+"""``compression.method = "static"``: the compression workflow of a bonded-particle scene as one linear
+solve (:mod:`opalflow.bpm.static`) instead of a LAMMPS run.
+
+The run folder gets what a dynamic run writes where it applies: ``data.lmp`` and ``run.json`` (the same
+structure, bond types and groups as the dynamic deck), ``results.h5``, ``summary.json`` (``method =
+"static"``), ``report.md`` and plots.  Particle stresses (eq. 21 of Dosta et al., as LAMMPS's ``compute
+stress/atom`` tallies bonds: 1/2 r (x) F per particle, over V_p) and bond-strain histograms (Fig. 7) are
+given at each of ``compression.snapshot_strains`` (the response is linear: one solve, scaled).  No strength:
+bonds do not break in a linear solve.
+"""
+from __future__ import annotations
+
+import io
+import time
+from pathlib import Path
+
+import numpy as np
+
+from opalflow.analysis import compression as mech
+from opalflow.bpm.deck import compression_deck
+from opalflow.bpm.scene import scene_of, solid_fraction
+from opalflow.bpm.spec import BpmWorkflow
+from opalflow.bpm.static import StaticResult, solve_compression
+from opalflow.bpm.stiffness import BondNetwork, stiffness_network
+from opalflow.lammps.datafile import write_data
+from opalflow.store import json_text, new_figure, save_figure, staged_files, write_json_atomic
+from opalflow.version import __version__
+
+#: the strain of the solve (any: the answer is linear; small keeps the reported displacements physical)
+STRAIN = 1e-4
+
+
+def particle_stress(net: BondNetwork, res: StaticResult, volumes: np.ndarray) -> np.ndarray:
+    """Eq. 21 per particle (MPa, tension positive), columns xx yy zz xy xz yz, as LAMMPS's compute
+    stress/atom tallies a bond (ev_tally_xyz: 1/2 r_a F_b to each partner, r = x_i - x_j, F = force1on2)."""
+    F = net.bond_forces(res.u, res.theta)
+    r = net.n * net.L[:, None]
+    pairs = [(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)]
+    sigma = np.zeros((net.n_particles, 6))
+    for k, (a, b) in enumerate(pairs):
+        w = 0.5 * r[:, a] * F[:, b]
+        sigma[:, k] = np.bincount(net.i, w, net.n_particles) + np.bincount(net.j, w, net.n_particles)
+    return sigma / volumes[:, None]
+
+
+def bond_strain(net: BondNetwork, u: np.ndarray) -> np.ndarray:
+    """r / r0 - 1 of each bond to first order: n . (u_i - u_j) / L."""
+    return np.einsum("ij,ij->i", net.n, u[net.i] - u[net.j]) / net.L
+
+
+def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
+    """Build the scene, solve the compression, write the results (see the module docstring)."""
+    t0 = time.perf_counter()
+    c = spec.compression
+    scene = scene_of(spec)
+    s = scene.build(spec, say)
+    deck = compression_deck(spec, s)
+    build_s = time.perf_counter() - t0
+    data = deck.structure
+    out.mkdir(parents=True, exist_ok=True)
+    write_data(out / "data.lmp", data, title=f"opalflow {__version__} {spec.name} (static)")
+    info = {"workflow": spec.name, "method": "static", "spec": spec.to_dict(), "opalflow_version": __version__,
+            "type_names": data.type_names, "n_particles": s.n_particles, "n_bonds": s.n_bonds,
+            "solid_fraction": solid_fraction(s), "build_s": build_s, "references": spec.references(),
+            "height_nm": deck.height_nm, "area_nm2": deck.area_nm2, "top_layer_particles": int(deck.top_layer.sum())}
+    if scene.run_keys:
+        stats = scene.statistics(deck.source)
+        info["structure"] = {k: stats[k] for k in scene.run_keys}
+    write_json_atomic(out / "run.json", info)
+
+    substrate = data.groups["substrate"]
+    net = stiffness_network(data, deck.coefficients)
+    say(f"static solve ({c.solver}): {s.n_particles} particles, {s.n_bonds} bonds, {6 * s.n_particles} dofs")
+    res = solve_compression(net, data.positions, substrate, deck.top_layer, deck.height_nm, deck.area_nm2,
+                            strain=STRAIN, solver=c.solver, say=say)
+    E_GPa = res.modulus_MPa / 1e3
+    volumes = data.particle_volumes()
+    sigma_unit = particle_stress(net, res, volumes) / STRAIN       # per unit strain
+    strain_unit = bond_strain(net, res.u) / STRAIN
+    types = data.types
+    snapshots = {}
+    for e in c.snapshot_strains:
+        sigma = sigma_unit * e
+        snapshots[e] = {"sigma_MPa": sigma,
+                        "by_material": mech.stress_by_material(sigma, types, data.type_names)}
+    summary = {
+        "workflow": spec.name, "method": "static",
+        "youngs_modulus_GPa": E_GPa, "youngs_modulus_specimen_GPa": E_GPa,
+        "n_particles": s.n_particles, "n_bonds": s.n_bonds, "solid_fraction": info["solid_fraction"],
+        "solver": res.solver, "iterations": res.iterations, "relative_residual": res.residual,
+        "solve_s": res.seconds, "setup_s": res.setup_seconds, "peak_memory_MiB": res.peak_memory_MiB,
+        "build_s": build_s, "complete": True,
+        "stress_by_material": {f"{e:.4f}": v["by_material"] for e, v in snapshots.items()},
+        "bond_strain_per_strain": {"mean": float(strain_unit.mean()), "std": float(strain_unit.std()),
+                                   "min": float(strain_unit.min()), "max": float(strain_unit.max())},
+        **info.get("structure", {}),
+        "opalflow_version": __version__,
+        "headline": f"E = {E_GPa:.4g} GPa (static, {res.solver}: {res.iterations} iterations, residual "
+                    f"{res.residual:.1e}, {res.seconds:.1f} s)",
+    }
+    summary["reference"] = {k: {"value": v, "source": src, "error": (summary[k] - v) / v}
+                            for k, (v, src) in info["references"].items() if k in summary}
+    summary["wall_s"] = time.perf_counter() - t0
+    with staged_files(out) as stage:
+        _write_h5(stage("results.h5"), data, res, sigma_unit, strain_unit, snapshots, summary)
+        _plots(stage, data, res, snapshots, strain_unit, c.snapshot_strains)
+        stage("report.md").write_text(_report(spec, info, summary, res))
+        stage("summary.json").write_text(json_text(summary))
+    return summary
+
+
+def _write_h5(path: Path, data, res: StaticResult, sigma_unit, strain_unit, snapshots, summary) -> None:
+    import h5py
+
+    buffer = io.BytesIO()
+    with h5py.File(buffer, "w") as h:
+        h.attrs["method"] = "static"
+        h.attrs["youngs_modulus_GPa"] = summary["youngs_modulus_GPa"]
+        g = h.create_group("static")
+        g.attrs["strain"] = res.strain
+        g["position_nm"], g["type"] = data.positions, data.types
+        g["displacement_nm"], g["rotation_rad"] = res.u, res.theta
+        g["sigma_per_strain_MPa"] = sigma_unit
+        g["sigma_per_strain_MPa"].attrs["columns"] = "xx yy zz xy xz yz"
+        g["bond_strain_per_strain"] = strain_unit
+        g["residual_history"] = np.asarray(res.history)
+        for e, snap in snapshots.items():
+            sg = h.create_group(f"snapshots/{e:.4f}")
+            sg.attrs["strain"] = e
+            sg["sigma_MPa"] = snap["sigma_MPa"]
+    path.write_bytes(buffer.getvalue())
+
+
+def _plots(stage, data, res: StaticResult, snapshots, strain_unit, strains) -> None:
+    fig, ax = new_figure(figsize=(5, 3.6))
+    mobile = ~data.groups["substrate"]
+    ax.plot(data.positions[mobile, 2], -res.u[mobile, 2] / res.strain, ".", ms=2)
+    ax.set_xlabel("height z (nm)")
+    ax.set_ylabel("-u_z / strain (nm)")
+    ax.set_title("displacement per unit strain (static)")
+    save_figure(fig, stage("displacement.png"))
+    if snapshots:
+        e, snap = list(snapshots.items())[0]
+        fig, axes = new_figure(1, 2, figsize=(8, 3.4))
+        for col, ax, label in ((0, axes[0], "sigma_xx"), (2, axes[1], "sigma_zz")):
+            for t, name in enumerate(data.type_names):
+                sel = data.types == t + 1
+                if name != "substrate" and sel.any():
+                    ax.hist(snap["sigma_MPa"][sel, col], bins=60, histtype="step",
+                            weights=np.full(sel.sum(), 1 / len(sel)), label=name)
+            ax.set_xlabel(f"{label} (MPa) at strain {100 * e:.2f} %")
+            ax.set_ylabel("fraction")
+        axes[0].legend()
+        save_figure(fig, stage("stress_hist.png"))
+        fig, ax = new_figure(figsize=(5, 3.4))
+        for e in strains:
+            values = strain_unit * e
+            ax.hist(100 * values, bins=80, histtype="step", weights=np.full(len(values), 1 / len(values)),
+                    label=f"strain {100 * e:.2f} %")
+        ax.set_xlabel("bond strain (%)")
+        ax.set_ylabel("fraction of bonds")
+        ax.legend()
+        save_figure(fig, stage("bond_strain.png"))
+
+
+def _report(spec: BpmWorkflow, info: dict, summary: dict, res: StaticResult) -> str:
+    lines = [f"# {spec.name}: static compression", "",
+             f"{info['n_particles']} particles, {info['n_bonds']} bonds; the bond network linearised from LAMMPS's "
+             "bpm/rotational (opalflow/bpm/stiffness.py); substrate fixed, top layer "
+             f"({info['top_layer_particles']} particles) pushed down by strain {res.strain:g} x H "
+             f"(H = {info['height_nm']:.1f} nm), its x, y and rotations free; sides "
+             f"{spec.boundary.sides}. Contacts carry no load at the reference state and bonds do not break: "
+             "no strength.", "",
+             "| quantity | value | reference | error |", "|---|---|---|---|"]
+    ref = summary["reference"].get("youngs_modulus_specimen_GPa") or summary["reference"].get("youngs_modulus_GPa")
+    lines.append(f"| Young's modulus (GPa) | {summary['youngs_modulus_GPa']:.4g} | "
+                 + (f"{ref['value']:g} ({ref['source']}) | {100 * ref['error']:+.1f} % |" if ref else "- | - |"))
+    lines += ["", f"Solver `{res.solver}`: {res.iterations} iterations to relative residual {res.residual:.1e}; "
+              f"setup {res.setup_seconds:.1f} s, solve {res.seconds:.1f} s, peak memory {res.peak_memory_MiB:.0f} MiB; "
+              f"structure built in {summary['build_s']:.1f} s; wall {summary['wall_s']:.1f} s.", ""]
+    if summary["stress_by_material"]:
+        lines += ["Particle stresses (eq. 21, V_p = particle volume; tension positive):", "",
+                  "| strain | material | sigma_xx (MPa) | sigma_zz (MPa) |", "|---|---|---|---|"]
+        for strain_txt, mats in summary["stress_by_material"].items():
+            for mat, v in mats.items():
+                lines.append(f"| {strain_txt} | {mat} | {v['sigma_xx_mean_MPa']:.2f} +- {v['sigma_xx_std_MPa']:.2f} | "
+                             f"{v['sigma_zz_mean_MPa']:.2f} +- {v['sigma_zz_std_MPa']:.2f} |")
+    lines += ["", "Plots: displacement.png, stress_hist.png, bond_strain.png. Data: results.h5 (group `static`), "
+              "summary.json."]
+    return "\n".join(lines) + "\n"

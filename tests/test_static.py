@@ -1,0 +1,92 @@
+"""The static solver of the bond network (opalflow/bpm/static.py, static_run.py): the analytic lattice,
+the two solvers against each other, the assembled matrix against the operator, loose particles, the
+workflow's outputs."""
+import json
+
+import numpy as np
+import pytest
+
+from opalflow.bpm.deck import compression_deck
+from opalflow.bpm.scene import scene_of
+from opalflow.bpm.static import LooseParticlesError, assemble, solve_compression
+from opalflow.bpm.stiffness import stiffness_network
+from opalflow.cli import main
+from opalflow.registry import load_spec
+from opalflow.resources import WORKFLOWS
+
+SMALL_OPAL = ["pores.arrangement=none", "pores.spacing_nm=300.0", "pores.diameter_nm=250.0", "pores.layers=1",
+              "packing.seed=3"]
+
+
+def scene(workflow: str, sets=()):
+    spec = load_spec(WORKFLOWS / f"{workflow}.toml", list(sets))
+    s = scene_of(spec).build(spec, lambda m: None)
+    deck = compression_deck(spec, s)
+    return spec, deck, stiffness_network(deck.structure, deck.coefficients)
+
+
+def test_lattice_modulus_is_the_analytic_one(tmp_path, capsys):
+    """Simple-cubic lattice without contacts: E = E_b pi r_b^2 / a^2 (pi/4 E_b at r_b = a/2) within 0.1 %,
+    through `python -m opalflow run lattice_sc --set compression.method=static`."""
+    out = tmp_path / "static"
+    assert main(["run", "lattice_sc", "--out", str(out), "--set", "compression.method=static"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    ref = summary["reference"]["youngs_modulus_specimen_GPa"]
+    assert ref["value"] == pytest.approx(np.pi / 4 * 6.53, rel=1e-9)
+    assert abs(ref["error"]) < 1e-3
+    assert summary["method"] == "static" and summary["relative_residual"] < 1e-7
+    assert {"results.h5", "report.md", "stress_hist.png", "bond_strain.png", "data.lmp"} <= {
+        p.name for p in out.iterdir()}
+    # uniaxial strain of a lattice: every vertical bond strained by -strain, horizontal ones not at all
+    import h5py
+    with h5py.File(out / "results.h5") as h:
+        eps = h["static/bond_strain_per_strain"][:]
+    vertical, horizontal = np.isclose(eps, -1.0, atol=1e-6), np.isclose(eps, 0.0, atol=1e-6)
+    assert np.all(vertical | horizontal) and 0.25 < vertical.mean() < 0.4
+
+
+@pytest.mark.parametrize("workflow, sets", [("lattice_sc", ()), ("opal_quick", SMALL_OPAL)])
+def test_assembled_matrix_is_the_operator(workflow, sets):
+    _, _, net = scene(workflow, sets)
+    K = assemble(net)
+    x = np.random.default_rng(0).normal(size=6 * net.n_particles)
+    assert np.allclose(K @ x, net.matvec(x), rtol=0, atol=1e-10 * np.abs(K).max() * np.abs(x).max())
+    assert abs(K - K.T).max() <= 1e-12 * abs(K).max()
+
+
+def test_both_solvers_give_the_same_modulus():
+    _, deck, net = scene("opal_quick", SMALL_OPAL)
+    s = deck.structure
+    args = (net, s.positions, s.groups["substrate"], deck.top_layer, deck.height_nm, deck.area_nm2)
+    amg = solve_compression(*args, solver="amg", say=lambda m: None)
+    cg = solve_compression(*args, solver="cg", say=lambda m: None)
+    assert amg.modulus_MPa == pytest.approx(cg.modulus_MPa, rel=1e-6)
+    assert amg.residual < 1e-7 and cg.residual < 1e-7
+    # linear: half the strain, half the stress, the same modulus
+    half = solve_compression(*args, strain=5e-5, solver="amg", say=lambda m: None)
+    assert half.stress_MPa == pytest.approx(amg.stress_MPa / 2, rel=1e-6)
+
+
+def test_a_floating_cluster_is_refused_in_one_line(tmp_path, capsys):
+    """Bonds of a few particles removed so that one is held by none: the static run says how many
+    particles are loose before solving, exit 2."""
+    _, deck, net = scene("lattice_sc")
+    s = deck.structure
+    mobile = np.flatnonzero(~s.groups["substrate"])
+    lone = mobile[len(mobile) // 2]
+    keep = (s.bonds[:, 0] != lone) & (s.bonds[:, 1] != lone)
+    net.i, net.j = net.i[keep], net.j[keep]
+    for name in ("n", "L", "a_r", "a_s", "bend", "twist"):
+        setattr(net, name, getattr(net, name)[keep])
+    with pytest.raises(LooseParticlesError, match="1 particles have no bond path to the substrate"):
+        solve_compression(net, s.positions, s.groups["substrate"], deck.top_layer, deck.height_nm, deck.area_nm2)
+
+
+def test_static_settings_are_checked(tmp_path, capsys):
+    out = tmp_path / "x"
+    assert main(["run", "lattice_sc", "--out", str(out), "--set", "compression.method=quasi"]) == 2
+    assert "compression.method = 'quasi'" in capsys.readouterr().err
+    assert main(["run", "lattice_sc", "--out", str(out), "--set", "compression.method=static",
+                 "--set", "compression.solver=lu"]) == 2
+    assert "compression.solver" in capsys.readouterr().err
+    assert not out.exists()
