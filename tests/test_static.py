@@ -78,8 +78,13 @@ def test_a_floating_cluster_is_refused_in_one_line(tmp_path, capsys):
     net.i, net.j = net.i[keep], net.j[keep]
     for name in ("n", "L", "a_r", "a_s", "bend", "twist"):
         setattr(net, name, getattr(net, name)[keep])
+    args = (net, s.positions, s.groups["substrate"], deck.top_layer, deck.height_nm, deck.area_nm2)
     with pytest.raises(LooseParticlesError, match="1 particles have no bond path to the substrate"):
-        solve_compression(net, s.positions, s.groups["substrate"], deck.top_layer, deck.height_nm, deck.area_nm2)
+        solve_compression(*args)
+    said = []
+    res = solve_compression(*args, drop_loose=True, say=said.append)
+    assert res.loose == 1 and "1 loose particles" in said[0] and res.residual < 1e-7
+    assert np.all(res.u[lone] == 0)
 
 
 def test_static_settings_are_checked(tmp_path, capsys):

@@ -18,7 +18,8 @@ Solvers (measured in bench/bench_static.py):
 
 - ``amg``: K assembled as a sparse matrix (12 x 12 per bond), smoothed-aggregation AMG (pyamg) with the
   six rigid-body modes as near-null space, as the preconditioner of conjugate gradients;
-- ``cg``: matrix-free conjugate gradients with a 6 x 6 block-Jacobi preconditioner (numpy).
+- ``cg``: matrix-free conjugate gradients with a 6 x 6 block-Jacobi preconditioner (numpy);
+- ``cg-jax``: the same, the operator jit-compiled by JAX (runs on a GPU where JAX has one).
 """
 from __future__ import annotations
 
@@ -54,6 +55,7 @@ class StaticResult:
     peak_memory_MiB: float
     solver: str
     history: list[float] = field(default_factory=list)
+    loose: int = 0
 
 
 def bond_blocks(net: BondNetwork) -> np.ndarray:
@@ -112,26 +114,30 @@ def rigid_body_modes(positions: np.ndarray) -> np.ndarray:
 
 def solve_compression(net: BondNetwork, positions: np.ndarray, fixed: np.ndarray, top: np.ndarray,
                       height: float, area: float, *, strain: float = 1e-4, solver: str = "amg",
-                      rtol: float = 1e-8, maxiter: int = 20000, say=print) -> StaticResult:
+                      rtol: float = 1e-8, maxiter: int = 20000, drop_loose: bool = False, say=print) -> StaticResult:
     """Uniaxial compression by a prescribed top-layer displacement (see the module docstring).
 
     ``fixed``: the substrate; ``top``: the top layer (both boolean over particles).  The strain is
-    small and the answer linear in it; the stress is reported for ``strain``.
+    small and the answer linear in it; the stress is reported for ``strain``.  Particles with no bond path
+    to the substrate make K singular: refused, or with ``drop_loose`` held still (they carry nothing).
     """
     if solver not in SOLVERS:
         raise InputError(f"compression.solver = {solver!r}: must be one of {', '.join(SOLVERS)}")
     loose = loose_particles(net, fixed)
-    if loose.any():
+    if loose.any() and not drop_loose:
         raise LooseParticlesError(f"structure: {int(loose.sum())} particles have no bond path to the substrate "
-                                  "(a floating particle or cluster makes the static problem singular)")
+                                  "(a floating particle or cluster makes the static problem singular); "
+                                  "compression.drop_loose = true leaves them out")
+    if loose.any():
+        say(f"static solve: {int(loose.sum())} loose particles (no bond path to the substrate) left out")
     t0 = time.perf_counter()
     n = net.n_particles
     prescribed = np.zeros((n, 6), bool)
-    prescribed[fixed] = True
-    prescribed[top & ~fixed, 2] = True
+    prescribed[fixed | loose] = True
+    prescribed[top & ~fixed & ~loose, 2] = True
     x_p = np.zeros((n, 6))
     delta = strain * height
-    x_p[top & ~fixed, 2] = -delta
+    x_p[top & ~fixed & ~loose, 2] = -delta
     free = ~prescribed.ravel()
     rhs = -net.matvec(x_p.ravel())[free]
     history: list[float] = []
@@ -149,22 +155,22 @@ def solve_compression(net: BondNetwork, positions: np.ndarray, fixed: np.ndarray
                 left = f", ~{max(0.0, math.log(r / rtol) / per_it / rate):.0f} s left"
             say(f"static solve: iteration {k}, relative residual {r:.2e} (target {rtol:g}), {rate:.1f} it/s{left}")
 
-    if solver == "amg":
-        x_f, iterations, residual, setup = _solve_amg(net, free, rhs, positions, rtol, maxiter, progress)
-    else:
-        x_f, iterations, residual, setup = _solve_cg(net, free, rhs, rtol, maxiter, progress)
+    run = {"amg": _solve_amg, "cg": _solve_cg, "cg-jax": _solve_cg_jax}[solver]
+    args = (net, free, rhs, positions) if solver == "amg" else (net, free, rhs)
+    x_f, iterations, residual, setup = run(*args, rtol, maxiter, progress)
     x = x_p.ravel().copy()
     x[free] = x_f
     x = x.reshape(n, 6)
     reaction = net.matvec(x.ravel()).reshape(n, 6)           # K x: the force the supports apply
-    force_top = -float(np.sum(reaction[top & ~fixed, 2]))    # compressive, > 0
+    force_top = -float(np.sum(reaction[top & ~fixed & ~loose, 2]))    # compressive, > 0
     stress = force_top / area
     seconds = time.perf_counter() - t0
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     true_res = float(np.linalg.norm(net.matvec(x.ravel())[free])) / max(b_norm, 1e-300)
     return StaticResult(u=x[:, :3], theta=x[:, 3:], strain=strain, stress_MPa=stress, modulus_MPa=stress / strain,
                         iterations=iterations, residual=true_res if residual is None else max(residual, true_res),
-                        seconds=seconds, setup_seconds=setup, peak_memory_MiB=peak, solver=solver, history=history)
+                        seconds=seconds, setup_seconds=setup, peak_memory_MiB=peak, solver=solver, history=history,
+                        loose=int(loose.sum()))
 
 
 def _solve_amg(net, free, rhs, positions, rtol, maxiter, progress):
@@ -188,20 +194,50 @@ def _solve_amg(net, free, rhs, positions, rtol, maxiter, progress):
     return x, len(residuals), residuals[-1] if residuals else None, setup
 
 
-def _solve_cg(net, free, rhs, rtol, maxiter, progress):
-    from scipy.sparse.linalg import LinearOperator, cg
+def pcg(matvec, precondition, b, rtol: float, maxiter: int, progress, dot=np.dot):
+    """Preconditioned conjugate gradients (Hestenes-Stiefel; Saad, Iterative Methods, alg. 9.1) from x = 0,
+    until |r| <= rtol |b|; ``progress(k, |r| / |b|)`` after every iteration.  Returns (x, iterations)."""
+    x = b * 0.0
+    r = b
+    z = precondition(r)
+    p = z
+    rz = dot(r, z)
+    b_norm = float(np.sqrt(dot(b, b)))
+    k = 0
+    for k in range(1, maxiter + 1):
+        Ap = matvec(p)
+        alpha = rz / dot(p, Ap)
+        x = x + alpha * p
+        r = r - alpha * Ap
+        res = float(np.sqrt(dot(r, r))) / b_norm
+        progress(k, res)
+        if res <= rtol:
+            break
+        z = precondition(r)
+        rz_new = dot(r, z)
+        p = z + (rz_new / rz) * p
+        rz = rz_new
+    return x, k
 
-    t = time.perf_counter()
+
+def _block_jacobi(net: BondNetwork, free: np.ndarray) -> np.ndarray:
+    """Inverses of the 6 x 6 diagonal blocks of K on the free dofs (prescribed ones: identity)."""
     n = net.n_particles
     blocks = np.zeros((n, 6, 6))
     bb = bond_blocks(net)
     np.add.at(blocks, net.i, bb[:, :6, :6])
     np.add.at(blocks, net.j, bb[:, 6:, 6:])
     mask = free.reshape(n, 6)
-    # block-Jacobi on the free dofs: prescribed rows and columns replaced by the identity
     blocks = np.where(mask[:, :, None] & mask[:, None, :], blocks, 0.0)
     blocks[:, np.arange(6), np.arange(6)] += ~mask
-    inv = np.linalg.inv(blocks)
+    return np.linalg.inv(blocks)
+
+
+def _solve_cg(net, free, rhs, rtol, maxiter, progress):
+    """Matrix-free PCG in numpy with the 6 x 6 block-Jacobi preconditioner."""
+    t = time.perf_counter()
+    n = net.n_particles
+    inv = _block_jacobi(net, free)
     full = np.zeros(6 * n)
 
     def matvec(v):
@@ -213,15 +249,50 @@ def _solve_cg(net, free, rhs, rtol, maxiter, progress):
         return np.einsum("nij,nj->ni", inv, full.reshape(n, 6)).ravel()[free]
 
     setup = time.perf_counter() - t
-    size = int(free.sum())
-    count = [0]
-    b_norm = float(np.linalg.norm(rhs))
+    x, iterations = pcg(matvec, precondition, rhs, rtol, maxiter, progress)
+    return x, iterations, None, setup
 
-    def callback(xk):
-        count[0] += 1
-        if count[0] % 100 == 0:
-            progress(count[0], float(np.linalg.norm(rhs - matvec(xk))) / b_norm)
 
-    x, info = cg(LinearOperator((size, size), matvec=matvec, dtype=float), rhs, rtol=rtol, maxiter=maxiter,
-                 M=LinearOperator((size, size), matvec=precondition, dtype=float), callback=callback)
-    return x, count[0], None, setup
+def _solve_cg_jax(net, free, rhs, rtol, maxiter, progress):
+    """The same PCG with the operator and preconditioner jit-compiled by JAX (float64; a GPU where JAX
+    has one)."""
+    import jax
+    import jax.numpy as jnp
+
+    jax.config.update("jax_enable_x64", True)
+    t = time.perf_counter()
+    n = net.n_particles
+    inv = jnp.asarray(_block_jacobi(net, free))
+    i, j, nv, L = jnp.asarray(net.i), jnp.asarray(net.j), jnp.asarray(net.n), jnp.asarray(net.L)
+    a_r, a_s = jnp.asarray(net.a_r)[:, None], jnp.asarray(net.a_s)[:, None]
+    bend, twist = jnp.asarray(net.bend)[:, None], jnp.asarray(net.twist)[:, None]
+    half = 0.5 * a_s * L[:, None]
+    free_idx = jnp.asarray(np.flatnonzero(free))
+    seg = jax.ops.segment_sum
+
+    def full(v):
+        return jnp.zeros(6 * n).at[free_idx].set(v).reshape(n, 6)
+
+    @jax.jit
+    def matvec(v):
+        x = full(v)
+        u, th = x[:, :3], x[:, 3:]
+        du, st, dt = u[i] - u[j], th[i] + th[j], th[i] - th[j]
+        F = (a_r - a_s) * jnp.sum(nv * du, 1, keepdims=True) * nv + a_s * du + half * jnp.cross(nv, st)
+        Ts = half * jnp.cross(nv, du) - 0.5 * half * L[:, None] * (st - jnp.sum(nv * st, 1, keepdims=True) * nv)
+        n_dt = jnp.sum(nv * dt, 1, keepdims=True) * nv
+        Bd = bend * (dt - n_dt) + twist * n_dt
+        f = seg(F, j, n) - seg(F, i, n)
+        tau = seg(Ts - Bd, i, n) + seg(Ts + Bd, j, n)
+        return -jnp.concatenate([f, tau], 1).ravel()[free_idx]
+
+    @jax.jit
+    def precondition(v):
+        return jnp.einsum("nij,nj->ni", inv, full(v)).ravel()[free_idx]
+
+    b = jnp.asarray(rhs)
+    matvec(b).block_until_ready()
+    precondition(b).block_until_ready()
+    setup = time.perf_counter() - t
+    x, iterations = pcg(matvec, precondition, b, rtol, maxiter, progress, dot=jnp.dot)
+    return np.asarray(x), iterations, None, setup

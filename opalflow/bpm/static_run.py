@@ -72,7 +72,7 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
     net = stiffness_network(data, deck.coefficients)
     say(f"static solve ({c.solver}): {s.n_particles} particles, {s.n_bonds} bonds, {6 * s.n_particles} dofs")
     res = solve_compression(net, data.positions, substrate, deck.top_layer, deck.height_nm, deck.area_nm2,
-                            strain=STRAIN, solver=c.solver, say=say)
+                            strain=STRAIN, solver=c.solver, drop_loose=c.drop_loose, say=say)
     E_GPa = res.modulus_MPa / 1e3
     volumes = data.particle_volumes()
     sigma_unit = particle_stress(net, res, volumes) / STRAIN       # per unit strain
@@ -89,7 +89,7 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
         "n_particles": s.n_particles, "n_bonds": s.n_bonds, "solid_fraction": info["solid_fraction"],
         "solver": res.solver, "iterations": res.iterations, "relative_residual": res.residual,
         "solve_s": res.seconds, "setup_s": res.setup_seconds, "peak_memory_MiB": res.peak_memory_MiB,
-        "build_s": build_s, "complete": True,
+        "build_s": build_s, "complete": True, "loose_particles_left_out": res.loose,
         "stress_by_material": {f"{e:.4f}": v["by_material"] for e, v in snapshots.items()},
         "bond_strain_per_strain": {"mean": float(strain_unit.mean()), "std": float(strain_unit.std()),
                                    "min": float(strain_unit.min()), "max": float(strain_unit.max())},
