@@ -95,3 +95,25 @@ def test_static_settings_are_checked(tmp_path, capsys):
                  "--set", "compression.solver=lu"]) == 2
     assert "compression.solver" in capsys.readouterr().err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("workflow, sets", [("opal_quick", SMALL_OPAL), ("quickstart", ())])
+def test_static_solution_is_an_equilibrium_of_lammps(tmp_path, workflow, sets):
+    """The solution put into LAMMPS (positions + u, quaternions from theta, bpm/rotational with the deck's
+    coefficients, no contacts): every free particle is in equilibrium (force and torque below 1e-3 of the
+    largest bond force and torque: second-order terms at strain 1e-4) and the force LAMMPS's bonds exert on
+    the top layer is the static reaction."""
+    from bpm_probe import lammps_response
+
+    _, deck, net = scene(workflow, sets)
+    s = deck.structure
+    res = solve_compression(net, s.positions, s.groups["substrate"], deck.top_layer, deck.height_nm,
+                            deck.area_nm2, say=lambda m: None)
+    f, tau = lammps_response(tmp_path, s, deck.coefficients, res.u, res.theta)
+    scale_f = np.abs(net.bond_forces(res.u, res.theta)).max()
+    free = ~s.groups["substrate"] & ~deck.top_layer
+    assert np.abs(f[free]).max() < 1e-3 * scale_f
+    top = deck.top_layer & ~s.groups["substrate"]
+    assert np.abs(f[top][:, :2]).max() < 1e-3 * scale_f
+    assert np.abs(tau[~s.groups["substrate"]]).max() < 1e-3 * scale_f * net.L.mean()
+    assert f[top, 2].sum() / deck.area_nm2 == pytest.approx(res.stress_MPa, rel=1e-3)

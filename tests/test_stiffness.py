@@ -3,10 +3,9 @@ forces and torques of small random displacements and rotations, symmetry, rigid-
 import numpy as np
 import pytest
 
+from bpm_probe import lammps_response
+
 from opalflow.bpm.stiffness import damping_network, mass_diagonal, stiffness_network
-from opalflow.lammps.datafile import write_data
-from opalflow.lammps.engine import session
-from opalflow.lammps.syntax import num
 from opalflow.materials import bond_coefficients
 from opalflow.structure import Structure
 
@@ -26,45 +25,6 @@ def cluster(seed: int = 4) -> tuple[Structure, list]:
     coeffs = [bond_coefficients("silica", 0.6 * d / 2, 62.0, 0.25, 200.0, 0.3),
               bond_coefficients("silica", 0.4 * d / 2, 58.0, 0.25, 200.0, 0.7)]
     return s, coeffs
-
-
-def quaternion(rot: np.ndarray) -> np.ndarray:
-    angle = np.linalg.norm(rot, axis=1)
-    axis = rot / np.where(angle > 0, angle, 1)[:, None]
-    return np.column_stack([np.cos(angle / 2), np.sin(angle / 2)[:, None] * axis])
-
-
-def lammps_response(tmp_path, s, coeffs, u, theta, v=None, omega=None):
-    """Forces and torques LAMMPS's bpm/rotational gives at x + u, rotations theta and velocities v, omega;
-    with velocities, less those it gives at rest: ``acos`` of a cosine that rounds to 1 - 1e-16 makes a
-    shear angle of ~1.5e-8 rad in a random direction at rest (elastic_forces), ~1.5e-8 ks per bond (a
-    displaced bond has none: its angle is far from 0)."""
-    write_data(tmp_path / "data.lmp", s)
-    lines = ["units nano", "atom_style bpm/sphere", "boundary f f f", "newton on off",
-             "comm_modify vel yes cutoff 200", "special_bonds lj 0.0 1.0 1.0 coul 1.0 1.0 1.0",
-             "read_data data.lmp", "bond_style bpm/rotational normalize yes smooth yes break yes",
-             *(f"bond_coeff {t + 1} " + " ".join(num(x) for x in c.values()) for t, c in enumerate(coeffs)),
-             "pair_style zero 200.0", "pair_coeff * *", "run 0"]
-    with session(tmp_path) as lmp:
-        for line in lines:
-            lmp.command(line)          # bond reference states are stored at this first run
-        ids = lmp.numpy.extract_atom("id").copy()
-        order = np.argsort(ids)
-        f0 = lmp.numpy.extract_atom("f")[order].copy()
-        tau0 = lmp.numpy.extract_atom("torque")[order].copy()
-        x = lmp.numpy.extract_atom("x")
-        q = lmp.numpy.extract_atom("quat")
-        x[order] += u
-        q[order] = quaternion(theta)
-        if v is not None:
-            lmp.numpy.extract_atom("v")[order] = v
-            lmp.numpy.extract_atom("omega")[order] = omega
-        lmp.command("run 0")
-        f = lmp.numpy.extract_atom("f")[order].copy()
-        tau = lmp.numpy.extract_atom("torque")[order].copy()
-    if v is not None:
-        f, tau = f - f0, tau - tau0
-    return f, tau
 
 
 def test_stiffness_is_lammps_linearisation(tmp_path):
