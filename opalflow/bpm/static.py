@@ -93,6 +93,11 @@ def loose_particles(net: BondNetwork, anchored: np.ndarray) -> np.ndarray:
     return ~np.isin(label, held)
 
 
+def loose_message(count: int) -> str:
+    return (f"structure: {count} particles have no bond path to the substrate (a floating particle or cluster "
+            "makes the static problem singular); compression.drop_loose = true leaves them out")
+
+
 def rigid_body_modes(positions: np.ndarray) -> np.ndarray:
     """The six rigid-body modes (6 N, 6): three translations, three rotations about the centroid."""
     x = positions - positions.mean(axis=0)
@@ -118,9 +123,7 @@ def solve_compression(net: BondNetwork, positions: np.ndarray, fixed: np.ndarray
         raise InputError(f"compression.solver = {solver!r}: must be one of {', '.join(SOLVERS)}")
     loose = loose_particles(net, fixed)
     if loose.any() and not drop_loose:
-        raise LooseParticlesError(f"structure: {int(loose.sum())} particles have no bond path to the substrate "
-                                  "(a floating particle or cluster makes the static problem singular); "
-                                  "compression.drop_loose = true leaves them out")
+        raise LooseParticlesError(loose_message(int(loose.sum())))
     if loose.any():
         say(f"static solve: {int(loose.sum())} loose particles (no bond path to the substrate) left out")
     t0 = time.perf_counter()

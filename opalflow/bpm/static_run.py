@@ -20,7 +20,7 @@ from opalflow.analysis import compression as mech
 from opalflow.bpm.deck import compression_deck
 from opalflow.bpm.scene import scene_of, solid_fraction
 from opalflow.bpm.spec import BpmWorkflow
-from opalflow.bpm.static import StaticResult, solve_compression
+from opalflow.bpm.static import LooseParticlesError, StaticResult, loose_message, loose_particles, solve_compression
 from opalflow.bpm.stiffness import BondNetwork, stiffness_network
 from opalflow.lammps.datafile import write_data
 from opalflow.store import json_text, new_figure, save_figure, staged_files, write_json_atomic
@@ -57,6 +57,11 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
     deck = compression_deck(spec, s)
     build_s = time.perf_counter() - t0
     data = deck.structure
+    net = stiffness_network(data, deck.coefficients)
+    substrate = data.groups["substrate"]
+    loose = loose_particles(net, substrate)
+    if loose.any() and not c.drop_loose:     # refused before anything is written
+        raise LooseParticlesError(loose_message(int(loose.sum())))
     out.mkdir(parents=True, exist_ok=True)
     write_data(out / "data.lmp", data, title=f"opalflow {__version__} {spec.name} (static)")
     info = {"workflow": spec.name, "method": "static", "spec": spec.to_dict(), "opalflow_version": __version__,
@@ -68,8 +73,6 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
         info["structure"] = {k: stats[k] for k in scene.run_keys}
     write_json_atomic(out / "run.json", info)
 
-    substrate = data.groups["substrate"]
-    net = stiffness_network(data, deck.coefficients)
     say(f"static solve ({c.solver}): {s.n_particles} particles, {s.n_bonds} bonds, {6 * s.n_particles} dofs")
     res = solve_compression(net, data.positions, substrate, deck.top_layer, deck.height_nm, deck.area_nm2,
                             strain=STRAIN, solver=c.solver, drop_loose=c.drop_loose, say=say)
