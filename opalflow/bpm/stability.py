@@ -110,7 +110,8 @@ def run_check(deck: CompressionDeck, folder: Path, *, factor: float = 1.0, steps
     ke_tot = ke + erot
     criteria = {}
     finite = bool(len(v)) and bool(np.all(np.isfinite(v)))
-    criteria["finite"] = (finite and not error, "all values finite" if finite else "non-finite values")
+    criteria["finite"] = (finite, "all values finite" if finite else
+                          "non-finite values" if len(v) else "no values (LAMMPS stopped before the first output)")
     lost = "Lost atoms" in error or "lost" in error.lower()
     criteria["no lost particles"] = (not lost, error if lost else "none lost")
     if error and not lost:

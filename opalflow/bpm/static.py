@@ -138,18 +138,27 @@ def solve_compression(net: BondNetwork, positions: np.ndarray, fixed: np.ndarray
     rhs = -net.matvec(x_p.ravel())[free]
     history: list[float] = []
     b_norm = float(np.linalg.norm(rhs))
-    start = time.perf_counter()
+    clock = {"first": 0.0, "said": 0.0}
 
     def progress(k: int, r: float) -> None:
+        """A line at the first iteration (the set-up is done) and then every 10 s at most."""
         history.append(r)
-        if k % 100 == 0 and k:
-            rate = k / (time.perf_counter() - start)
-            # CG's residual falls about geometrically: iterations left from the recent rate of decrease
-            left = ""
-            if len(history) > 50 and history[-50] > r > 0:
-                per_it = math.log(history[-50] / r) / 50
-                left = f", ~{max(0.0, math.log(r / rtol) / per_it / rate):.0f} s left"
-            say(f"static solve: iteration {k}, relative residual {r:.2e} (target {rtol:g}), {rate:.1f} it/s{left}")
+        now = time.perf_counter()
+        if k == 1:
+            clock["first"] = clock["said"] = now
+            say(f"static solve: set-up done after {now - t0:.1f} s; iteration 1, relative residual {r:.2e}")
+            return
+        if now - clock["said"] < 10 and k % 100:
+            return
+        clock["said"] = now
+        rate = (k - 1) / max(now - clock["first"], 1e-9)
+        # CG's residual falls about geometrically: iterations left from the recent rate of decrease
+        left = ""
+        back = min(200, k // 2)
+        if back >= 5 and history[-back] > r > 0:
+            per_it = math.log(history[-back] / r) / back
+            left = f", ~{max(0.0, math.log(r / rtol) / per_it / rate):.0f} s left"
+        say(f"static solve: iteration {k}, relative residual {r:.2e} (target {rtol:g}), {rate:.2f} it/s{left}")
 
     run = {"amg": _solve_amg, "block-amg": _solve_block_amg, "cg": _solve_cg, "cg-jax": _solve_cg_jax}[solver]
     args = (net, free, rhs, positions) if "amg" in solver else (net, free, rhs)
@@ -254,32 +263,48 @@ def _jacobi_inverse(blocks: np.ndarray, free: np.ndarray) -> np.ndarray:
     return np.linalg.inv(blocks)
 
 
-def translational_matrix(net: BondNetwork, free_u: np.ndarray, chunk: int = 1_000_000):
-    """K_uu, the translation-translation part of K, as a 3 x 3 block sparse (BSR) matrix: the bonds'
-    A = a_r n n^T + a_s P off the diagonal (-A) and summed on it; prescribed dofs (``free_u`` False, (N, 3))
-    decoupled with their diagonal kept.  (N + 2 M) blocks of 9 numbers: assembled without a coordinate
-    list of every entry."""
+def translational_matrix(net: BondNetwork, free_u: np.ndarray, dtype=np.float32, chunk: int = 1_000_000):
+    """K_uu, the translation-translation part of K, as a 3 x 3 block sparse (BSR) matrix for the
+    preconditioner: the bonds' A = a_r n n^T + a_s P off the diagonal (-A) and summed on it; prescribed
+    dofs (``free_u`` False, (N, 3)) decoupled with their diagonal kept.  (N + 2 M) blocks of 9 numbers in
+    ``dtype`` (single precision by default: a preconditioner needs no more, and the paper's sample then
+    fits in memory), written straight into row order (a counting sort), without a coordinate list."""
     import scipy.sparse as sp
 
     n, m = net.n_particles, len(net.L)
-    data = np.zeros((n + 2 * m, 3, 3))
+    rows = np.concatenate([np.arange(n), net.i, net.j])
+    counts = np.bincount(rows, minlength=n)
+    indptr = np.concatenate([[0], np.cumsum(counts)])
+    order = np.argsort(rows, kind="stable")
+    del rows
+    pos = np.empty(n + 2 * m, np.int64)
+    pos[order] = np.arange(n + 2 * m)
+    cols = np.empty(n + 2 * m, np.int32)
+    cols[pos[:n]] = np.arange(n)
+    cols[pos[n:n + m]] = net.j
+    cols[pos[n + m:]] = net.i
+    del order
+    data = np.zeros((n + 2 * m, 3, 3), dtype)
+    diag = np.zeros((n, 3, 3))
+    fu = free_u.astype(float)
     for start in range(0, m, chunk):
         sel = slice(start, start + chunk)
+        i, j = net.i[sel], net.j[sel]
         A = _bond_parts(net, sel)[0]
-        data[n + start: n + start + A.shape[0]] = -A
-        data[n + m + start: n + m + start + A.shape[0]] = -A
         for a in range(3):
             for b in range(3):
-                data[:n, a, b] += np.bincount(net.i[sel], A[:, a, b], n) + np.bincount(net.j[sel], A[:, a, b], n)
-    rows = np.concatenate([np.arange(n), net.i, net.j])
-    cols = np.concatenate([np.arange(n), net.j, net.i])
-    diag = data[:n, np.arange(3), np.arange(3)].copy()
-    data *= free_u[rows][:, :, None]
-    data *= free_u[cols][:, None, :]
-    data[:n, np.arange(3), np.arange(3)] += np.where(free_u, 0.0, diag)
-    order = np.lexsort((cols, rows))
-    indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=n))])
-    return sp.bsr_matrix((data[order], cols[order], indptr), shape=(3 * n, 3 * n))
+                diag[:, a, b] += np.bincount(i, A[:, a, b], n) + np.bincount(j, A[:, a, b], n)
+        idx = np.arange(start, start + len(i))
+        data[pos[n + idx]] = -A * fu[i][:, :, None] * fu[j][:, None, :]
+        data[pos[n + m + idx]] = -A * fu[j][:, :, None] * fu[i][:, None, :]
+    kept = diag[:, np.arange(3), np.arange(3)].copy()
+    diag *= fu[:, :, None] * fu[:, None, :]
+    diag[:, np.arange(3), np.arange(3)] += np.where(free_u, 0.0, kept)
+    data[pos[:n]] = diag
+    del pos
+    K = sp.bsr_matrix((data, cols, indptr), shape=(3 * n, 3 * n))
+    K.sort_indices()
+    return K
 
 
 def _operator(net: BondNetwork, free: np.ndarray, use_jax: bool):
@@ -362,7 +387,7 @@ def _solve_block_amg(net, free, rhs, positions, rtol, maxiter, progress):
     matvec, dot, array = _operator(net, free, True)
     mask = free.reshape(n, 6)
     Kuu = translational_matrix(net, mask[:, :3])
-    B = rigid_body_modes(positions).reshape(n, 6, 6)[:, :3, :].reshape(3 * n, 6)
+    B = rigid_body_modes(positions).reshape(n, 6, 6)[:, :3, :].reshape(3 * n, 6).astype(Kuu.dtype)
     ml = pyamg.smoothed_aggregation_solver(Kuu, B=B, strength=("symmetric", {"theta": 0.0}), max_coarse=500,
                                            smooth=("jacobi", {"omega": 4.0 / 3.0}))
     vcycle = ml.aspreconditioner(cycle="V")
@@ -372,7 +397,7 @@ def _solve_block_amg(net, free, rhs, positions, rtol, maxiter, progress):
     def precondition(v):
         v = np.asarray(v).reshape(n, 6)
         z = np.empty((n, 6))
-        z[:, :3] = vcycle.matvec(v[:, :3].ravel()).reshape(n, 3)
+        z[:, :3] = vcycle.matvec(v[:, :3].ravel().astype(Kuu.dtype)).reshape(n, 3)
         z[:, 3:] = np.einsum("nij,nj->ni", inv_rot, v[:, 3:])
         return array(maskf * z.ravel())
 
