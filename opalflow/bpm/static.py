@@ -307,8 +307,10 @@ def translational_matrix(net: BondNetwork, free_u: np.ndarray, dtype=np.float32,
     return K
 
 
-def _operator(net: BondNetwork, free: np.ndarray, use_jax: bool):
-    """v -> P K P v on full vectors (P: zero on prescribed dofs), numpy or jit-compiled JAX (float64)."""
+def _operator(net: BondNetwork, free: np.ndarray, use_jax: bool, chunk: int = 1 << 21):
+    """v -> P K P v on full vectors (P: zero on prescribed dofs), numpy or jit-compiled JAX (float64).
+    The JAX operator runs over the bonds ``chunk`` at a time (``lax.scan``; padding bonds have zero
+    stiffness), so its temporaries stay small on the paper's 17.5 million bonds."""
     mask = free.astype(float)
     if not use_jax:
         return lambda v: mask * net.matvec(mask * v), np.dot, np.asarray
@@ -316,11 +318,18 @@ def _operator(net: BondNetwork, free: np.ndarray, use_jax: bool):
     import jax.numpy as jnp
 
     jax.config.update("jax_enable_x64", True)
-    n = net.n_particles
-    i, j, nv, L = jnp.asarray(net.i), jnp.asarray(net.j), jnp.asarray(net.n), jnp.asarray(net.L)
-    a_r, a_s = jnp.asarray(net.a_r)[:, None], jnp.asarray(net.a_s)[:, None]
-    bend, twist = jnp.asarray(net.bend)[:, None], jnp.asarray(net.twist)[:, None]
-    half = 0.5 * a_s * L[:, None]
+    n, m = net.n_particles, len(net.L)
+    chunk = max(1, min(chunk, m))
+    pad = (-m) % chunk
+
+    def chunked(a, fill=0):
+        a = np.concatenate([a, np.full((pad, *a.shape[1:]), fill, a.dtype)])
+        return jnp.asarray(a.reshape(-1, chunk, *a.shape[1:]))
+
+    unit = np.zeros((pad, 3))
+    unit[:, 2] = 1.0
+    bonds = (chunked(net.i), chunked(net.j), jnp.asarray(np.concatenate([net.n, unit]).reshape(-1, chunk, 3)),
+             chunked(net.L, 1.0), chunked(net.a_r), chunked(net.a_s), chunked(net.bend), chunked(net.twist))
     jmask = jnp.asarray(mask)
     seg = jax.ops.segment_sum
 
@@ -328,13 +337,20 @@ def _operator(net: BondNetwork, free: np.ndarray, use_jax: bool):
     def matvec(v):
         x = (jmask * v).reshape(n, 6)
         u, th = x[:, :3], x[:, 3:]
-        du, st, dt = u[i] - u[j], th[i] + th[j], th[i] - th[j]
-        F = (a_r - a_s) * jnp.sum(nv * du, 1, keepdims=True) * nv + a_s * du + half * jnp.cross(nv, st)
-        Ts = half * jnp.cross(nv, du) - 0.5 * half * L[:, None] * (st - jnp.sum(nv * st, 1, keepdims=True) * nv)
-        n_dt = jnp.sum(nv * dt, 1, keepdims=True) * nv
-        Bd = bend * (dt - n_dt) + twist * n_dt
-        f = seg(F, j, n) - seg(F, i, n)
-        tau = seg(Ts - Bd, i, n) + seg(Ts + Bd, j, n)
+
+        def step(acc, b):
+            i, j, nv, L, a_r, a_s, bend, twist = b
+            a_r, a_s, bend, twist = a_r[:, None], a_s[:, None], bend[:, None], twist[:, None]
+            half = 0.5 * a_s * L[:, None]
+            du, st, dt = u[i] - u[j], th[i] + th[j], th[i] - th[j]
+            F = (a_r - a_s) * jnp.sum(nv * du, 1, keepdims=True) * nv + a_s * du + half * jnp.cross(nv, st)
+            Ts = half * jnp.cross(nv, du) - 0.5 * half * L[:, None] * (st - jnp.sum(nv * st, 1, keepdims=True) * nv)
+            n_dt = jnp.sum(nv * dt, 1, keepdims=True) * nv
+            Bd = bend * (dt - n_dt) + twist * n_dt
+            f, tau = acc
+            return (f + seg(F, j, n) - seg(F, i, n), tau + seg(Ts - Bd, i, n) + seg(Ts + Bd, j, n)), None
+
+        (f, tau), _ = jax.lax.scan(step, (jnp.zeros((n, 3)), jnp.zeros((n, 3))), bonds)
         return -jmask * jnp.concatenate([f, tau], 1).ravel()
 
     return matvec, jnp.dot, jnp.asarray

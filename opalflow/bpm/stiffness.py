@@ -60,25 +60,32 @@ class BondNetwork:
         return (self.a_r[:, None] - self.a_s[:, None]) * n_du * n + self.a_s[:, None] * du \
             + (0.5 * self.a_s * self.L)[:, None] * np.cross(n, theta[i] + theta[j])
 
-    def forces(self, u: np.ndarray, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def part(self, sel: slice) -> "BondNetwork":
+        """The bonds in ``sel`` (views, no copies)."""
+        return BondNetwork(self.n_particles, self.i[sel], self.j[sel], self.n[sel], self.L[sel], self.a_r[sel],
+                           self.a_s[sel], self.bend[sel], self.twist[sel])
+
+    def forces(self, u: np.ndarray, theta: np.ndarray, chunk: int = 2_000_000) -> tuple[np.ndarray, np.ndarray]:
         """Forces and torques (N, 3) of the bonds for displacements u and rotations theta (N, 3):
-        minus the stiffness (or damping) matrix times (u, theta)."""
-        i, j, n, L = self.i, self.j, self.n, self.L
-        du = u[i] - u[j]
-        sum_t = theta[i] + theta[j]
-        d_t = theta[i] - theta[j]
-        half = (0.5 * self.a_s * L)[:, None]
-        F = self.bond_forces(u, theta)
-        n_st = np.einsum("ij,ij->i", n, sum_t)[:, None]
-        Ts = half * np.cross(n, du) - (0.5 * half * L[:, None]) * (sum_t - n_st * n)
-        n_dt = np.einsum("ij,ij->i", n, d_t)[:, None]
-        Bd = self.bend[:, None] * (d_t - n_dt * n) + self.twist[:, None] * n_dt * n
+        minus the stiffness (or damping) matrix times (u, theta); ``chunk`` bonds at a time."""
         f = np.zeros((self.n_particles, 3))
         tau = np.zeros((self.n_particles, 3))
-        for k in range(3):
-            f[:, k] = np.bincount(j, F[:, k], self.n_particles) - np.bincount(i, F[:, k], self.n_particles)
-            tau[:, k] = np.bincount(i, Ts[:, k] - Bd[:, k], self.n_particles) \
-                + np.bincount(j, Ts[:, k] + Bd[:, k], self.n_particles)
+        for start in range(0, len(self.L), chunk):
+            b = self.part(slice(start, start + chunk))
+            i, j, n, L = b.i, b.j, b.n, b.L
+            du = u[i] - u[j]
+            sum_t = theta[i] + theta[j]
+            d_t = theta[i] - theta[j]
+            half = (0.5 * b.a_s * L)[:, None]
+            F = b.bond_forces(u, theta)
+            n_st = np.einsum("ij,ij->i", n, sum_t)[:, None]
+            Ts = half * np.cross(n, du) - (0.5 * half * L[:, None]) * (sum_t - n_st * n)
+            n_dt = np.einsum("ij,ij->i", n, d_t)[:, None]
+            Bd = b.bend[:, None] * (d_t - n_dt * n) + b.twist[:, None] * n_dt * n
+            for k in range(3):
+                f[:, k] += np.bincount(j, F[:, k], self.n_particles) - np.bincount(i, F[:, k], self.n_particles)
+                tau[:, k] += np.bincount(i, Ts[:, k] - Bd[:, k], self.n_particles) \
+                    + np.bincount(j, Ts[:, k] + Bd[:, k], self.n_particles)
         return f, tau
 
     def matvec(self, x: np.ndarray) -> np.ndarray:
