@@ -206,3 +206,18 @@ def test_sweep_killed_at_random_times_completes_to_the_same_results(tmp_path):
         after = {p.parent.name: json.loads(p.read_text())["youngs_modulus_GPa"] for p in root.glob("jobs/*/summary.json")}
         assert after == pytest.approx(reference, rel=1e-4)   # a job resumed from its restart file: not bit-exact
         assert all((root / "jobs" / k / "summary.json").stat().st_mtime_ns == v for k, v in before.items())
+
+
+def test_bulk_study_by_static_solves(tmp_path):
+    """study.method = "static": K_E from one linear solve per diameter; no strength columns; the job's
+    summary says method static; a calibration cannot be static."""
+    spec = load_spec(WORKFLOWS / "bulk_silica.toml", ["study.method=static", "study.diameters_nm=[60.0]"])
+    summary = studies.run(spec, tmp_path, say=lambda m: None)
+    row = summary["by_diameter"]["60"]
+    assert row["strength_MPa"] is None and 0.5 < row["K_E"] < 6
+    jobs = list((tmp_path / "jobs").iterdir())
+    assert json.loads((jobs[0] / "summary.json").read_text())["method"] == "static"
+    assert "| 60 |" in (tmp_path / "report.md").read_text() and "no strength" in (tmp_path / "report.md").read_text()
+    from opalflow.spec import InputError
+    with pytest.raises(InputError, match="study.method"):
+        load_spec(WORKFLOWS / "calibrate_silica.toml", ["study.method=static"])

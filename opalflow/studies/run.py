@@ -39,7 +39,8 @@ def job_spec(spec: StudyWorkflow, overrides: list[str]) -> WorkflowSpec:
     if not path.exists():
         raise SpecError("study.paper_base" if st.paper_scale else "study.base", base,
                         f"no workflow {path.name} in {WORKFLOWS}")
-    return load_spec(path, [*st.set, *overrides])
+    static = ["compression.method=static", "compression.drop_loose=true"] if st.method == "static" else []
+    return load_spec(path, [*static, *st.set, *overrides])
 
 
 FAILED: dict[str, str] = {}
@@ -50,6 +51,11 @@ def _sweep(spec: StudyWorkflow, out: Path, jobs: list[Job], say) -> dict[str, di
     res = run_jobs(jobs, out, workers=spec.study.workers, np_=spec.study.np, say=say)
     FAILED.update({k: v["failed"] for k, v in res.items() if "failed" in v})
     return {k: v for k, v in res.items() if "failed" not in v}
+
+
+def _fmt(value, spec: str) -> str:
+    """``value`` formatted, or "-" where a static job has none (strength, strain at peak, broken bonds)."""
+    return "-" if value is None else format(value, spec)
 
 
 def _num(x: float) -> str:
@@ -172,11 +178,11 @@ def bulk(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
         k_e = s["youngs_modulus_specimen_GPa"] / e_b
         table[_num(d)] = {"diameter_nm": d, "E_macro_GPa": s["youngs_modulus_specimen_GPa"], "K_E": k_e,
                           "E_plate_GPa": s["youngs_modulus_GPa"], "K_E_plate": s["youngs_modulus_GPa"] / e_b,
-                          "strength_MPa": s["strength_MPa"], "strain_at_peak": s["strain_at_peak"],
-                          "broken_bonds": s["broken_bonds"], "n_particles": s["n_particles"], "wall_s": s["wall_s"]}
+                          "strength_MPa": s.get("strength_MPa"), "strain_at_peak": s.get("strain_at_peak"),
+                          "broken_bonds": s.get("broken_bonds"), "n_particles": s["n_particles"], "wall_s": s["wall_s"]}
         rows.append(f"| {d:g} | {s['n_particles']} | {s['youngs_modulus_specimen_GPa']:.3f} | {k_e:.3f} | "
-                    f"{s['youngs_modulus_GPa']:.3f} | {s['strength_MPa']:.1f} | {s['strain_at_peak']:.4f} | "
-                    f"{s['broken_bonds']} | {s['wall_s']:.0f} |")
+                    f"{s['youngs_modulus_GPa']:.3f} | {_fmt(s.get('strength_MPa'), '.1f')} | "
+                    f"{_fmt(s.get('strain_at_peak'), '.4f')} | {_fmt(s.get('broken_bonds'), 'd')} | {s['wall_s']:.0f} |")
     finest = table[min(table, key=lambda k: table[k]["diameter_nm"])]
     exp = paper()["coating"]
     titania = {k: {"E_exp_GPa": v[0], "E_b_GPa": v[0] / finest["K_E"], "E_b_paper_GPa": v[0] / ref["K_E"]}
@@ -184,10 +190,12 @@ def bulk(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
     summary = {"K_E": finest["K_E"], "by_diameter": table, "titania_bond_E_GPa": titania,
                "headline": "K_E = " + ", ".join(f"{v['K_E']:.3f} (d = {k} nm)" for k, v in table.items())
                            + f"; paper {ref['K_E']}"}
+    how = ("By the static solver (compression.method = static): E_macro is the top layer's modulus at zero "
+           "loading rate, the same in both columns (no plate); no strength." if st.method == "static" else
+           "The plate-strain modulus beside it also holds the Hertz settling of the plate on the rough top, "
+           "which dominates in a short stiff block.")
     report = ["Pore-free silica (`pores.arrangement = none`), compressed like the opal; K_E = E_macro / E_b "
-              "(eq. 20) with E_macro from the top particle layer's strain (the sample's own modulus). The "
-              "plate-strain modulus beside it also holds the Hertz settling of the plate on the rough top, "
-              "which dominates in a short stiff block.", "",
+              "(eq. 20) with E_macro from the top particle layer's strain (the sample's own modulus). " + how, "",
               "| d (nm) | particles | E_macro (GPa) | K_E | E from plate strain (GPa) | strength (MPa) | "
               "strain at peak | broken bonds | wall (s) |",
               "|---|---|---|---|---|---|---|---|---|", *rows, "",
@@ -232,22 +240,26 @@ def coating(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
         s = res[job.label]
         table.append({"thickness_nm": t, "case": case, "E_exp_GPa": e_exp,
                       "bond_E_GPa": None if e_exp is None else e_exp / k_e,
-                      "youngs_modulus_GPa": s["youngs_modulus_GPa"], "strength_MPa": s["strength_MPa"],
+                      "youngs_modulus_GPa": s["youngs_modulus_GPa"], "strength_MPa": s.get("strength_MPa"),
                       "n_particles": s["n_particles"], "wall_s": s["wall_s"]})
     means = [r for r in table if r["case"] in ("uncoated", "mean")]
-    rising = all(b["strength_MPa"] > a["strength_MPa"] for a, b in zip(means, means[1:]))
     paper20 = ref["coating"]["coated20"]
-    summary = {"table": table, "strength_rises_with_thickness": rising,
-               "headline": "strength at E_exp: " + ", ".join(f"{r['thickness_nm']:g} nm {r['strength_MPa']:.3g} MPa"
-                                                              for r in means)
-                           + f" ({'rises' if rising else 'does NOT rise'} with thickness)"}
+    if st.method == "static":
+        summary = {"table": table, "headline": "E at E_exp (static): " + ", ".join(
+            f"{r['thickness_nm']:g} nm {r['youngs_modulus_GPa']:.3g} GPa" for r in means)}
+    else:
+        rising = all(b["strength_MPa"] > a["strength_MPa"] for a, b in zip(means, means[1:]))
+        summary = {"table": table, "strength_rises_with_thickness": rising,
+                   "headline": "strength at E_exp: " + ", ".join(
+                       f"{r['thickness_nm']:g} nm {r['strength_MPa']:.3g} MPa" for r in means)
+                   + f" ({'rises' if rising else 'does NOT rise'} with thickness)"}
     _plot_coating(table, out / "coating.png")
     report = [f"E_b(titania) = E_exp / K_E with the paper's K_E = {k_e}; E_exp of Colombi et al. (Table 1).", "",
               "| coating (nm) | E_exp case | E_exp (GPa) | titania E_b (GPa) | E (GPa) | strength (MPa) | wall (s) |",
               "|---|---|---|---|---|---|---|"]
     for r in table:
         report.append(f"| {r['thickness_nm']:g} | {r['case']} | {_blank(r['E_exp_GPa'])} | {_blank(r['bond_E_GPa'])} | "
-                      f"{r['youngs_modulus_GPa']:.3g} | {r['strength_MPa']:.3g} | {r['wall_s']:.0f} |")
+                      f"{r['youngs_modulus_GPa']:.3g} | {_fmt(r['strength_MPa'], '.3g')} | {r['wall_s']:.0f} |")
     report += ["", f"Paper (d = 15 nm, 8.05 um^2): uncoated E = 1.7 GPa, strength 41.1 MPa; 20 nm coated "
                f"E = {paper20['youngs_modulus_GPa']} GPa, strength {paper20['strength_MPa']} MPa "
                f"(density {paper20['density_kg_m3']} kg/m^3); the 34 nm strength within 2.2 % of experiment.",
@@ -263,7 +275,7 @@ def _plot_coating(table, path: Path) -> None:
     fig, axes = new_figure(1, 2, figsize=(9, 3.6))
     for ax, key, label in ((axes[0], "youngs_modulus_GPa", "E (GPa)"), (axes[1], "strength_MPa", "strength (MPa)")):
         for case, marker in (("low", "v"), ("mean", "o"), ("high", "^"), ("uncoated", "s")):
-            pts = [(r["thickness_nm"], r[key]) for r in table if r["case"] == case]
+            pts = [(r["thickness_nm"], r[key]) for r in table if r["case"] == case and r[key] is not None]
             if pts:
                 ax.plot(*zip(*pts), marker, label=f"E_exp {case}" if case != "uncoated" else "uncoated")
         ax.set_xlabel("TiO2 coating (nm)")
@@ -290,20 +302,21 @@ def porosity(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
             continue
         r = res[job.label]
         runs.append({"target_porosity": p, "seed": s, "porosity": r["porosity"], "density_kg_m3": r["density_kg_m3"],
-                     "youngs_modulus_GPa": r["youngs_modulus_GPa"], "strength_MPa": r["strength_MPa"],
+                     "youngs_modulus_GPa": r["youngs_modulus_GPa"], "strength_MPa": r.get("strength_MPa"),
                      "wall_s": r["wall_s"]})
     eps = np.array([r["porosity"] for r in runs])
     e = np.array([r["youngs_modulus_GPa"] for r in runs])
-    sig = np.array([r["strength_MPa"] for r in runs])
-    fits = {"E_exponential": fit_exponential(eps, e), "E_power": fit_power(eps, e),
-            "strength_exponential": fit_exponential(eps, sig)}
+    fits = {"E_exponential": fit_exponential(eps, e), "E_power": fit_power(eps, e)}
+    if st.method == "dynamic":
+        fits["strength_exponential"] = fit_exponential(eps, np.array([r["strength_MPa"] for r in runs]))
     ref = paper()["porosity"]
     better = "power" if fits["E_power"].r2 > fits["E_exponential"].r2 else "exponential"
+    sigma = (f", b_sigma = {fits['strength_exponential'].exponent:.2f}, sigma0 = "
+             f"{fits['strength_exponential'].prefactor:.4g} MPa" if "strength_exponential" in fits else " (static)")
     summary = {"runs": runs, "fits": {k: f.as_dict() for k, f in fits.items()}, "E_better_law": better,
                "paper": ref,
-               "headline": (f"b_E = {fits['E_exponential'].exponent:.2f}, m = {fits['E_power'].exponent:.2f}, "
-                            f"b_sigma = {fits['strength_exponential'].exponent:.2f}, sigma0 = "
-                            f"{fits['strength_exponential'].prefactor:.4g} MPa; E better fitted by the {better} law")}
+               "headline": (f"b_E = {fits['E_exponential'].exponent:.2f}, m = {fits['E_power'].exponent:.2f}"
+                            f"{sigma}; E better fitted by the {better} law")}
     _plot_porosity(runs, fits, out / "porosity.png")
     report = ["Random non-overlapping pores, seeds " + ", ".join(map(str, st.seeds)) + " at each porosity "
               "(`pores.seed` and `packing.seed`). Porosity = the sample's measured macro-porosity.", "",
@@ -313,6 +326,8 @@ def porosity(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
             ("E_exponential", "E = E0 exp(-b eps) (22)", "b", ref["b_E"], ref["E0_GPa"]),
             ("E_power", "E = E0 (1 - eps)^m (23)", "m", ref["m"], ref["E0_GPa"]),
             ("strength_exponential", "sigma = sigma0 exp(-b eps) (26)", "b", ref["b_strength"], ref["sigma0_MPa"])):
+        if key not in fits:
+            continue
         f = fits[key]
         report.append(f"| {name} | {pname} | {f.exponent:.3f} | [{f.exponent_ci[0]:.3f}, {f.exponent_ci[1]:.3f}] | "
                       f"{ref_exp} | {f.prefactor:.4g} | [{f.prefactor_ci[0]:.4g}, {f.prefactor_ci[1]:.4g}] | "
@@ -322,7 +337,7 @@ def porosity(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
                "| target porosity | seed | porosity | density (kg/m^3) | E (GPa) | strength (MPa) | wall (s) |",
                "|---|---|---|---|---|---|---|"]
     report += [f"| {r['target_porosity']:g} | {r['seed']} | {r['porosity']:.4f} | {r['density_kg_m3']:.0f} | "
-               f"{r['youngs_modulus_GPa']:.4g} | {r['strength_MPa']:.4g} | {r['wall_s']:.0f} |" for r in runs]
+               f"{r['youngs_modulus_GPa']:.4g} | {_fmt(r['strength_MPa'], '.4g')} | {r['wall_s']:.0f} |" for r in runs]
     report += ["", "![porosity](porosity.png)"]
     return summary, report
 
@@ -336,14 +351,17 @@ def _plot_porosity(runs, fits, path: Path) -> None:
         f = fits[key]
         y = f.prefactor * (np.exp(-f.exponent * grid) if f.law == "exponential" else (1 - grid) ** f.exponent)
         axes[0].plot(grid, y, style, label=f"{f.law}: {f.exponent:.2f}")
-    f = fits["strength_exponential"]
-    axes[1].plot(eps, [r["strength_MPa"] for r in runs], "o")
-    axes[1].plot(grid, f.prefactor * np.exp(-f.exponent * grid), "--", label=f"exponential: {f.exponent:.2f}")
     dens = [r["density_kg_m3"] for r in runs]
     axes[2].plot(dens, [r["youngs_modulus_GPa"] for r in runs], "o", label="E (GPa)")
-    ax2 = axes[2].twinx()
-    ax2.plot(dens, [r["strength_MPa"] for r in runs], "s", color="C3")
-    ax2.set_ylabel("strength (MPa)", color="C3")
+    if "strength_exponential" in fits:
+        f = fits["strength_exponential"]
+        axes[1].plot(eps, [r["strength_MPa"] for r in runs], "o")
+        axes[1].plot(grid, f.prefactor * np.exp(-f.exponent * grid), "--", label=f"exponential: {f.exponent:.2f}")
+        ax2 = axes[2].twinx()
+        ax2.plot(dens, [r["strength_MPa"] for r in runs], "s", color="C3")
+        ax2.set_ylabel("strength (MPa)", color="C3")
+    else:
+        axes[1].set_title("no strength (static solves)")
     axes[0].set_ylabel("E (GPa)")
     axes[1].set_ylabel("strength (MPa)")
     for ax in axes[:2]:
@@ -380,18 +398,19 @@ def convergence(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
             continue
         r = res[job.label]
         by_setting.setdefault((cells, d), []).append(
-            {"seed": s, "youngs_modulus_GPa": r["youngs_modulus_GPa"], "strength_MPa": r["strength_MPa"],
+            {"seed": s, "youngs_modulus_GPa": r["youngs_modulus_GPa"], "strength_MPa": r.get("strength_MPa", math.nan),
              "wall_s": r["wall_s"], "n_particles": r["n_particles"], "n_bonds": r["n_bonds"],
              "area_um2": cells[0] * cells[1] * base.pores.spacing_nm ** 2 * math.sqrt(3) * 1e-6})
     rows = []
     for (cells, d), runs in by_setting.items():
         e = np.array([r["youngs_modulus_GPa"] for r in runs])
-        sg = np.array([r["strength_MPa"] for r in runs])
+        sg = np.array([r["strength_MPa"] for r in runs], float)
+        has_strength = bool(np.all(np.isfinite(sg)))
         rows.append({"cells": list(cells), "diameter_nm": d, "area_um2": runs[0]["area_um2"],
                      "n_particles": float(np.mean([r["n_particles"] for r in runs])),
                      "E_mean_GPa": float(e.mean()), "E_std_GPa": float(e.std(ddof=1)) if len(e) > 1 else 0.0,
-                     "strength_mean_MPa": float(sg.mean()),
-                     "strength_std_MPa": float(sg.std(ddof=1)) if len(sg) > 1 else 0.0,
+                     "strength_mean_MPa": float(sg.mean()) if has_strength else None,
+                     "strength_std_MPa": (float(sg.std(ddof=1)) if len(sg) > 1 else 0.0) if has_strength else None,
                      "wall_s_mean": float(np.mean([r["wall_s"] for r in runs])), "seeds": len(runs)})
     # error against the finest setting of each axis (largest cross-section; smallest diameter)
     for axis, pick in (("cells", lambda r: r["area_um2"]), ("diameter", lambda r: -r["diameter_nm"])):
@@ -400,7 +419,8 @@ def convergence(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
         finest = max(members, key=pick)
         for r in members:
             r[f"error_E_vs_finest_{axis}"] = r["E_mean_GPa"] / finest["E_mean_GPa"] - 1
-            r[f"error_strength_vs_finest_{axis}"] = r["strength_mean_MPa"] / finest["strength_mean_MPa"] - 1
+            r[f"error_strength_vs_finest_{axis}"] = (r["strength_mean_MPa"] / finest["strength_mean_MPa"] - 1
+                                                     if r["strength_mean_MPa"] is not None else None)
     size_rows = sorted([r for r in rows if r["diameter_nm"] == d0], key=lambda r: r["area_um2"])
     diam_rows = sorted([r for r in rows if r["cells"] == c0], key=lambda r: -r["diameter_nm"])
     cost = {}
@@ -431,8 +451,9 @@ def convergence(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
     for axis, r in [("cells", r) for r in size_rows] + [("diameter", r) for r in diam_rows]:
         report.append(f"| {axis} | {r['cells'][0]}x{r['cells'][1]} | {r['diameter_nm']:g} | {r['area_um2']:.2f} | "
                       f"{r['n_particles']:.0f} | {r['E_mean_GPa']:.4g} | {r['E_std_GPa']:.2g} | "
-                      f"{100 * r[f'error_E_vs_finest_{axis}']:+.1f} % | {r['strength_mean_MPa']:.4g} | "
-                      f"{r['strength_std_MPa']:.2g} | {100 * r[f'error_strength_vs_finest_{axis}']:+.1f} % | "
+                      f"{100 * r[f'error_E_vs_finest_{axis}']:+.1f} % | {_fmt(r['strength_mean_MPa'], '.4g')} | "
+                      f"{_fmt(r['strength_std_MPa'], '.2g')} | "
+                      f"{_fmt(r[f'error_strength_vs_finest_{axis}'] and 100 * r[f'error_strength_vs_finest_{axis}'], '+.1f')} % | "
                       f"{r['wall_s_mean']:.0f} |")
     for name, c in cost.items():
         report.append("")

@@ -19,6 +19,7 @@ class StudySpec:
     set: list[str] = field(default_factory=list)
     workers: int = 0
     np: int = 1
+    method: str = "dynamic"      # static: moduli by one linear solve per job (no strength; not calibration)
     # calibration (eqs. 18-19)
     target_E_GPa: float = 1.7
     target_strength_MPa: float = 41.3
@@ -51,6 +52,9 @@ class StudyWorkflow(WorkflowSpec):
             check_name(where, name)
         check(st.workers >= 0, "study.workers", st.workers, "must be >= 0 (jobs at once; 0: cores / np)")
         check(st.np >= 1, "study.np", st.np, "must be >= 1 (MPI processes per job)")
+        check(st.method in ("dynamic", "static"), "study.method", st.method, "must be 'dynamic' or 'static'")
+        check(not (st.method == "static" and st.type == "calibration"), "study.method", st.method,
+              "must be 'dynamic' for a calibration (it fits the strength, which a static solve has not)")
         check(st.target_E_GPa > 0, "study.target_E_GPa", st.target_E_GPa, "must be > 0")
         check(st.target_strength_MPa > 0, "study.target_strength_MPa", st.target_strength_MPa, "must be > 0")
         check(0 < st.tolerance < 0.5, "study.tolerance", st.tolerance, "must be in (0, 0.5) (relative)")
