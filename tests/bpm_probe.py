@@ -13,8 +13,9 @@ def quaternion(rot: np.ndarray) -> np.ndarray:
     return np.column_stack([np.cos(angle / 2), np.sin(angle / 2)[:, None] * axis])
 
 
-def lammps_response(tmp_path, s, coeffs, u, theta, v=None, omega=None):
-    """Forces and torques LAMMPS's bpm/rotational gives at x + u, rotations theta and velocities v, omega;
+def lammps_response(tmp_path, s, coeffs, u, theta, v=None, omega=None, bond_lines=None):
+    """Forces and torques LAMMPS's bpm/rotational (or the style of ``bond_lines``) gives at x + u, rotations
+    theta and velocities v, omega;
     with velocities, less those it gives at rest: ``acos`` of a cosine that rounds to 1 - 1e-16 makes a
     shear angle of ~1.5e-8 rad in a random direction at rest (elastic_forces), ~1.5e-8 ks per bond (a
     displaced bond has none: its angle is far from 0)."""
@@ -22,8 +23,10 @@ def lammps_response(tmp_path, s, coeffs, u, theta, v=None, omega=None):
     lines = ["units nano", "atom_style bpm/sphere", "boundary p p f" if s.periodic[0] else "boundary f f f",
              "newton on off",
              "comm_modify vel yes cutoff 200", "special_bonds lj 0.0 1.0 1.0 coul 1.0 1.0 1.0",
-             "read_data data.lmp", "bond_style bpm/rotational normalize yes smooth yes break yes",
-             *(f"bond_coeff {t + 1} " + " ".join(num(x) for x in c.values()) for t, c in enumerate(coeffs)),
+             "read_data data.lmp",
+             *(bond_lines or ["bond_style bpm/rotational normalize yes smooth yes break yes",
+                              *(f"bond_coeff {t + 1} " + " ".join(num(x) for x in c.values())
+                                for t, c in enumerate(coeffs))]),
              "pair_style zero 200.0", "pair_coeff * *", "run 0"]
     with session(tmp_path) as lmp:
         for line in lines:

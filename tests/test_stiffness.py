@@ -5,7 +5,7 @@ import pytest
 
 from bpm_probe import lammps_response
 
-from opalflow.bpm.stiffness import damping_network, mass_diagonal, stiffness_network
+from opalflow.bpm.stiffness import damping_network, mass_diagonal, spring_network, stiffness_network
 from opalflow.materials import bond_coefficients
 from opalflow.structure import Structure
 
@@ -104,3 +104,26 @@ def test_each_bond_mode_alone_and_the_error_falls_with_the_amplitude(tmp_path, m
     assert errors[2] <= 3e-5 and errors[3] <= 1e-3
     if mode == "kr":
         assert errors[3] <= 1e-5
+
+
+def test_spring_bonds_are_lammps_linearisation(tmp_path):
+    """bond_style bpm/spring (normalize yes): forces against K u, no torques at all; its damping against
+    C v at rest."""
+    s, _ = cluster()
+    k, gamma = [800.0, 1300.0], [7.0, 11.0]
+    lines = ["bond_style bpm/spring normalize yes smooth yes break yes",
+             *(f"bond_coeff {t + 1} {k[t]} 0.5 {gamma[t]}" for t in range(2))]
+    net = spring_network(s, k)
+    rng = np.random.default_rng(6)
+    u, theta = rng.normal(0, 1.0, (6, 3)) * 60.0 * 1e-5, rng.normal(0, 1.0, (6, 3)) * 1e-5
+    (tmp_path / "k").mkdir()
+    f_lmp, tau_lmp = lammps_response(tmp_path / "k", s, None, u, theta, bond_lines=lines)
+    f, tau = net.forces(u, theta)
+    assert np.abs(f - f_lmp).max() < 1e-4 * np.abs(f_lmp).max()
+    assert not tau.any() and not tau_lmp.any()
+    v = rng.normal(0, 1.0, (6, 3))
+    zero = np.zeros((6, 3))
+    (tmp_path / "c").mkdir()
+    f_lmp, _ = lammps_response(tmp_path / "c", s, None, zero, zero, v, zero, bond_lines=lines)
+    f, _ = spring_network(s, gamma, normalize=False).forces(v, zero)
+    assert np.abs(f - f_lmp).max() < 1e-7 * np.abs(f_lmp).max()

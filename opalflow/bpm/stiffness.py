@@ -26,6 +26,11 @@ factor 1 - B^4 of ``smooth yes`` is 1 to fourth order and leaves the linearisati
 
 ``damping_forces`` has the same form in the velocities, with a_r = gamma_n, a_s = gamma_s,
 B = gamma_r L / 2 P + gamma_t / 2 n n^T.
+
+``bond_style bpm/spring`` (BondBPMSpring::compute: a central force k (r0 - r), / r0 with ``normalize
+yes``, and a damping gamma (v_ij . r) / r along the bond) is the special case a_r = k (/ L), a_s = bend
+= twist = 0 (damping: a_r = gamma): force only, no torque, so a spring network has no rotational
+stiffness at all (:func:`spring_network`).
 """
 from __future__ import annotations
 
@@ -137,3 +142,13 @@ def mass_diagonal(s: Structure) -> np.ndarray:
     m = s.densities * np.pi / 6 * s.diameters**3
     inertia = 0.1 * m * s.diameters**2
     return np.repeat(np.column_stack([m, inertia]), 3, axis=1).ravel()
+
+
+def spring_network(s: Structure, k: np.ndarray, *, normalize: bool = True, L0: np.ndarray | None = None) -> BondNetwork:
+    """The tangent stiffness of ``bond_style bpm/spring`` bonds with spring constant ``k`` per bond type
+    (1-based types of ``s.bond_types``), or of their damping when ``k`` holds the gammas and
+    ``normalize`` is False: a_r = k / L (``normalize yes``) or k along the bond, nothing else."""
+    i, j, n, L = _geometry(s, L0)
+    a_r = np.asarray(k, float)[s.bond_types - 1] / (L if normalize else 1.0)
+    zero = np.zeros(len(L))
+    return BondNetwork(s.n_particles, i, j, n, L, a_r, zero, zero, zero)
