@@ -43,7 +43,7 @@ class ContactsSpec:
 #: how a compression is computed: a LAMMPS run, or the linear solve of opalflow.bpm.static
 METHODS = ("dynamic", "static")
 #: solvers of the static method (opalflow.bpm.static.SOLVERS)
-STATIC_SOLVERS = ("amg", "block-amg", "cg", "cg-jax")
+STATIC_SOLVERS = ("auto", "amg", "block-amg", "cg", "cg-jax")
 
 
 @dataclass
@@ -60,7 +60,7 @@ class CompressionSpec:
     restart_every_strain: float = 0.005
     check_rate: bool = False
     method: str = "dynamic"          # dynamic: LAMMPS; static: one linear solve (E and stresses only)
-    solver: str = "amg"              # static: amg, block-amg, cg or cg-jax (opalflow/bpm/static.py)
+    solver: str = "auto"             # static: auto, amg, block-amg, cg or cg-jax (opalflow/bpm/static.py)
     drop_loose: bool = False         # static: leave out particles with no bond path to the substrate
 
 

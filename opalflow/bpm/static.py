@@ -16,6 +16,7 @@ with the bond forces of the solution.
 
 Solvers (measured in bench/bench_static.py):
 
+- ``auto`` (default): ``amg`` up to AMG_MAX_BONDS bonds, ``block-amg`` above;
 - ``amg``: K assembled as a sparse matrix (12 x 12 per bond), smoothed-aggregation AMG (pyamg) with the
   six rigid-body modes as near-null space, as the preconditioner of conjugate gradients;
 - ``block-amg``: matrix-free CG (the JAX operator) preconditioned by AMG on the translational part of K
@@ -35,6 +36,11 @@ import numpy as np
 from opalflow.bpm.spec import STATIC_SOLVERS as SOLVERS
 from opalflow.bpm.stiffness import BondNetwork
 from opalflow.spec import InputError
+
+
+#: ``solver = "auto"``: the assembled AMG up to this many bonds (fastest there; 5.4 GiB at 0.87 M bonds),
+#: block-amg above (12.7 GiB for the paper's 17.5 M bonds); bench/results/static_quickstart.json
+AMG_MAX_BONDS = 500_000
 
 
 class LooseParticlesError(InputError):
@@ -111,7 +117,7 @@ def rigid_body_modes(positions: np.ndarray) -> np.ndarray:
 
 
 def solve_compression(net: BondNetwork, positions: np.ndarray, fixed: np.ndarray, top: np.ndarray,
-                      height: float, area: float, *, strain: float = 1e-4, solver: str = "amg",
+                      height: float, area: float, *, strain: float = 1e-4, solver: str = "auto",
                       rtol: float = 1e-6, maxiter: int = 20000, drop_loose: bool = False, say=print) -> StaticResult:
     """Uniaxial compression by a prescribed top-layer displacement (see the module docstring).
 
@@ -123,6 +129,8 @@ def solve_compression(net: BondNetwork, positions: np.ndarray, fixed: np.ndarray
     """
     if solver not in SOLVERS:
         raise InputError(f"compression.solver = {solver!r}: must be one of {', '.join(SOLVERS)}")
+    if solver == "auto":
+        solver = "amg" if len(net.L) <= AMG_MAX_BONDS else "block-amg"
     loose = loose_particles(net, fixed)
     if loose.any() and not drop_loose:
         raise LooseParticlesError(loose_message(int(loose.sum())))
