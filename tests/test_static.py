@@ -133,3 +133,16 @@ def test_jax_operator_in_chunks_is_the_operator():
     for chunk in (997, 1 << 21):
         got = np.asarray(_operator(net, free, True, chunk=chunk)[0](x))
         assert np.allclose(got, ref, rtol=0, atol=1e-12 * np.abs(ref).max()), chunk
+
+
+def test_loose_particles_are_refused_before_anything_is_written(tmp_path, capsys):
+    """The quickstart at d = 40 nm has one particle no bond holds: the static run says so in one line,
+    exit 2, no folder; compression.drop_loose = true solves without it."""
+    out = tmp_path / "run"
+    sets = ["--set", "packing.diameter_nm=40.0", "--set", "compression.method=static"]
+    assert main(["run", "quickstart", "--out", str(out), *sets]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("error: structure: 1 particles have no bond path to the substrate")
+    assert not out.exists()
+    assert main(["run", "quickstart", "--out", str(out), *sets, "--set", "compression.drop_loose=true"]) == 0
+    assert json.loads((out / "summary.json").read_text())["loose_particles_left_out"] == 1
