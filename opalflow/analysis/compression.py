@@ -135,6 +135,38 @@ def stress_by_material(sigma: np.ndarray, types: np.ndarray, type_names: list[st
     return out
 
 
+def stress_table(stress_by_strain: dict[str, dict[str, dict]], digits: int = 1) -> list[str]:
+    """Report lines: the particle stresses per material at each strain (Table 2 format of Dosta et al.)."""
+    if not stress_by_strain:
+        return []
+    lines = ["Particle stresses (eq. 21, V_p = particle volume; tension positive):", "",
+             "| strain | material | sigma_xx (MPa) | sigma_zz (MPa) |", "|---|---|---|---|"]
+    for strain_txt, mats in stress_by_strain.items():
+        for mat, v in mats.items():
+            lines.append(f"| {strain_txt} | {mat} | {v['sigma_xx_mean_MPa']:.{digits}f} +- "
+                         f"{v['sigma_xx_std_MPa']:.{digits}f} | {v['sigma_zz_mean_MPa']:.{digits}f} +- "
+                         f"{v['sigma_zz_std_MPa']:.{digits}f} |")
+    return lines
+
+
+def plot_stress_histograms(path: Path, sigma: np.ndarray, types: np.ndarray, type_names: list[str],
+                           strain: float) -> None:
+    """sigma_xx and sigma_zz histograms per material (substrate left out) at one strain, into ``path``."""
+    from opalflow.store import new_figure, save_figure
+
+    fig, axes = new_figure(1, 2, figsize=(8, 3.4))
+    for col, ax, label in ((0, axes[0], "sigma_xx"), (2, axes[1], "sigma_zz")):
+        for t, name in enumerate(type_names):
+            sel = types == t + 1
+            if name != "substrate" and sel.any():
+                ax.hist(sigma[sel, col], bins=60, histtype="step", weights=np.full(sel.sum(), 1 / len(sel)),
+                        label=name)
+        ax.set_xlabel(f"{label} (MPa) at strain {100 * strain:.2f} %")
+        ax.set_ylabel("fraction")
+    axes[0].legend()
+    save_figure(fig, path)
+
+
 def bond_strain_histogram(local: np.ndarray, bins: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Fraction of intact bonds per strain bin (Fig. 7 format); strain = r / r0 - 1."""
     strain = local[:, 0] / local[:, 1] - 1.0

@@ -276,18 +276,9 @@ def _plots(stage, strain, stress, stress_plate, stress_substrate, fit, snapshots
     ax.legend()
     save_figure(fig, stage("stress_strain.png"))
     if snapshots:
-        step, snap = list(snapshots.items())[-1]
-        fig, axes = new_figure(1, 2, figsize=(8, 3.4))
-        for col, ax, label in ((0, axes[0], "sigma_xx"), (2, axes[1], "sigma_zz")):
-            for t, name in enumerate(type_names):
-                sel = snap["type"] == t + 1
-                if name != "substrate" and sel.any():
-                    ax.hist(snap["sigma_MPa"][sel, col], bins=60, histtype="step",
-                            weights=np.full(sel.sum(), 1 / len(sel)), label=name)
-            ax.set_xlabel(f"{label} (MPa) at strain {100 * snap['strain']:.2f} %")
-            ax.set_ylabel("fraction")
-        axes[0].legend()
-        save_figure(fig, stage("stress_hist.png"))
+        snap = list(snapshots.values())[-1]
+        mech.plot_stress_histograms(stage("stress_hist.png"), snap["sigma_MPa"], snap["type"], type_names,
+                                    snap["strain"])
     if histograms:
         fig, ax = new_figure(figsize=(5, 3.4))
         for hist in histograms.values():
@@ -324,13 +315,7 @@ def _report(info, summary, fit) -> str:
               f"({fit.points} points).",
               f"Bond stiffness error from {info['spec']['bonds']['length_bins']} length bins: "
               f"max {100 * summary['bond_stiffness_error_max']:.2f} %.", ""]
-    if summary["stress_by_material"]:
-        lines += ["Particle stresses (eq. 21, V_p = particle volume; tension positive):", "",
-                  "| strain | material | sigma_xx (MPa) | sigma_zz (MPa) |", "|---|---|---|---|"]
-        for strain_txt, mats in summary["stress_by_material"].items():
-            for mat, v in mats.items():
-                lines.append(f"| {strain_txt} | {mat} | {v['sigma_xx_mean_MPa']:.1f} +- {v['sigma_xx_std_MPa']:.1f} | "
-                             f"{v['sigma_zz_mean_MPa']:.1f} +- {v['sigma_zz_std_MPa']:.1f} |")
+    lines += mech.stress_table(summary["stress_by_material"])
     if "rate_check" in summary:
         rc = summary["rate_check"]
         lines += ["", f"Rate check (half plate speed): E changes by {100 * rc['youngs_modulus_change']:+.2f} %, "

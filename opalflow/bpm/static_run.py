@@ -144,17 +144,7 @@ def _plots(stage, data, res: StaticResult, snapshots, strain_unit, strains) -> N
     save_figure(fig, stage("displacement.png"))
     if snapshots:
         e, snap = list(snapshots.items())[0]
-        fig, axes = new_figure(1, 2, figsize=(8, 3.4))
-        for col, ax, label in ((0, axes[0], "sigma_xx"), (2, axes[1], "sigma_zz")):
-            for t, name in enumerate(data.type_names):
-                sel = data.types == t + 1
-                if name != "substrate" and sel.any():
-                    ax.hist(snap["sigma_MPa"][sel, col], bins=60, histtype="step",
-                            weights=np.full(sel.sum(), 1 / len(sel)), label=name)
-            ax.set_xlabel(f"{label} (MPa) at strain {100 * e:.2f} %")
-            ax.set_ylabel("fraction")
-        axes[0].legend()
-        save_figure(fig, stage("stress_hist.png"))
+        mech.plot_stress_histograms(stage("stress_hist.png"), snap["sigma_MPa"], data.types, data.type_names, e)
         fig, ax = new_figure(figsize=(5, 3.4))
         for e in strains:
             values = strain_unit * e
@@ -181,13 +171,7 @@ def _report(spec: BpmWorkflow, info: dict, summary: dict, res: StaticResult) -> 
     lines += ["", f"Solver `{res.solver}`: {res.iterations} iterations to relative residual {res.residual:.1e}; "
               f"setup {res.setup_seconds:.1f} s, solve {res.seconds:.1f} s, peak memory {res.peak_memory_MiB:.0f} MiB; "
               f"structure built in {summary['build_s']:.1f} s; wall {summary['wall_s']:.1f} s.", ""]
-    if summary["stress_by_material"]:
-        lines += ["Particle stresses (eq. 21, V_p = particle volume; tension positive):", "",
-                  "| strain | material | sigma_xx (MPa) | sigma_zz (MPa) |", "|---|---|---|---|"]
-        for strain_txt, mats in summary["stress_by_material"].items():
-            for mat, v in mats.items():
-                lines.append(f"| {strain_txt} | {mat} | {v['sigma_xx_mean_MPa']:.2f} +- {v['sigma_xx_std_MPa']:.2f} | "
-                             f"{v['sigma_zz_mean_MPa']:.2f} +- {v['sigma_zz_std_MPa']:.2f} |")
+    lines += mech.stress_table(summary["stress_by_material"], digits=2)
     lines += ["", "Plots: displacement.png, stress_hist.png, bond_strain.png. Data: results.h5 (group `static`), "
               "summary.json."]
     return "\n".join(lines) + "\n"
