@@ -146,10 +146,14 @@ def _plots(stage, data, res: StaticResult, snapshots, strain_unit, strains) -> N
         e, snap = list(snapshots.items())[0]
         mech.plot_stress_histograms(stage("stress_hist.png"), snap["sigma_MPa"], data.types, data.type_names, e)
         fig, ax = new_figure(figsize=(5, 3.4))
+        # the range from the data: the middle 99.8 % of the bonds at the largest strain (outliers clipped
+        # into the end bins), a log axis so that the tails show beside the peak
+        lo, hi = np.percentile(100 * strain_unit * max(strains), [0.1, 99.9])
         for e in strains:
-            values = strain_unit * e
-            ax.hist(100 * values, bins=80, histtype="step", weights=np.full(len(values), 1 / len(values)),
-                    label=f"strain {100 * e:.2f} %")
+            values = np.clip(100 * strain_unit * e, lo, hi)
+            ax.hist(values, bins=np.linspace(lo, hi, 81), histtype="step",
+                    weights=np.full(len(values), 1 / len(values)), label=f"strain {100 * e:.2f} %")
+        ax.set_yscale("log")
         ax.set_xlabel("bond strain (%)")
         ax.set_ylabel("fraction of bonds")
         ax.legend()
