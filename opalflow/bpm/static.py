@@ -172,7 +172,7 @@ def solve_compression(net: BondNetwork, positions: np.ndarray, fixed: np.ndarray
 
     run = {"amg": _solve_amg, "block-amg": _solve_block_amg, "cg": _solve_cg, "cg-jax": _solve_cg_jax}[solver]
     args = (net, free, rhs, positions) if "amg" in solver else (net, free, rhs)
-    x_f, iterations, residual, setup = run(*args, rtol, maxiter, progress)
+    x_f, iterations, setup = run(*args, rtol, maxiter, progress)
     x = x_p.ravel().copy()
     x[free] = x_f
     x = x.reshape(n, 6)
@@ -183,7 +183,7 @@ def solve_compression(net: BondNetwork, positions: np.ndarray, fixed: np.ndarray
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     true_res = float(np.linalg.norm(net.matvec(x.ravel())[free])) / max(b_norm, 1e-300)
     return StaticResult(u=x[:, :3], theta=x[:, 3:], strain=strain, stress_MPa=stress, modulus_MPa=stress / strain,
-                        iterations=iterations, residual=true_res if residual is None else max(residual, true_res),
+                        iterations=iterations, residual=true_res,
                         seconds=seconds, setup_seconds=setup, peak_memory_MiB=peak, solver=solver, history=history,
                         loose=int(loose.sum()))
 
@@ -201,7 +201,7 @@ def _solve_amg(net, free, rhs, positions, rtol, maxiter, progress):
     vcycle = ml.aspreconditioner(cycle="V")
     setup = time.perf_counter() - t
     x, iterations = pcg(lambda v: K @ v, vcycle.matvec, rhs, rtol, maxiter, progress)
-    return x, iterations, None, setup
+    return x, iterations, setup
 
 
 def pcg(matvec, precondition, b, rtol: float, maxiter: int, progress, dot=np.dot):
@@ -393,7 +393,7 @@ def _solve_cg(net, free, rhs, rtol, maxiter, progress, use_jax=False):
     precondition(b)
     setup = time.perf_counter() - t
     x, iterations = pcg(matvec, precondition, b, rtol, maxiter, progress, dot=dot)
-    return np.asarray(x)[free], iterations, None, setup
+    return np.asarray(x)[free], iterations, setup
 
 
 def _solve_cg_jax(net, free, rhs, rtol, maxiter, progress):
@@ -431,4 +431,4 @@ def _solve_block_amg(net, free, rhs, positions, rtol, maxiter, progress):
     matvec(b)
     setup = time.perf_counter() - t
     x, iterations = pcg(matvec, precondition, b, rtol, maxiter, progress, dot=dot)
-    return np.asarray(x)[free], iterations, None, setup
+    return np.asarray(x)[free], iterations, setup

@@ -99,19 +99,6 @@ class BondNetwork:
         f, tau = self.forces(x[:, :3], x[:, 3:])
         return -np.hstack([f, tau]).ravel()
 
-    def diagonal(self) -> np.ndarray:
-        """The diagonal of the matrix (6 per particle), for Jacobi preconditioning and bounds."""
-        n, L = self.n, self.L
-        nn = n**2
-        tr = (self.a_r[:, None] - self.a_s[:, None]) * nn + self.a_s[:, None]
-        rot = 0.25 * (self.a_s * L**2)[:, None] * (1 - nn) + self.bend[:, None] * (1 - nn) + self.twist[:, None] * nn
-        d = np.zeros((self.n_particles, 6))
-        for k in range(3):
-            d[:, k] = np.bincount(self.i, tr[:, k], self.n_particles) + np.bincount(self.j, tr[:, k], self.n_particles)
-            d[:, 3 + k] = np.bincount(self.i, rot[:, k], self.n_particles) + np.bincount(self.j, rot[:, k],
-                                                                                           self.n_particles)
-        return d.ravel()
-
 
 def _geometry(s: Structure, L0: np.ndarray | None):
     i = np.minimum(s.bonds[:, 0], s.bonds[:, 1])
