@@ -137,7 +137,8 @@ class CompressionDeck:
 
 
 def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
-    """Decks (fresh and resume) for the uniaxial compression of ``s`` by a plate."""
+    """Decks (fresh and resume) for the uniaxial compression of ``s`` by a plate (for a static solve,
+    which runs no deck, the time step is only the cheap Gershgorin bound)."""
     c = spec.compression
     d_mean = float(np.mean(s.diameters))
     r0 = s.bond_lengths()
@@ -163,7 +164,7 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
                 for k, n in enumerate(s.type_names)}
     plate_E = {t: plate_contact_E(cp, plate) for t, cp in contacts.items()}
     estimate = estimate_timestep(data, coeffs, contacts if spec.contacts.enabled else {},
-                                 plate_E, contacts, r0)
+                                 plate_E, contacts, r0, spectral=spec.compression.method != "static")
     limit_ns = estimate.limit_ns
     if c.timestep_s:
         dt = c.timestep_s * 1e9

@@ -62,8 +62,9 @@ def _dt(omega2: np.ndarray) -> float:
 def estimate_timestep(s: Structure, coeffs: list[BondCoefficients],
                       contacts: dict[int, ContactProperties], plate_E: dict[int, float],
                       plate_props: dict[int, ContactProperties],
-                      L0: np.ndarray | None = None) -> TimestepEstimate:
-    """Critical time step of ``s`` with bond types ``coeffs`` (1-based types of s.bond_types).
+                      L0: np.ndarray | None = None, spectral: bool = True) -> TimestepEstimate:
+    """Critical time step of ``s`` with bond types ``coeffs`` (1-based types of s.bond_types); the
+    Gershgorin bound alone with ``spectral`` False (a deck that will not be run).
 
     ``contacts`` maps atom type -> contact properties (empty: no particle contacts);
     ``plate_E`` and ``plate_props`` give the plate contact per atom type.
@@ -141,7 +142,7 @@ def estimate_timestep(s: Structure, coeffs: list[BondCoefficients],
     bound = float(np.min(2 * (np.sqrt(1 + zeta**2) - zeta) / omega))
     stiffest = min(by_mode, key=by_mode.get)
     by_mode["gershgorin"] = bound
-    if s.n_bonds <= SPECTRAL_MAX_BONDS:
+    if spectral and s.n_bonds <= SPECTRAL_MAX_BONDS:
         by_mode["spectral"] = _spectral_limit(s, coeffs, L0, contact * m)
         return TimestepEstimate(by_mode, by_mode["spectral"], stiffest, "spectral")
     return TimestepEstimate(by_mode, bound, stiffest, "gershgorin")
