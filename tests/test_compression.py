@@ -324,6 +324,23 @@ def test_stability_check_catches_a_timestep_three_times_the_estimate(tmp_path, c
     assert "FAIL  energy account: max(KE - W_in) = " in capsys.readouterr().err
 
 
+def test_stability_check_to_a_strain(tmp_path, capsys):
+    """--strain: the check runs until the plate has compressed the sample that far (a dense state), the
+    step count from the deck (height / speed / dt); a bad strain is one line."""
+    out = tmp_path / "check"
+    sets = ["--set", "compression.plate_speed_m_s=50.0", "--set", "lattice.cells_z=6"]
+    assert main(["check", "lattice_sc", "--out", str(out), "--strain", "0.2", *sets]) == 0
+    summary = json.loads((out / "stability.json").read_text())
+    info = summary["run"]
+    assert summary["passed"] and summary["strain"] == 0.2
+    dt_ns = summary["timestep_s"] * 1e9
+    planned = math.ceil(0.2 * 100.0 / 50.0 / dt_ns)        # 6 cells of 20 nm: the mobile part is 100 nm high
+    assert planned <= info["steps"] < planned * 1.05
+    assert "(to strain 0.2)" in summary["headline"]
+    assert main(["check", "lattice_sc", "--out", str(tmp_path / "x"), "--strain", "2"]) == 2
+    assert "--strain = 2.0" in capsys.readouterr().err
+
+
 def test_stability_matrix_writes_one_row_per_case(tmp_path, capsys):
     """The matrix machinery on a small lattice: each row checked at the deck's dt and bisected."""
     wf = tmp_path / "m.toml"
