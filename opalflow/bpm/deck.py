@@ -136,12 +136,11 @@ class CompressionDeck:
         }
 
 
-def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
-    """Decks (fresh and resume) for the uniaxial compression of ``s`` by a plate (for a static solve,
-    which runs no deck, the time step is only the cheap Gershgorin bound)."""
-    c = spec.compression
-    d_mean = float(np.mean(s.diameters))
-    r0 = s.bond_lengths()
+def bond_model(spec: BpmWorkflow, s: Structure, r0: np.ndarray | None = None
+               ) -> tuple[Structure, BondBins, list[BondCoefficients]]:
+    """``s`` with its bonds typed by material and length bin, the bins, and each type's bpm/rotational
+    coefficients (the materials' bond E and strength at the mean particle radius and mass of the type)."""
+    r0 = s.bond_lengths() if r0 is None else r0
     bins = bin_bonds(s, spec.bonds.length_bins, r0)
     data = Structure(positions=s.positions, diameters=s.diameters, types=s.types, densities=s.densities,
                      box_lo=s.box_lo, box_hi=s.box_hi, periodic=s.periodic, bonds=s.bonds,
@@ -157,6 +156,17 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
         r = float(np.mean(s.diameters[on])) / 2
         coeffs.append(bond_coefficients(mat, spec.bonds.radius_factor * r, L, m, 0.4 * m * r * r,
                                         spec.bonds.damping_ratio, spec.materials))
+    return data, bins, coeffs
+
+
+def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
+    """Decks (fresh and resume) for the uniaxial compression of ``s`` by a plate (for a static solve,
+    which runs no deck, the time step is only the cheap Gershgorin bound)."""
+    c = spec.compression
+    d_mean = float(np.mean(s.diameters))
+    r0 = s.bond_lengths()
+    data, bins, coeffs = bond_model(spec, s, r0)
+    masses = s.densities * np.pi / 6 * s.diameters**3
     plate = contact_properties(DIAMOND)
     given = {k: v for k, v in (("friction", spec.contacts.friction), ("restitution", spec.contacts.restitution))
              if v is not None}
