@@ -146,3 +146,51 @@ def test_loose_particles_are_refused_before_anything_is_written(tmp_path, capsys
     assert not out.exists()
     assert main(["run", "quickstart", "--out", str(out), *sets, "--set", "compression.drop_loose=true"]) == 0
     assert json.loads((out / "summary.json").read_text())["loose_particles_left_out"] == 1
+
+
+def test_periodic_lattice_stiffness_tensor_is_analytic(tmp_path, capsys):
+    """A simple-cubic lattice periodic in x, y and z: C11 = C22 = C33 = E_b pi r_b^2 / a^2, C12 = 0 and
+    C44 = ks / (2 a^2) (a shear strains the y and z bonds sideways; no particle turns, by symmetry)."""
+    from opalflow.materials import material
+
+    out = tmp_path / "t"
+    assert main(["run", "lattice_sc", "--out", str(out), "--set", "compression.method=static",
+                 "--set", "lattice.periodic_z=true"]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    C = np.array(s["stiffness_tensor_GPa"])
+    m = material("silica")
+    a, r_b = 20.0, 10.0
+    E_b, nu = m["bond_youngs_modulus_GPa"], m["bond_poisson_ratio"]
+    c11 = E_b * np.pi * r_b**2 / a**2
+    c44 = E_b / (2 * (1 + nu)) * np.pi * r_b**2 / (2 * a**2)
+    assert np.allclose(np.diag(C)[:3], c11, rtol=1e-9) and np.allclose(np.diag(C)[3:], c44, rtol=1e-9)
+    assert np.abs(C - np.diag(np.diag(C))).max() < 1e-9 * c11
+    assert abs(s["reference"]["youngs_modulus_GPa"]["error"]) < 1e-9
+    assert "| zz |" in (out / "report.md").read_text()
+    assert main(["run", "lattice_sc", "--out", str(tmp_path / "d"), "--set", "lattice.periodic_z=true"]) == 2
+    assert "lattice.periodic_z = True: needs compression.method" in capsys.readouterr().err
+
+
+def test_stiffness_tensor_of_a_disordered_periodic_network():
+    """A periodic FCC lattice with jittered positions: the particles relax (CG iterations), C is symmetric
+    and positive definite, below the affine (unrelaxed) tensor, and amg and cg agree."""
+    from opalflow.bpm.deck import bond_model
+    from opalflow.bpm.static import solve_tensor
+
+    spec = load_spec(WORKFLOWS / "lattice_sc.toml", ["lattice.arrangement=fcc", "lattice.cells_z=4",
+                                                     "bonds.cutoff_factor=1.2", "compression.method=static",
+                                                     "lattice.periodic_z=true"])
+    s = scene_of(spec).build(spec, lambda m: None)
+    s.positions += np.random.default_rng(7).normal(0, 0.4, s.positions.shape)
+    data, _, coeffs = bond_model(spec, s)
+    net = stiffness_network(data, coeffs)
+    volume = float(np.prod(data.box_lengths))
+    amg = solve_tensor(net, data.positions, volume, solver="amg", say=lambda m: None)
+    cg = solve_tensor(net, data.positions, volume, solver="cg", say=lambda m: None)
+    C = amg.C_GPa
+    assert min(amg.iterations) > 0 and amg.residual < 1e-7
+    assert np.allclose(C, C.T, atol=1e-6 * C.max()) and np.linalg.eigvalsh(C).min() > 0
+    assert np.allclose(cg.C_GPa, C, atol=1e-6 * C.max())
+    # the affine tensor: the same loadings without relaxation (iterations capped at zero)
+    affine = solve_tensor(net, data.positions, volume, solver="cg", maxiter=0, say=lambda m: None).C_GPa
+    assert np.linalg.eigvalsh(affine - C).min() > -1e-9 * C.max() and np.trace(affine - C) > 1e-3 * np.trace(C)

@@ -87,16 +87,20 @@ def assemble(net: BondNetwork):
     return sp.csr_matrix((blocks.ravel(), (rows, cols)), shape=(size, size))
 
 
-def loose_particles(net: BondNetwork, anchored: np.ndarray) -> np.ndarray:
-    """Particles with no bond path to an ``anchored`` one (a floating particle or cluster)."""
+def clusters(net: BondNetwork) -> np.ndarray:
+    """The bonded cluster of each particle (connected components of the bond graph), labels 0, 1, ..."""
     import scipy.sparse as sp
     from scipy.sparse.csgraph import connected_components
 
     n = net.n_particles
-    graph = sp.coo_matrix((np.ones(len(net.i)), (net.i, net.j)), shape=(n, n))
-    _, label = connected_components(graph, directed=False)
-    held = np.unique(label[anchored])
-    return ~np.isin(label, held)
+    return connected_components(sp.coo_matrix((np.ones(len(net.i)), (net.i, net.j)), shape=(n, n)),
+                                directed=False)[1]
+
+
+def loose_particles(net: BondNetwork, anchored: np.ndarray) -> np.ndarray:
+    """Particles with no bond path to an ``anchored`` one (a floating particle or cluster)."""
+    label = clusters(net)
+    return ~np.isin(label, np.unique(label[anchored]))
 
 
 def loose_message(count: int) -> str:
@@ -188,6 +192,79 @@ def solve_compression(net: BondNetwork, positions: np.ndarray, fixed: np.ndarray
                         loose=int(loose.sum()))
 
 
+#: Voigt order of the stiffness tensor: xx yy zz yz xz xy (engineering shear strains)
+VOIGT = ((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))
+
+
+@dataclass
+class TensorResult:
+    """The 6 x 6 stiffness tensor (GPa, Voigt order xx yy zz yz xz xy) of a sample periodic in x, y, z."""
+
+    C_GPa: np.ndarray
+    iterations: list[int]
+    residual: float
+    seconds: float
+    peak_memory_MiB: float
+    solver: str
+    loose: int = 0
+
+
+def solve_tensor(net: BondNetwork, positions: np.ndarray, volume: float, *, solver: str = "auto",
+                 rtol: float = 1e-8, maxiter: int = 20000, drop_loose: bool = False, say=print) -> TensorResult:
+    """The stiffness tensor of a network periodic in all three directions, from six loadings.
+
+    A unit macroscopic strain E (Voigt column k) stretches every bond by E R_b through the periodic
+    images (R_b the bond vector, minimum image); the particles then relax: K w = g(E), g the forces of the
+    affine stretch, with one particle's translations held (the three translations are the only
+    zero-energy modes of a periodic network).  The stress is the bond virial
+    sigma = 1/V sum_b R_b (x) F_b (symmetrised), column k of C.  Loose particles (not in the largest
+    bonded cluster) are refused, or held still with ``drop_loose``.
+    """
+    if solver not in SOLVERS:
+        raise InputError(f"compression.solver = {solver!r}: must be one of {', '.join(SOLVERS)}")
+    if solver == "auto":
+        solver = "amg" if len(net.L) <= AMG_MAX_BONDS else "block-amg"
+    t0 = time.perf_counter()
+    n = net.n_particles
+    label = clusters(net)
+    loose = label != np.argmax(np.bincount(label))
+    if loose.any() and not drop_loose:
+        raise LooseParticlesError(f"structure: {int(loose.sum())} particles are not in the largest bonded "
+                                  "cluster (the static problem is singular); compression.drop_loose = true "
+                                  "leaves them out")
+    prescribed = np.zeros((n, 6), bool)
+    prescribed[loose] = True
+    prescribed[int(np.flatnonzero(~loose)[0]), :3] = True
+    free = ~prescribed.ravel()
+    R = net.n * net.L[:, None]
+    zero = np.zeros((n, 3))
+    C = np.zeros((6, 6))
+    iterations, worst = [], 0.0
+    run = {"amg": _solve_amg, "block-amg": _solve_block_amg, "cg": _solve_cg, "cg-jax": _solve_cg_jax}[solver]
+    for k, (a, b) in enumerate(VOIGT):
+        E = np.zeros((3, 3))
+        E[a, b] = E[b, a] = 1.0 if a == b else 0.5
+        stretch = R @ E
+        f, tau = net.forces(zero, zero, stretch)
+        rhs = np.hstack([f, tau]).ravel()[free]
+        say(f"static tensor: loading {k + 1} of 6 ({'xx yy zz yz xz xy'.split()[k]})")
+        args = (net, free, rhs, positions) if "amg" in solver else (net, free, rhs)
+        x_f, its, _ = run(*args, rtol, maxiter, lambda i, r: None)
+        x = np.zeros(6 * n)
+        x[free] = x_f
+        x = x.reshape(n, 6)
+        f2, tau2 = net.forces(x[:, :3], x[:, 3:], stretch)
+        worst = max(worst, float(np.linalg.norm(np.hstack([f2, tau2]).ravel()[free])) / max(np.linalg.norm(rhs), 1e-300))
+        F = net.bond_forces(x[:, :3], x[:, 3:], stretch)
+        sigma = R.T @ F / volume
+        sigma = 0.5 * (sigma + sigma.T)
+        C[:, k] = [sigma[p, q] for p, q in VOIGT]
+        iterations.append(its)
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    return TensorResult(C_GPa=C / 1e3, iterations=iterations, residual=worst, seconds=time.perf_counter() - t0,
+                        peak_memory_MiB=peak, solver=solver, loose=int(loose.sum()))
+
+
 def _solve_amg(net, free, rhs, positions, rtol, maxiter, progress):
     """K assembled on the free dofs; smoothed-aggregation AMG (rigid-body modes as near-null space), one
     V-cycle per CG iteration."""
@@ -214,6 +291,8 @@ def pcg(matvec, precondition, b, rtol: float, maxiter: int, progress, dot=np.dot
     rz = dot(r, z)
     b_norm = float(np.sqrt(dot(b, b)))
     k = 0
+    if b_norm == 0.0:            # nothing to relax (an affine strain of a perfect lattice): x = 0
+        return x, 0
     for k in range(1, maxiter + 1):
         Ap = matvec(p)
         alpha = rz / dot(p, Ap)

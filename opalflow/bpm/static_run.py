@@ -7,6 +7,10 @@ structure, bond types and groups as the dynamic deck), ``results.h5``, ``summary
 stress/atom`` tallies bonds: 1/2 r (x) F per particle, over V_p) and bond-strain histograms (Fig. 7) are
 given at each of ``compression.snapshot_strains`` (the response is linear: one solve, scaled).  No strength:
 bonds do not break in a linear solve.
+
+A sample periodic in all three directions (``lattice.periodic_z``) has no substrate to compress on: it
+gets its 6 x 6 stiffness tensor instead (:func:`opalflow.bpm.static.solve_tensor`), with the Young's
+moduli, Poisson ratios and bulk modulus it implies.
 """
 from __future__ import annotations
 
@@ -17,10 +21,11 @@ from pathlib import Path
 import numpy as np
 
 from opalflow.analysis import compression as mech
-from opalflow.bpm.deck import compression_deck
+from opalflow.bpm.deck import bond_model, compression_deck
 from opalflow.bpm.scene import scene_of, solid_fraction
 from opalflow.bpm.spec import BpmWorkflow
-from opalflow.bpm.static import LooseParticlesError, StaticResult, loose_message, loose_particles, solve_compression
+from opalflow.bpm.static import (VOIGT, LooseParticlesError, StaticResult, loose_message, loose_particles,
+                                  solve_compression, solve_tensor)
 from opalflow.bpm.stiffness import BondNetwork, stiffness_network
 from opalflow.lammps.datafile import write_data
 from opalflow.store import json_text, new_figure, save_figure, staged_files, write_json_atomic
@@ -54,6 +59,8 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
     c = spec.compression
     scene = scene_of(spec)
     s = scene.build(spec, say)
+    if np.all(s.periodic):
+        return run_tensor(spec, s, out, t0, say)
     deck = compression_deck(spec, s)
     build_s = time.perf_counter() - t0
     data = deck.structure
@@ -181,3 +188,62 @@ def _report(spec: BpmWorkflow, info: dict, summary: dict, res: StaticResult) -> 
     lines += ["", "Plots: displacement.png, stress_hist.png, bond_strain.png. Data: results.h5 (group `static`), "
               "summary.json."]
     return "\n".join(lines) + "\n"
+
+
+def run_tensor(spec: BpmWorkflow, s, out: Path, t0: float, say=print) -> dict:
+    """The stiffness tensor of a sample periodic in x, y and z, and what it implies."""
+    c = spec.compression
+    data, _, coeffs = bond_model(spec, s)
+    build_s = time.perf_counter() - t0
+    net = stiffness_network(data, coeffs)
+    volume = float(np.prod(data.box_lengths))
+    say(f"static stiffness tensor ({c.solver}): {s.n_particles} particles, {s.n_bonds} bonds, six loadings")
+    res = solve_tensor(net, data.positions, volume, solver=c.solver, drop_loose=c.drop_loose, say=say)
+    C = res.C_GPa
+    S = np.linalg.inv(C)
+    E = 1.0 / np.diag(S)[:3]
+    info = {"workflow": spec.name, "method": "static", "loading": "periodic", "spec": spec.to_dict(),
+            "opalflow_version": __version__, "type_names": data.type_names, "n_particles": s.n_particles,
+            "n_bonds": s.n_bonds, "solid_fraction": solid_fraction(s), "build_s": build_s,
+            "references": spec.references(), "volume_nm3": volume}
+    out.mkdir(parents=True, exist_ok=True)
+    write_data(out / "data.lmp", data, title=f"opalflow {__version__} {spec.name} (static, periodic)")
+    write_json_atomic(out / "run.json", info)
+    summary = {
+        "workflow": spec.name, "method": "static", "loading": "periodic",
+        "stiffness_tensor_GPa": C.tolist(), "voigt_order": "xx yy zz yz xz xy",
+        "youngs_modulus_GPa": float(E[2]), "youngs_moduli_GPa": {"x": float(E[0]), "y": float(E[1]), "z": float(E[2])},
+        "poisson_ratio_zx": float(-S[0, 2] / S[2, 2]), "bulk_modulus_GPa": float(1.0 / S[:3, :3].sum()),
+        "n_particles": s.n_particles, "n_bonds": s.n_bonds, "solver": res.solver, "iterations": res.iterations,
+        "relative_residual": res.residual, "static_s": res.seconds, "peak_memory_MiB": res.peak_memory_MiB,
+        "build_s": build_s, "complete": True, "loose_particles_left_out": res.loose, "opalflow_version": __version__,
+        "headline": f"E_z = {E[2]:.4g} GPa, C11 = {C[0, 0]:.4g}, C12 = {C[0, 1]:.3g}, C44 = {C[3, 3]:.4g} GPa "
+                    f"(static, periodic, {res.solver}: {sum(res.iterations)} iterations, {res.seconds:.1f} s)",
+    }
+    summary["reference"] = {k: {"value": v, "source": src, "error": (summary[k] - v) / v}
+                            for k, (v, src) in info["references"].items() if k in summary}
+    summary["wall_s"] = time.perf_counter() - t0
+    names = [f"{'xyz'[a]}{'xyz'[b]}" for a, b in VOIGT]
+    lines = [f"# {spec.name}: static stiffness tensor", "",
+             f"{s.n_particles} particles, {s.n_bonds} bonds, periodic in x, y and z; six unit macroscopic strains "
+             "through the periodic images, the particles relaxed (opalflow/bpm/static.py, solve_tensor); stress "
+             "= bond virial / volume.", "", "C (GPa), Voigt order:", "",
+             "| | " + " | ".join(names) + " |", "|---|" + "---|" * 6]
+    lines += [f"| {names[r]} | " + " | ".join(f"{C[r, k]:.4g}" for k in range(6)) + " |" for r in range(6)]
+    lines += ["", f"Young's moduli x / y / z: {E[0]:.4g} / {E[1]:.4g} / {E[2]:.4g} GPa; Poisson ratio zx "
+              f"{summary['poisson_ratio_zx']:.4f}; bulk modulus (Reuss) {summary['bulk_modulus_GPa']:.4g} GPa.", ""]
+    for k, r in summary["reference"].items():
+        lines.append(f"Reference {k}: {r['value']:.6g} ({r['source']}); error {100 * r['error']:+.4f} %.")
+    lines += ["", f"Solver `{res.solver}`: iterations per loading {res.iterations}, worst relative residual "
+              f"{res.residual:.1e}; {res.seconds:.1f} s, peak memory {res.peak_memory_MiB:.0f} MiB."]
+    with staged_files(out) as stage:
+        buffer = io.BytesIO()
+        import h5py
+
+        with h5py.File(buffer, "w") as h:
+            h["stiffness_tensor_GPa"] = C
+            h["stiffness_tensor_GPa"].attrs["voigt_order"] = "xx yy zz yz xz xy"
+        stage("results.h5").write_bytes(buffer.getvalue())
+        stage("report.md").write_text("\n".join(lines) + "\n")
+        stage("summary.json").write_text(json_text(summary))
+    return summary

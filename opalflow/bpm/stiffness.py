@@ -57,10 +57,11 @@ class BondNetwork:
     bend: np.ndarray
     twist: np.ndarray
 
-    def bond_forces(self, u: np.ndarray, theta: np.ndarray) -> np.ndarray:
-        """The force F of each bond (M, 3), LAMMPS's ``force1on2``: -F on particle i, +F on j."""
+    def bond_forces(self, u: np.ndarray, theta: np.ndarray, stretch: np.ndarray | None = None) -> np.ndarray:
+        """The force F of each bond (M, 3), LAMMPS's ``force1on2``: -F on particle i, +F on j.  ``stretch``
+        (M, 3) adds to each bond's u_i - u_j (a macroscopic strain through the periodic images)."""
         i, j, n = self.i, self.j, self.n
-        du = u[i] - u[j]
+        du = u[i] - u[j] if stretch is None else u[i] - u[j] + stretch
         n_du = np.einsum("ij,ij->i", n, du)[:, None]
         return (self.a_r[:, None] - self.a_s[:, None]) * n_du * n + self.a_s[:, None] * du \
             + (0.5 * self.a_s * self.L)[:, None] * np.cross(n, theta[i] + theta[j])
@@ -70,19 +71,23 @@ class BondNetwork:
         return BondNetwork(self.n_particles, self.i[sel], self.j[sel], self.n[sel], self.L[sel], self.a_r[sel],
                            self.a_s[sel], self.bend[sel], self.twist[sel])
 
-    def forces(self, u: np.ndarray, theta: np.ndarray, chunk: int = 2_000_000) -> tuple[np.ndarray, np.ndarray]:
-        """Forces and torques (N, 3) of the bonds for displacements u and rotations theta (N, 3):
-        minus the stiffness (or damping) matrix times (u, theta); ``chunk`` bonds at a time."""
+    def forces(self, u: np.ndarray, theta: np.ndarray, stretch: np.ndarray | None = None,
+               chunk: int = 2_000_000) -> tuple[np.ndarray, np.ndarray]:
+        """Forces and torques (N, 3) of the bonds for displacements u and rotations theta (N, 3) (and a
+        per-bond ``stretch``, see bond_forces): minus the stiffness (or damping) matrix times (u, theta);
+        ``chunk`` bonds at a time."""
         f = np.zeros((self.n_particles, 3))
         tau = np.zeros((self.n_particles, 3))
         for start in range(0, len(self.L), chunk):
-            b = self.part(slice(start, start + chunk))
+            sel = slice(start, start + chunk)
+            b = self.part(sel)
             i, j, n, L = b.i, b.j, b.n, b.L
-            du = u[i] - u[j]
+            extra = None if stretch is None else stretch[sel]
+            du = u[i] - u[j] if extra is None else u[i] - u[j] + extra
             sum_t = theta[i] + theta[j]
             d_t = theta[i] - theta[j]
             half = (0.5 * b.a_s * L)[:, None]
-            F = b.bond_forces(u, theta)
+            F = b.bond_forces(u, theta, extra)
             n_st = np.einsum("ij,ij->i", n, sum_t)[:, None]
             Ts = half * np.cross(n, du) - (0.5 * half * L[:, None]) * (sum_t - n_st * n)
             n_dt = np.einsum("ij,ij->i", n, d_t)[:, None]

@@ -7,7 +7,8 @@ uniaxial compression along z with periodic x and y strains only the z bonds, so
     E = k_axial L0 / a^2 = E_b pi r_b^2 / a^2       (k_axial = E_b A / L0, L0 = a)
 
 which is pi/4 E_b for r_b = a/2.  FCC with cubic cell a: diameter a / sqrt(2),
-12 neighbours.  The bottom layer is the fixed substrate.
+12 neighbours.  The bottom layer is the fixed substrate, or, with ``lattice.periodic_z``, the lattice is
+periodic in all three directions (no substrate) for the static stiffness tensor.
 """
 from __future__ import annotations
 
@@ -37,10 +38,10 @@ def build_lattice(spec: LatticeWorkflow, progress=None) -> Structure:
     a = lat.spacing_nm
     x, d = lattice_sites(lat.arrangement, a, lat.cells_x, lat.cells_y, lat.cells_z)
     box = np.array([lat.cells_x * a, lat.cells_y * a, lat.cells_z * a])
-    periodic = np.array([spec.boundary.sides == "periodic"] * 2 + [False])
+    periodic = np.array([spec.boundary.sides == "periodic"] * 2 + [lat.periodic_z])
     x = quantize(x, box, periodic)
     diameters = np.full(len(x), d)
-    substrate = x[:, 2] < x[:, 2].min() + 0.5 * d
+    substrate = np.zeros(len(x), bool) if lat.periodic_z else x[:, 2] < x[:, 2].min() + 0.5 * d
     types = np.where(substrate, 2, 1).astype(np.int32)
     bonds = find_bonds(x, diameters, box, periodic, spec.bonds.cutoff_factor)
     rho = density_to_nano(material(spec.material, spec.materials)["density_kg_m3"])

@@ -20,6 +20,7 @@ class LatticeSpec:
     cells_x: int = 4
     cells_y: int = 4
     cells_z: int = 8
+    periodic_z: bool = False     # periodic in z too, no substrate: the static 6 x 6 stiffness tensor
 
 
 @dataclass
@@ -35,6 +36,9 @@ class LatticeWorkflow(BpmWorkflow):
             return {}
         E_b = material(self.material, self.materials)["bond_youngs_modulus_GPa"]
         r = self.bonds.radius_factor / 2
+        if self.lattice.periodic_z:      # C11 = C22 = C33, C12 = 0: E along each axis is C11
+            return {"youngs_modulus_GPa": (math.pi * r**2 * E_b, "analytic: C11 = E_b pi r_b^2 / a^2, C12 = 0 "
+                                           "(periodic simple-cubic lattice)")}
         return {"youngs_modulus_specimen_GPa": (math.pi * r**2 * E_b,
                                                 "analytic: E_b pi r_b^2 / a^2 (simple-cubic lattice)")}
 
@@ -44,6 +48,11 @@ class LatticeWorkflow(BpmWorkflow):
         check(lat.arrangement in LATTICES, "lattice.arrangement", lat.arrangement,
               f"must be one of {', '.join(LATTICES)}")
         check(0 < lat.spacing_nm <= 1e5, "lattice.spacing_nm", lat.spacing_nm, "must be in (0, 1e5] nm")
+        if lat.periodic_z:
+            check(self.compression.method == "static", "lattice.periodic_z", lat.periodic_z,
+                  "needs compression.method = \"static\" (a sample periodic in z has no substrate to compress on)")
+            check(self.boundary.sides == "periodic", "lattice.periodic_z", lat.periodic_z,
+                  "needs boundary.sides = \"periodic\" (periodic in all three directions)")
         for axis in "xyz":
             n = getattr(lat, f"cells_{axis}")
             check(2 <= n <= 200, f"lattice.cells_{axis}", n, "must be in [2, 200]")
