@@ -236,13 +236,14 @@ def run_tensor(spec: BpmWorkflow, s, out: Path, t0: float, say=print) -> dict:
         lines.append(f"Reference {k}: {r['value']:.6g} ({r['source']}); error {100 * r['error']:+.4f} %.")
     lines += ["", f"Solver `{res.solver}`: iterations per loading {res.iterations}, worst relative residual "
               f"{res.residual:.1e}; {res.seconds:.1f} s, peak memory {res.peak_memory_MiB:.0f} MiB."]
-    with staged_files(out) as stage:
-        buffer = io.BytesIO()
-        import h5py
+    import h5py
 
-        with h5py.File(buffer, "w") as h:
-            h["stiffness_tensor_GPa"] = C
-            h["stiffness_tensor_GPa"].attrs["voigt_order"] = "xx yy zz yz xz xy"
+    buffer = io.BytesIO()
+    with h5py.File(buffer, "w") as h:
+        h.attrs["method"] = "static"
+        h["stiffness_tensor_GPa"] = C
+        h["stiffness_tensor_GPa"].attrs["voigt_order"] = "xx yy zz yz xz xy"
+    with staged_files(out) as stage:
         stage("results.h5").write_bytes(buffer.getvalue())
         stage("report.md").write_text("\n".join(lines) + "\n")
         stage("summary.json").write_text(json_text(summary))
