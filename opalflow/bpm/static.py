@@ -458,10 +458,9 @@ def _solve_cg(net, free, rhs, rtol, maxiter, progress, use_jax=False):
     matvec, dot, array = _operator(net, free, use_jax)
     inv = array(_jacobi_inverse(diagonal_blocks(net), free))
     mask = array(free.astype(float))
-    einsum = np.einsum if not use_jax else __import__("jax.numpy", fromlist=["einsum"]).einsum
 
-    def precondition(v):
-        return mask * einsum("nij,nj->ni", inv, v.reshape(n, 6)).ravel()
+    def precondition(v):          # numpy or JAX arrays alike: a batched 6 x 6 product
+        return mask * (inv @ v.reshape(n, 6, 1)).ravel()
 
     if use_jax:
         import jax
