@@ -68,6 +68,13 @@ class BondCoefficients:
     twisting one as 0.5 gamma_t per relative angular velocity and the rolling one as
     0.5 gamma_r r per relative angular velocity (BondBPMRotational::damping_forces),
     so gamma_t = 2 c_t and gamma_r = 2 c_r / L0.
+
+    A contact bond (``moments=False``; PFC's contact bond, Roy and Hossain Fig. 10.8: glue of vanishing
+    radius at the contact point that transmits a normal and a shear force and no moment, and breaks
+    when the normal or shear force exceeds its strength) is the same bond with kb = kt = 0 and no
+    rolling or twisting damping: bpm/rotational keeps the shear force at the contact point (its
+    torques F_s x r/2 turn the particles), which ``bpm/spring`` (a central force, no shear stiffness)
+    would lose.  Its breaking sum is then f_r/fr_c + |f_s|/fs_c.
     """
 
     kr: float
@@ -91,8 +98,10 @@ class BondCoefficients:
 
 
 def bond_coefficients(material_name: str, bond_radius: float, length: float, mass: float,
-                      inertia: float, damping_ratio: float, overrides: dict | None = None) -> BondCoefficients:
-    """bpm/rotational coefficients for a bond of ``material_name`` (see BondCoefficients).
+                      inertia: float, damping_ratio: float, overrides: dict | None = None,
+                      moments: bool = True) -> BondCoefficients:
+    """bpm/rotational coefficients for a bond of ``material_name`` (see BondCoefficients); ``moments``
+    False gives the contact bond (no bending or twisting stiffness).
 
     bond_radius and length in nm, mass in ag, inertia (of one particle) in ag nm^2.
     """
@@ -105,6 +114,8 @@ def bond_coefficients(material_name: str, bond_radius: float, length: float, mas
     I = math.pi * bond_radius**4 / 4.0
     J = 2.0 * I
     kr, ks, kt, kb = E * A, G * A, G * J / length, E * I / length
+    if not moments:
+        kt = kb = 0.0
     m_red, i_red = mass / 2.0, inertia / 2.0
     z = damping_ratio
     return BondCoefficients(
@@ -117,12 +128,27 @@ def bond_coefficients(material_name: str, bond_radius: float, length: float, mas
 
 @dataclass
 class ContactProperties:
-    """Hertz-Mindlin contact of one material (pair_style granular hertz/material)."""
+    """Contact of one material: Hertz-Mindlin (pair_style granular hertz/material, mindlin) or linear
+    (hooke, linear_history) with normal stiffness ``stiffness`` (pN/nm)."""
 
     youngs_modulus_MPa: float
     poisson_ratio: float
     restitution: float
     friction: float
+    model: str = "hertz"
+    stiffness: float = 0.0
+
+    @property
+    def tangential_ratio(self) -> float:
+        """k_t / k_n = 2 (1 - nu) / (2 - nu): Mindlin's ratio for equal spheres, used by the linear model
+        too, so that the two models differ only in the normal force law."""
+        return 2 * (1 - self.poisson_ratio) / (2 - self.poisson_ratio)
+
+
+def linear_contact_stiffness(contact: ContactProperties, radius: float) -> float:
+    """Normal stiffness (pN/nm) of a linear contact between spheres of that radius (nm): two balls of
+    PFC stiffness k_n = 4 R E in series (Roy and Hossain eq. 10.3), K = 2 R E."""
+    return 2 * radius * contact.youngs_modulus_MPa
 
 
 def contact_properties(material_name: str) -> ContactProperties:

@@ -18,7 +18,8 @@ import numpy as np
 from opalflow.bpm.spec import BpmWorkflow
 from opalflow.bpm.timestep import TimestepEstimate, estimate_timestep
 from opalflow.lammps.syntax import name, num, render
-from opalflow.materials import BondCoefficients, ContactProperties, bond_coefficients, contact_properties
+from opalflow.materials import (BondCoefficients, ContactProperties, bond_coefficients, contact_properties,
+                                linear_contact_stiffness)
 from opalflow.spec import SpecError
 from opalflow.structure import Structure
 from opalflow.version import __version__
@@ -87,7 +88,13 @@ def plate_contact_E(particle: ContactProperties, plate: ContactProperties) -> fl
     return 2.0 * (1.0 - particle.poisson_ratio**2) * e_star
 
 
-def contact_args(c: ContactProperties, E: float | None = None) -> str:
+def contact_args(c: ContactProperties, E: float | None = None, k: float | None = None) -> str:
+    """pair_coeff / wall arguments of a contact: Hertz-Mindlin with Young's modulus E, or linear with
+    normal stiffness k (pN/nm; tangential k_t = ``c.tangential_ratio`` k)."""
+    if c.model == "linear":
+        kn = k if k is not None else c.stiffness
+        return (f"hooke {num(kn)} {num(c.restitution)} tangential linear_history {num(c.tangential_ratio * kn)} "
+                f"1.0 {num(c.friction)} damping coeff_restitution")
     return (f"hertz/material {num(E if E is not None else c.youngs_modulus_MPa)} {num(c.restitution)} "
             f"{num(c.poisson_ratio)} tangential mindlin NULL 1.0 {num(c.friction)} "
             "damping coeff_restitution")
@@ -155,7 +162,8 @@ def bond_model(spec: BpmWorkflow, s: Structure, r0: np.ndarray | None = None
         m = float(np.mean(masses[on]))
         r = float(np.mean(s.diameters[on])) / 2
         coeffs.append(bond_coefficients(mat, spec.bonds.radius_factor * r, L, m, 0.4 * m * r * r,
-                                        spec.bonds.damping_ratio, spec.materials))
+                                        spec.bonds.damping_ratio, spec.materials,
+                                        moments=spec.bonds.model == "parallel"))
     return data, bins, coeffs
 
 
@@ -172,6 +180,10 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
              if v is not None}
     contacts = {k + 1: dataclasses.replace(contact_properties(particle_material(n, spec.material)), **given)
                 for k, n in enumerate(s.type_names)}
+    if spec.contacts.model == "linear":
+        contacts = {t: dataclasses.replace(cp, model="linear", stiffness=linear_contact_stiffness(
+            cp, 0.5 * float(np.mean(s.diameters[s.types == t])) if np.any(s.types == t) else 0.5 * d_mean))
+            for t, cp in contacts.items()}
     plate_E = {t: plate_contact_E(cp, plate) for t, cp in contacts.items()}
     estimate = estimate_timestep(data, coeffs, contacts if spec.contacts.enabled else {},
                                  plate_E, contacts, r0, spectral=spec.compression.method != "static")
@@ -226,7 +238,7 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
         "damping": render("damping", zeta=num(c.global_damping), gamma=num(gamma), plate_speed=num(v),
                           base=num(base), height=num(height)),
         "plate": render("plate", plate_speed=num(v), plate_z0=num(top),
-                        plate_contact=contact_args(contacts[1], plate_E[1])),
+                        plate_contact=contact_args(contacts[1], plate_E[1], 2 * contacts[1].stiffness)),
         "snapshots": render("snapshots", next_snapshot=_next_snapshot(snaps)),
         "run": render("run", restart_every=num(restart_every), steps=num(steps)),
     }

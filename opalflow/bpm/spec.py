@@ -8,12 +8,17 @@ over rows of such workflows.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 from opalflow.materials import OVERRIDABLE, material_names
 from opalflow.spec import WorkflowSpec, check, check_name, is_number
 
 SIDES = ("periodic", "open")
+#: bond models (Roy and Hossain, Fig. 10.8): parallel bond = force and moment, contact bond = force only
+BOND_MODELS = ("parallel", "contact")
+#: contact force laws between unbonded particles: Hertz-Mindlin or linear (PFC's two stiffness models)
+CONTACT_MODELS = ("hertz", "linear")
 #: allowed range of each material property a workflow may override (far around any ceramic's)
 PROPERTY_RANGES = {"density_kg_m3": (1.0, 1e5), "bond_youngs_modulus_GPa": (1e-6, 1e4),
                    "bond_poisson_ratio": (-0.99, 0.499), "bond_strength_MPa": (1e-6, 1e6)}
@@ -21,8 +26,15 @@ PROPERTY_RANGES = {"density_kg_m3": (1.0, 1e5), "bond_youngs_modulus_GPa": (1e-6
 
 @dataclass
 class BondsSpec:
-    """Bonds: who is bonded (cutoff) and how they respond (bpm/rotational)."""
+    """Bonds: who is bonded (cutoff) and how they respond (bpm/rotational).
 
+    ``model``: "parallel" (PFC's parallel bond: normal and shear force and bending and twisting moment
+    over the bond's cross-section) or "contact" (PFC's contact bond: normal and shear force at the
+    contact point and no moment: bpm/rotational with zero bending and twisting stiffness; see
+    :func:`opalflow.materials.bond_coefficients`).
+    """
+
+    model: str = "parallel"
     cutoff_factor: float = 1.75
     radius_factor: float = 1.0
     length_bins: int = 8
@@ -36,6 +48,7 @@ class ContactsSpec:
     replace every material's (data/materials.toml) when given."""
 
     enabled: bool = True
+    model: str = "hertz"             # hertz: hertz/material + mindlin; linear: hooke + linear_history
     friction: float | None = None
     restitution: float | None = None
 
@@ -65,6 +78,37 @@ class CompressionSpec:
 
 
 @dataclass
+class CalibrationSpec:
+    """First-estimate bond properties from a target Young's modulus and tensile strength of the particle
+    assembly (Roy and Hossain, eqs. 10.3-10.4, PFC's cubic-array relations): k_n = 4 R E, s_n = 4 R^2
+    sigma_t.  0 leaves the material's bond properties as they are (see :func:`first_estimate`)."""
+
+    target_E_GPa: float = 0.0
+    target_tensile_strength_MPa: float = 0.0
+    shear_ratio: float = 1.0         # k_s / k_n
+
+
+def first_estimate(c: CalibrationSpec, radius_factor: float) -> dict:
+    """Bond properties (``[materials.<name>]`` keys) of the first estimate (eqs. 10.3-10.4).
+
+    In PFC k_n is a ball's normal stiffness: a contact is two balls in series, K = k_n / 2 = 2 R E, and
+    a simple-cubic array of spacing 2R carries E = K / (2R) = k_n / (4 R) (eq. 10.3); each contact
+    carries the tensile force of a (2R)^2 square, s_n = 4 R^2 sigma_t (eq. 10.4).  A bpm/rotational bond
+    (``normalize yes``, r0 = 2R) is the contact spring when k_r / r0 = K, i.e. k_r = E_b pi r_b^2 =
+    4 R^2 E with r_b = radius_factor R, so E_b = 4 E / (pi f^2), and its critical force sigma_b pi r_b^2
+    = s_n, so sigma_b = 4 sigma_t / (pi f^2); neither depends on R.  k_s / k_n = G_b / E_b =
+    1 / (2 (1 + nu_b)) sets the bond Poisson ratio nu_b = 1 / (2 shear_ratio) - 1.  The shear strength
+    equals the normal one (s_s = s_n, PFC's "equal" choice; opalflow's bonds have one strength).
+    """
+    f2 = radius_factor**2
+    out = {"bond_youngs_modulus_GPa": 4 * c.target_E_GPa / (math.pi * f2),
+           "bond_poisson_ratio": 1 / (2 * c.shear_ratio) - 1}
+    if c.target_tensile_strength_MPa > 0:
+        out["bond_strength_MPa"] = 4 * c.target_tensile_strength_MPa / (math.pi * f2)
+    return out
+
+
+@dataclass
 class BoundarySpec:
     """Side boundaries (x and y): periodic, or open (no bonds across)."""
 
@@ -83,6 +127,7 @@ class BpmWorkflow(WorkflowSpec):
     bonds: BondsSpec = field(default_factory=BondsSpec)
     contacts: ContactsSpec = field(default_factory=ContactsSpec)
     compression: CompressionSpec = field(default_factory=CompressionSpec)
+    calibration: CalibrationSpec = field(default_factory=CalibrationSpec)
 
     def references(self) -> dict[str, tuple[float, str]]:
         """Reference values a run of this scene is compared with: {summary key: (value, source)}."""
@@ -103,6 +148,9 @@ class BpmWorkflow(WorkflowSpec):
                       f"must be a number in [{lo:g}, {hi:g}]")
         check_material("material", self.material)
         b = self.bonds
+        check(b.model in BOND_MODELS, "bonds.model", b.model, f"must be one of {', '.join(BOND_MODELS)}")
+        check(self.contacts.model in CONTACT_MODELS, "contacts.model", self.contacts.model,
+              f"must be one of {', '.join(CONTACT_MODELS)}")
         check(1.0 <= b.cutoff_factor <= 3.0, "bonds.cutoff_factor", b.cutoff_factor,
               "must be in [1.0, 3.0] (bond cutoff in particle diameters)")
         check(0 < b.radius_factor <= 2.0, "bonds.radius_factor", b.radius_factor,
@@ -133,8 +181,33 @@ class BpmWorkflow(WorkflowSpec):
               f"must be one of {', '.join(STATIC_SOLVERS)} (static method)")
         check(not (c.method == "static" and c.check_rate), "compression.check_rate", c.check_rate,
               "must be false with method = \"static\" (a static solve has no loading rate)")
+        check(not (c.method == "static" and b.model == "contact"), "bonds.model", b.model,
+              "must be \"parallel\" with compression.method = \"static\" (contact bonds carry no moment: "
+              "a tree-like network of them is a mechanism with no static stiffness)")
+        self._apply_calibration()
         check(0 < c.restart_every_strain <= 1, "compression.restart_every_strain", c.restart_every_strain,
               "must be in (0, 1] (restart files every this much strain; >= strain_max: none)")
+
+
+    def _apply_calibration(self) -> None:
+        """Fold the first estimate (``[calibration]``) into ``materials.<material>``."""
+        cal = self.calibration
+        check(0 <= cal.target_E_GPa <= 1e4, "calibration.target_E_GPa", cal.target_E_GPa,
+              "must be in [0, 1e4] GPa (0: no first estimate)")
+        check(0 <= cal.target_tensile_strength_MPa <= 1e6, "calibration.target_tensile_strength_MPa",
+              cal.target_tensile_strength_MPa, "must be in [0, 1e6] MPa")
+        check(0.34 <= cal.shear_ratio <= 10, "calibration.shear_ratio", cal.shear_ratio,
+              "must be in [0.34, 10] (k_s / k_n = 1 / (2 (1 + nu_b)) with nu_b in (-0.95, 0.47))")
+        if cal.target_E_GPa == 0:
+            check(cal.target_tensile_strength_MPa == 0, "calibration.target_tensile_strength_MPa",
+                  cal.target_tensile_strength_MPa, "needs calibration.target_E_GPa > 0 as well")
+            return
+        derived = first_estimate(cal, self.bonds.radius_factor)
+        given = dict(self.materials.get(self.material, {}))
+        for key, value in derived.items():
+            check(key not in given or math.isclose(given[key], value, rel_tol=1e-12), f"materials.{self.material}.{key}",
+                  given.get(key), "is set by [calibration] (eqs. 10.3-10.4): leave it out")
+        self.materials = {**self.materials, self.material: {**given, **derived}}
 
 
 def check_material(where: str, value: str, also: tuple[str, ...] = ()) -> None:

@@ -108,18 +108,20 @@ def estimate_timestep(s: Structure, coeffs: list[BondCoefficients],
                + ks * R[j] / np.sqrt(inertia[j] * m[j]) + ks * R[j] / np.sqrt(inertia[j] * m[i]))
     total = np.maximum(tr, rot)
 
-    # Hertz contacts: a particle touching ~12 neighbours (dense packing) and the plate
+    # contacts: a particle touching ~12 neighbours (dense packing) and the plate; Hertz stiffness at
+    # an overlap of DELTA_CONTACT d, linear stiffness as it is (the plate's: one ball on a rigid wall, 2 K)
     contact = np.zeros(n)
     types = s.types
     for typ, cp in contacts.items():
         sel = types == typ
         e_star = cp.youngs_modulus_MPa / (2 * (1 - cp.poisson_ratio**2))
-        k = 2 * e_star * np.sqrt(R[sel] / 2 * DELTA_CONTACT * s.diameters[sel])
+        k = cp.stiffness if cp.model == "linear" else 2 * e_star * np.sqrt(R[sel] / 2 * DELTA_CONTACT * s.diameters[sel])
         contact[sel] = 12 * 2 * k / m[sel]
     for typ, E in plate_E.items():
         sel = types == typ
         e_star = E / (2 * (1 - plate_props[typ].poisson_ratio**2))
-        k = 2 * e_star * np.sqrt(R[sel] * DELTA_CONTACT * s.diameters[sel])
+        k = 2 * plate_props[typ].stiffness if plate_props[typ].model == "linear" else \
+            2 * e_star * np.sqrt(R[sel] * DELTA_CONTACT * s.diameters[sel])
         contact[sel] += k / m[sel]
     modes["contact"] = contact
     total = total + contact

@@ -1,0 +1,126 @@
+"""The aerogel scene: an aggregate bonded at its contacts, whole (periodic cube) or cut to a slab.
+
+Bonds join every pair whose centre distance is within ``bonds.cutoff_factor`` of its contact distance
+r_i + r_j (1.001 by default: the contacts the aggregation made, which leave a tree, plus near-contacts
+that close loops), across the periodic boundaries too.
+
+The slab for the compression (kind ``aerogel``): the periodic aggregate is cut open at the cube's z
+faces (bonds that cross z = 0 = L are dropped; x and y stay periodic, so the network is infinite
+sideways), the spheres whose centres lie within one mean diameter of the bottom face are the fixed
+substrate (the bottom wall the network is attached to), and every sphere with no bond path to the
+substrate (pieces the cut set free: they would float) is left out and counted.  The plate starts at
+the top of the highest sphere, as PFC's wall does: a contact-only wall, so the top is loaded where
+the network reaches it.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from opalflow.aerogel.aggregation import Aggregate, aggregate, box_edge, gaussian_diameters
+from opalflow.aerogel.spec import RANDOM_PLACEMENT_MAX, AggregateSpec, AerogelWorkflow
+from opalflow.bpm.bonds import find_bonds
+from opalflow.bpm.scene import Scene
+from opalflow.materials import material
+from opalflow.structure import Structure, quantize
+from opalflow.units import density_to_nano
+
+
+def make_aggregate(a: AggregateSpec, progress=None) -> Aggregate:
+    """The aggregate of an ``[aggregate]`` section (seeded: the same section gives the same spheres)."""
+    d = gaussian_diameters(a.particles, a.diameter_nm, a.diameter_std_nm, np.random.default_rng(a.seed))
+
+    def said(left, n, moves, rate, eta):
+        progress(f"  aggregation: {left} clusters of {n} spheres left, {moves} moves ({rate:,.0f}/s), "
+                 f"about {eta:.0f} s left")
+
+    return aggregate(d, box_edge(d, a.solid_fraction), seed=a.seed, step_fraction=a.step_fraction,
+                     mobility_exponent=a.mobility_exponent,
+                     sticking_probability=a.sticking_probability if a.algorithm == "rlca" else 1.0,
+                     progress=said if progress else None, random_placement_max=RANDOM_PLACEMENT_MAX)
+
+
+def coordination(n: int, bonds: np.ndarray) -> np.ndarray:
+    """Bonds per sphere."""
+    return np.bincount(bonds.ravel(), minlength=n)
+
+
+def periodic_structure(agg: Aggregate, cutoff_factor: float, material_name: str, overrides=None) -> Structure:
+    """The whole aggregate bonded at its contacts, periodic in x, y and z (no substrate)."""
+    box = np.full(3, agg.box)
+    periodic = np.ones(3, bool)
+    x = quantize(agg.positions, box, periodic)
+    bonds = find_bonds(x, agg.diameters, box, periodic, cutoff_factor)
+    rho = density_to_nano(material(material_name, overrides)["density_kg_m3"])
+    return Structure(positions=x, diameters=agg.diameters.copy(), types=np.ones(len(x), np.int32),
+                     densities=np.full(len(x), rho), box_lo=np.zeros(3), box_hi=box, periodic=periodic,
+                     bonds=bonds, bond_types=np.ones(len(bonds), np.int32), type_names=[material_name],
+                     bond_type_names=[material_name],
+                     meta={"solid_fraction": agg.solid_fraction})
+
+
+def slab(agg: Aggregate, cutoff_factor: float, material_name: str, overrides=None) -> tuple[Structure, dict]:
+    """The aggregate cut open at z = 0 = L, its bottom layer fixed, free pieces left out (module docstring)."""
+    box = np.full(3, agg.box)
+    periodic = np.array([True, True, False])
+    x = quantize(agg.positions, box, np.ones(3, bool))
+    bonds = find_bonds(x, agg.diameters, box, periodic, cutoff_factor)
+    n = len(x)
+    d_mean = float(np.mean(agg.diameters))
+    substrate = x[:, 2] < d_mean
+    graph = coo_matrix((np.ones(len(bonds)), (bonds[:, 0], bonds[:, 1])), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    attached = np.isin(label, np.unique(label[substrate]))
+    rho = density_to_nano(material(material_name, overrides)["density_kg_m3"])
+    s = Structure(positions=x, diameters=agg.diameters.copy(), types=np.where(substrate, 2, 1).astype(np.int32),
+                  densities=np.full(n, rho), box_lo=np.zeros(3), box_hi=box, periodic=periodic, bonds=bonds,
+                  bond_types=np.ones(len(bonds), np.int32), molecules=np.ones(n, np.int32),
+                  type_names=[material_name, "substrate"], bond_type_names=[material_name],
+                  groups={"substrate": substrate})
+    kept = s.select(attached)
+    kept.meta = {"aggregate_solid_fraction": agg.solid_fraction,
+                 "solid_fraction": float(np.sum(kept.particle_volumes()) / agg.box**3),
+                 "dropped_unattached": int(n - attached.sum()), "cut_bonds": int(_cut_bonds(agg, cutoff_factor)),
+                 "aggregation_s": agg.wall_s, "aggregation_moves": agg.moves}
+    return kept, {"dropped": int(n - attached.sum())}
+
+
+def _cut_bonds(agg: Aggregate, cutoff_factor: float) -> int:
+    """Bonds across the z faces that the cut removes."""
+    box = np.full(3, agg.box)
+    whole = find_bonds(agg.positions, agg.diameters, box, np.ones(3, bool), cutoff_factor)
+    dz = np.abs(agg.positions[whole[:, 1], 2] - agg.positions[whole[:, 0], 2])
+    return int(np.sum(dz > agg.box / 2))
+
+
+def build_aerogel(spec: AerogelWorkflow, progress=None) -> Structure:
+    agg = make_aggregate(spec.aggregate, progress)
+    s, _ = slab(agg, spec.bonds.cutoff_factor, spec.material, spec.materials)
+    return s
+
+
+def statistics(s: Structure) -> dict:
+    """Numbers about the slab for the build and run summaries."""
+    n = s.n_particles
+    z = coordination(n, s.bonds)
+    volume = float(np.prod(s.box_lengths))
+    mass = float(np.sum(s.densities * s.particle_volumes()))
+    return {"n_particles": n, "n_bonds": s.n_bonds, "solid_fraction": s.meta["solid_fraction"],
+            "aggregate_solid_fraction": s.meta["aggregate_solid_fraction"],
+            "density_kg_m3": mass / volume * 1e6, "mean_coordination": float(z.mean()),
+            "dangling_fraction": float(np.mean(z <= 1)), "dropped_unattached": s.meta["dropped_unattached"],
+            "cut_bonds": s.meta["cut_bonds"], "aggregation_s": s.meta["aggregation_s"]}
+
+
+#: what each run summary carries of the statistics (the density study plots against them)
+RUN_KEYS = ("solid_fraction", "density_kg_m3", "mean_coordination", "dropped_unattached")
+
+
+def _describe(st: dict) -> str:
+    return (f"aerogel slab: {st['n_particles']} spheres, {st['n_bonds']} bonds (coordination "
+            f"{st['mean_coordination']:.2f}), solid fraction {st['solid_fraction']:.4f} "
+            f"({st['dropped_unattached']} spheres left out: no bond path to the bottom after the cut)")
+
+
+SCENE = Scene(build=build_aerogel, statistics=statistics, run_keys=RUN_KEYS, describe=_describe)
