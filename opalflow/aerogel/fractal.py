@@ -24,6 +24,7 @@ from scipy import stats
 from scipy.spatial import cKDTree
 
 from opalflow.aerogel.aggregation import Aggregate
+from opalflow.store import new_figure, save_figure
 
 
 @dataclass
@@ -91,11 +92,7 @@ def radius_of_gyration(agg: Aggregate, *, n_min: int = 10) -> tuple[FractalFit, 
 
 def plot_fractal(mr: tuple[FractalFit, dict], rg: tuple[FractalFit, dict], path) -> None:
     """Both estimates side by side: excess count against r, R_g against N, each with its fit."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4))
+    fig, (a, b) = new_figure(1, 2, figsize=(10, 4))
     fit, c = mr
     excess = c["count"] - c["background"]
     a.loglog(c["r_nm"], c["count"], "o", ms=3, label="C(r): centres within r")
@@ -122,6 +119,4 @@ def plot_fractal(mr: tuple[FractalFit, dict], rg: tuple[FractalFit, dict], path)
     b.set_ylabel("R_g (nm)")
     b.set_title("radius of gyration during aggregation")
     b.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path)

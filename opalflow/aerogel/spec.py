@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from opalflow.bpm.spec import BondsSpec, BoundarySpec, BpmWorkflow, check_material
+from opalflow.bpm.spec import BondsSpec, BoundarySpec, BpmWorkflow, CompressionSpec, check_material
 from opalflow.spec import WorkflowSpec, check
 
 ALGORITHMS = ("dlca", "rlca")
@@ -94,6 +94,7 @@ class AerogelWorkflow(BpmWorkflow):
     aggregate: AggregateSpec = field(default_factory=AggregateSpec)
     bonds: BondsSpec = field(default_factory=lambda: BondsSpec(cutoff_factor=1.001, length_bins=1))
     boundary: BoundarySpec = field(default_factory=BoundarySpec)
+    compression: CompressionSpec = field(default_factory=lambda: CompressionSpec(loading="glued"))
 
     def validate(self) -> None:
         super().validate()

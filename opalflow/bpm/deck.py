@@ -230,7 +230,8 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
                   data_file="data.lmp", boundary="p p f" if s.periodic[0] else "m m f")
     blocks = {
         "system": render("system", **common),
-        "groups": render("groups", substrate_type=num(substrate_type), top_layer_z=num(top - 0.75 * d_mean)),
+        "groups": render("groups" if c.loading == "plate" else "groups_glued", substrate_type=num(substrate_type),
+                         top_layer_z=num(top - 0.75 * d_mean)),
         "bonds": render("bonds", breakable="yes" if spec.bonds.breakable else "no", bond_coeffs=bond_lines),
         "contacts": render("contacts", pair_coeffs="\n".join(
             f"pair_coeff      {t} {t} {contact_args(cp)}" for t, cp in contacts.items())),
@@ -238,7 +239,8 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
         "damping": render("damping", zeta=num(c.global_damping), gamma=num(gamma), plate_speed=num(v),
                           base=num(base), height=num(height)),
         "plate": render("plate", plate_speed=num(v), plate_z0=num(top),
-                        plate_contact=contact_args(contacts[1], plate_E[1], 2 * contacts[1].stiffness)),
+                        plate_contact=contact_args(contacts[1], plate_E[1], 2 * contacts[1].stiffness))
+        if c.loading == "plate" else render("plate_glued", plate_speed=num(v)),
         "snapshots": render("snapshots", next_snapshot=_next_snapshot(snaps)),
         "run": render("run", restart_every=num(restart_every), steps=num(steps)),
     }

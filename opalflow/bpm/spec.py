@@ -55,6 +55,8 @@ class ContactsSpec:
 
 #: how a compression is computed: a LAMMPS run, or the linear solve of opalflow.bpm.static
 METHODS = ("dynamic", "static")
+#: how the top is loaded: a contact plate (fix wall/gran) or the top particle layer glued to a moving wall
+LOADINGS = ("plate", "glued")
 #: solvers of the static method (opalflow.bpm.static.SOLVERS)
 STATIC_SOLVERS = ("auto", "amg", "block-amg", "cg", "cg-jax")
 
@@ -72,6 +74,7 @@ class CompressionSpec:
     snapshot_strains: list[float] = field(default_factory=lambda: [0.01, 0.02])
     restart_every_strain: float = 0.005
     check_rate: bool = False
+    loading: str = "plate"           # plate: contact wall (fix wall/gran); glued: top layer moves with the wall
     method: str = "dynamic"          # dynamic: LAMMPS; static: one linear solve (E and stresses only)
     solver: str = "auto"             # static: auto, amg, block-amg, cg or cg-jax (opalflow/bpm/static.py)
     drop_loose: bool = False         # static: leave out particles with no bond path to the substrate
@@ -176,6 +179,7 @@ class BpmWorkflow(WorkflowSpec):
         for i, e in enumerate(c.snapshot_strains):
             check(0 < e <= c.strain_max, f"compression.snapshot_strains[{i}]", e,
                   f"must be in (0, strain_max = {c.strain_max:g}]")
+        check(c.loading in LOADINGS, "compression.loading", c.loading, f"must be one of {', '.join(LOADINGS)}")
         check(c.method in METHODS, "compression.method", c.method, f"must be one of {', '.join(METHODS)}")
         check(c.solver in STATIC_SOLVERS, "compression.solver", c.solver,
               f"must be one of {', '.join(STATIC_SOLVERS)} (static method)")

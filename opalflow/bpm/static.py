@@ -122,10 +122,13 @@ def rigid_body_modes(positions: np.ndarray) -> np.ndarray:
 
 def solve_compression(net: BondNetwork, positions: np.ndarray, fixed: np.ndarray, top: np.ndarray,
                       height: float, area: float, *, strain: float = 1e-4, solver: str = "auto",
-                      rtol: float = 1e-6, maxiter: int = 20000, drop_loose: bool = False, say=print) -> StaticResult:
+                      rtol: float = 1e-6, maxiter: int = 20000, drop_loose: bool = False, clamp_top: bool = False,
+                      say=print) -> StaticResult:
     """Uniaxial compression by a prescribed top-layer displacement (see the module docstring).
 
-    ``fixed``: the substrate; ``top``: the top layer (both boolean over particles).  The strain is
+    ``fixed``: the substrate; ``top``: the top layer (both boolean over particles); the top layer moves
+    only in z and is free sideways and in rotation (a frictionless plate), or with ``clamp_top`` is held
+    in its other five degrees of freedom (glued to the wall: ``compression.loading = "glued"``).  The strain is
     small and the answer linear in it; the stress is reported for ``strain``.  ``rtol``: CG stops at this
     relative residual; E converges far faster than the residual (quickstart at d = 30 nm: E to 1e-10 at
     1e-6, to 7e-7 at 1e-4), so 1e-6 is plenty.  Particles with no bond path
@@ -144,7 +147,7 @@ def solve_compression(net: BondNetwork, positions: np.ndarray, fixed: np.ndarray
     n = net.n_particles
     prescribed = np.zeros((n, 6), bool)
     prescribed[fixed | loose] = True
-    prescribed[top & ~fixed & ~loose, 2] = True
+    prescribed[top & ~fixed & ~loose, slice(None) if clamp_top else 2] = True
     x_p = np.zeros((n, 6))
     delta = strain * height
     x_p[top & ~fixed & ~loose, 2] = -delta

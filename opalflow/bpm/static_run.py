@@ -82,7 +82,8 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
 
     say(f"static solve ({c.solver}): {s.n_particles} particles, {s.n_bonds} bonds, {6 * s.n_particles} dofs")
     res = solve_compression(net, data.positions, substrate, deck.top_layer, deck.height_nm, deck.area_nm2,
-                            strain=STRAIN, solver=c.solver, drop_loose=c.drop_loose, say=say)
+                            strain=STRAIN, solver=c.solver, drop_loose=c.drop_loose,
+                            clamp_top=c.loading == "glued", say=say)
     E_GPa = res.modulus_MPa / 1e3
     volumes = data.particle_volumes()
     sigma_unit = particle_stress(net, res, volumes) / STRAIN       # per unit strain
@@ -173,7 +174,9 @@ def _report(spec: BpmWorkflow, info: dict, summary: dict, res: StaticResult) -> 
              f"{info['n_particles']} particles, {info['n_bonds']} bonds; the bond network linearised from LAMMPS's "
              "bpm/rotational (opalflow/bpm/stiffness.py); substrate fixed, top layer "
              f"({info['top_layer_particles']} particles) pushed down by strain {res.strain:g} x H "
-             f"(H = {info['height_nm']:.1f} nm), its x, y and rotations free; sides "
+             f"(H = {info['height_nm']:.1f} nm), "
+             + ("glued to the wall (x, y and rotations held)" if spec.compression.loading == "glued"
+                else "its x, y and rotations free") + "; sides "
              f"{spec.boundary.sides}. Contacts carry no load at the reference state and bonds do not break: "
              "no strength.", "",
              "| quantity | value | reference | error |", "|---|---|---|---|"]

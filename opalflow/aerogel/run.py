@@ -1,0 +1,125 @@
+"""Kind ``aggregation``: one aggregate, its fractal dimension two ways, pictures, its bonded data file.
+
+Writes ``aggregate.lmp`` (atom_style bpm/sphere, periodic in x, y and z, bonds at contacts: LAMMPS reads
+it as it is), ``results.h5`` (spheres, the contacts the aggregation made, every merger's N and R_g, the
+mass-radius curve), ``fractal.png``, ``network.png``, ``report.md`` and ``summary.json`` (last: a folder
+with a summary.json is finished), all or none.
+"""
+from __future__ import annotations
+
+import io
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from opalflow.aerogel.aggregation import Aggregate
+from opalflow.aerogel.fractal import FractalFit, mass_radius, plot_fractal, radius_of_gyration
+from opalflow.aerogel.scene import coordination, make_aggregate, periodic_structure
+from opalflow.aerogel.spec import AggregationWorkflow
+from opalflow.lammps.datafile import write_data
+from opalflow.store import json_text, new_figure, save_figure, staged_files
+from opalflow.version import __version__
+
+#: literature values of D_f (BRIEF section 2, with sources)
+LITERATURE = {"dlca": ("1.75-1.85 at low concentration, rising with it", "Hasmy et al., Phys. Rev. B 50, 6006 "
+                       "(1994); Rottereau et al., Eur. Phys. J. E 15, 133 (2004)"),
+              "rlca": ("2.0-2.1", "Lin et al., Nature 339, 360 (1989)")}
+
+
+def plot_network(agg: Aggregate, z: np.ndarray, path) -> None:
+    """The network: 3D view coloured by arrival (when the sphere's cluster joined), and a slab a fifth of
+    the box thick seen along z, coloured by coordination; marker areas follow the diameters."""
+    import matplotlib
+
+    fig = new_figure(figsize=(11, 5))[0]
+    fig.clf()
+    ax = fig.add_subplot(1, 2, 1, projection="3d")
+    x = agg.positions
+    order = np.where(agg.arrival < 0, len(agg.contacts), agg.arrival) / max(len(agg.contacts), 1)
+    size = (agg.diameters / agg.box * 330) ** 2
+    sc = ax.scatter(x[:, 0], x[:, 1], x[:, 2], c=order, s=size, cmap="viridis", depthshade=True, linewidths=0)
+    ax.set_box_aspect((1, 1, 1))
+    ax.set_title("aggregate (colour: when its cluster joined)")
+    fig.colorbar(sc, ax=ax, shrink=0.6, label="arrival / mergers")
+    b = fig.add_subplot(1, 2, 2)
+    sel = x[:, 2] < agg.box / 5
+    cmap = matplotlib.colormaps["plasma"].resampled(5)
+    sc = b.scatter(x[sel, 0], x[sel, 1], c=np.minimum(z[sel], 4), s=size[sel] * 1.6, cmap=cmap, vmin=-0.5,
+                   vmax=4.5, linewidths=0)
+    b.set_aspect("equal")
+    b.set_xlim(0, agg.box)
+    b.set_ylim(0, agg.box)
+    b.set_xlabel("x (nm)")
+    b.set_ylabel("y (nm)")
+    b.set_title(f"slab z < L/5 (colour: coordination; {int(sel.sum())} spheres)")
+    fig.colorbar(sc, ax=b, ticks=range(5), shrink=0.8, label="bonds (4 = 4 or more)")
+    save_figure(fig, path)
+
+
+def _fit_line(f: FractalFit) -> str:
+    if not math.isfinite(f.D):
+        return f"| {f.method} | - | - | {f.range[0]:.4g}-{f.range[1]:.4g} | {f.points} | {f.note} |"
+    unit = " nm" if f.method == "mass-radius" else ""
+    return (f"| {f.method} | {f.D:.3f} | [{f.ci95[0]:.3f}, {f.ci95[1]:.3f}] | {f.range[0]:.4g}-{f.range[1]:.4g}{unit} "
+            f"| {f.points} | {f.note} |")
+
+
+def run_aggregation(spec: AggregationWorkflow, out: Path, say=print) -> dict:
+    start = time.perf_counter()
+    a = spec.aggregate
+    say(f"{spec.name}: {a.algorithm.upper()} of {a.particles} spheres (d = {a.diameter_nm:g} +- {a.diameter_std_nm:g} "
+        f"nm) at solid fraction {a.solid_fraction:g}")
+    agg = make_aggregate(a, progress=say)
+    say(f"aggregated in {agg.wall_s:.1f} s: {agg.moves} moves, {agg.collisions} contacts, {len(agg.contacts)} mergers")
+    s = periodic_structure(agg, spec.bonds.cutoff_factor, spec.material)
+    z = coordination(s.n_particles, s.bonds)
+    mr, mr_curve = mass_radius(agg, seed=a.seed)
+    rg, rg_curve = radius_of_gyration(agg)
+    lit, source = LITERATURE[a.algorithm]
+    summary = {
+        "workflow": spec.name, "opalflow_version": __version__, "algorithm": a.algorithm,
+        "n_particles": s.n_particles, "n_bonds": s.n_bonds, "box_nm": agg.box, "solid_fraction": agg.solid_fraction,
+        "placement": agg.placement, "moves": agg.moves, "collisions": agg.collisions, "mergers": len(agg.contacts),
+        "clusters_left": agg.clusters_left, "aggregation_s": agg.wall_s, "moves_per_s": agg.moves / max(agg.wall_s, 1e-9),
+        "mean_coordination": float(z.mean()), "loops": int(s.n_bonds - (s.n_particles - agg.clusters_left)),
+        "fractal_mass_radius": mr.as_dict(), "fractal_rg": rg.as_dict(),
+        "literature_D": {"value": lit, "source": source},
+    }
+    d_text = " and ".join(f"{f.D:.2f} [{f.ci95[0]:.2f}, {f.ci95[1]:.2f}] ({f.method})" for f in (mr, rg)
+                          if math.isfinite(f.D)) or "no fit"
+    summary["headline"] = (f"D_f = {d_text}; literature {lit}; {s.n_particles} spheres, {s.n_bonds} bonds, "
+                           f"{agg.wall_s:.1f} s")
+    report = [f"# {spec.name}: {a.algorithm.upper()} aggregate", "",
+              f"{s.n_particles} spheres, d = {a.diameter_nm:g} +- {a.diameter_std_nm:g} nm (Gaussian), solid fraction "
+              f"{agg.solid_fraction:.4f} in a periodic cube of {agg.box:.4g} nm; {agg.placement}; "
+              f"{agg.moves} moves, {agg.collisions} contacts, {len(agg.contacts)} mergers in {agg.wall_s:.1f} s. "
+              f"Bonds at contacts (within {spec.bonds.cutoff_factor:g} of r_i + r_j): {s.n_bonds}, mean coordination "
+              f"{z.mean():.3f}, {summary['loops']} closing loops.", "",
+              "| method | D_f | 95 % interval | fitted range | points | note |", "|---|---|---|---|---|---|",
+              _fit_line(mr), _fit_line(rg), "",
+              f"Literature ({a.algorithm.upper()}): {lit} ({source}). The intervals are regression intervals of "
+              "correlated points (lower bounds); seeds give the spread.", "",
+              "![fractal dimension](fractal.png)", "", "![network](network.png)", "",
+              "`aggregate.lmp`: the bonded network as an atom_style bpm/sphere data file (periodic in x, y, z)."]
+    import h5py
+
+    buffer = io.BytesIO()
+    with h5py.File(buffer, "w") as h:
+        h.attrs["workflow"] = spec.name
+        for key, value in (("positions_nm", agg.positions), ("diameters_nm", agg.diameters), ("arrival", agg.arrival),
+                           ("contacts", agg.contacts), ("bonds", s.bonds), ("merger_size", agg.merger_size),
+                           ("merger_rg_nm", agg.merger_rg), ("mass_radius/r_nm", mr_curve["r_nm"]),
+                           ("mass_radius/count", mr_curve["count"]), ("mass_radius/background", mr_curve["background"])):
+            h[key] = value
+    out.mkdir(parents=True, exist_ok=True)
+    summary["wall_s"] = time.perf_counter() - start
+    with staged_files(out) as stage:
+        write_data(stage("aggregate.lmp"), s, title=f"opalflow {__version__} {spec.name}")
+        stage("results.h5").write_bytes(buffer.getvalue())
+        plot_fractal((mr, mr_curve), (rg, rg_curve), stage("fractal.png"))
+        plot_network(agg, z, stage("network.png"))
+        stage("report.md").write_text("\n".join(report) + "\n")
+        stage("summary.json").write_text(json_text(summary))
+    return summary
