@@ -17,49 +17,18 @@ import numpy as np
 
 from opalflow.analysis.fits import fit_exponential, fit_power, fit_power_law
 from opalflow.materials import material
-from opalflow.registry import load_spec
-from opalflow.resources import DATA, WORKFLOWS, resource
-from opalflow.spec import SpecError, WorkflowSpec
+from opalflow.resources import DATA, resource
+from opalflow.spec import SpecError
 from opalflow.store import new_figure, save_figure, write_json_atomic, write_text_atomic
+from opalflow.studies.aerogel import aerogel_density, aerogel_models
 from opalflow.studies.spec import StudyWorkflow
-from opalflow.studies.sweep import Job, run_jobs
+from opalflow.studies.sweep import FAILED, Job, fmt_value, job_spec, label_number, sweep
 from opalflow.version import __version__
 
 
 def paper() -> dict:
     """Reference numbers of Dosta et al. (data/reference/dosta2022.toml)."""
     return tomllib.loads(resource(DATA / "reference", "dosta2022.toml").read_text())
-
-
-def job_spec(spec: StudyWorkflow, overrides: list[str]) -> WorkflowSpec:
-    """The study's base workflow with the study's and the job's overrides."""
-    st = spec.study
-    base = st.paper_base if st.paper_scale else st.base
-    path = WORKFLOWS / f"{base}.toml"
-    if not path.exists():
-        raise SpecError("study.paper_base" if st.paper_scale else "study.base", base,
-                        f"no workflow {path.name} in {WORKFLOWS}")
-    static = ["compression.method=static", "compression.drop_loose=true"] if st.method == "static" else []
-    return load_spec(path, [*static, *st.set, *overrides])
-
-
-FAILED: dict[str, str] = {}
-
-
-def _sweep(spec: StudyWorkflow, out: Path, jobs: list[Job], say) -> dict[str, dict]:
-    """Run the jobs; failed ones are left out of the result and listed in FAILED (label -> reason)."""
-    res = run_jobs(jobs, out, workers=spec.study.workers, np_=spec.study.np, say=say)
-    FAILED.update({k: v["failed"] for k, v in res.items() if "failed" in v})
-    return {k: v for k, v in res.items() if "failed" not in v}
-
-
-def _fmt(value, spec: str) -> str:
-    """``value`` formatted, or "-" where a static job has none (strength, strain at peak, broken bonds)."""
-    return "-" if value is None else format(value, spec)
-
-
-def _num(x: float) -> str:
-    return f"{x:.6g}"
 
 
 # ----------------------------------------------------------------------------- calibration
@@ -81,7 +50,7 @@ def calibration(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
     history, runs, jac, prev = [], 0, None, None
 
     def job(p) -> Job:
-        return Job(f"Eb{_num(p[0])}_sb{_num(p[1])}",
+        return Job(f"Eb{label_number(p[0])}_sb{label_number(p[1])}",
                    job_spec(spec, [f"materials.{base.material}.bond_youngs_modulus_GPa={float(p[0])!r}",
                                    f"materials.{base.material}.bond_strength_MPa={float(p[1])!r}"]))
 
@@ -97,7 +66,7 @@ def calibration(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
                        else [x * np.array([1 + h, 1.0]), x * np.array([1.0, 1 + h])])
         points = points[:st.max_runs - runs]
         jobs = [job(p) for p in points]
-        summaries = _sweep(spec, out, jobs, say)
+        summaries = sweep(spec, out, jobs, say)
         if len(summaries) < len(jobs):
             raise SpecError("study", spec.name, f"calibration run failed: {FAILED}; see {out}/jobs")
         runs += len(points)
@@ -165,9 +134,9 @@ def calibration(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
 def bulk(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
     """K_E = E_macro / E_b (eq. 20) from pore-free samples at each particle diameter."""
     st = spec.study
-    jobs = [Job(f"bulk_d{_num(d)}", job_spec(spec, ['pores.arrangement="none"', f"packing.diameter_nm={d!r}"]))
+    jobs = [Job(f"bulk_d{label_number(d)}", job_spec(spec, ['pores.arrangement="none"', f"packing.diameter_nm={d!r}"]))
             for d in st.diameters_nm]
-    res = _sweep(spec, out, jobs, say)
+    res = sweep(spec, out, jobs, say)
     ref = paper()["bulk"]
     rows, table = [], {}
     for d, job in zip(st.diameters_nm, jobs):
@@ -176,13 +145,13 @@ def bulk(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
         s = res[job.label]
         e_b = material(job.spec.material, job.spec.materials)["bond_youngs_modulus_GPa"]
         k_e = s["youngs_modulus_specimen_GPa"] / e_b
-        table[_num(d)] = {"diameter_nm": d, "E_macro_GPa": s["youngs_modulus_specimen_GPa"], "K_E": k_e,
+        table[label_number(d)] = {"diameter_nm": d, "E_macro_GPa": s["youngs_modulus_specimen_GPa"], "K_E": k_e,
                           "E_plate_GPa": s["youngs_modulus_GPa"], "K_E_plate": s["youngs_modulus_GPa"] / e_b,
                           "strength_MPa": s.get("strength_MPa"), "strain_at_peak": s.get("strain_at_peak"),
                           "broken_bonds": s.get("broken_bonds"), "n_particles": s["n_particles"], "wall_s": s["wall_s"]}
         rows.append(f"| {d:g} | {s['n_particles']} | {s['youngs_modulus_specimen_GPa']:.3f} | {k_e:.3f} | "
-                    f"{s['youngs_modulus_GPa']:.3f} | {_fmt(s.get('strength_MPa'), '.1f')} | "
-                    f"{_fmt(s.get('strain_at_peak'), '.4f')} | {_fmt(s.get('broken_bonds'), 'd')} | {s['wall_s']:.0f} |")
+                    f"{s['youngs_modulus_GPa']:.3f} | {fmt_value(s.get('strength_MPa'), '.1f')} | "
+                    f"{fmt_value(s.get('strain_at_peak'), '.4f')} | {fmt_value(s.get('broken_bonds'), 'd')} | {s['wall_s']:.0f} |")
     finest = table[min(table, key=lambda k: table[k]["diameter_nm"])]
     exp = paper()["coating"]
     titania = {k: {"E_exp_GPa": v[0], "E_b_GPa": v[0] / finest["K_E"], "E_b_paper_GPa": v[0] / ref["K_E"]}
@@ -223,7 +192,7 @@ def coating(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
             jobs.append(Job("coat0", job_spec(spec, ["coating.thickness_nm=0.0"])))
             cases.append((t, "uncoated", None))
             continue
-        key = _num(t)
+        key = label_number(t)
         if key not in ref["coating"]["E_exp_GPa"]:
             raise SpecError("study.thicknesses_nm", t, f"no E_exp for it; the paper gives "
                             f"{', '.join(ref['coating']['E_exp_GPa'])} nm")
@@ -232,7 +201,7 @@ def coating(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
             jobs.append(Job(f"coat{key}_{case}", job_spec(spec, [
                 f"coating.thickness_nm={float(t)!r}", f"materials.titania.bond_youngs_modulus_GPa={e_exp / k_e!r}"])))
             cases.append((t, case, e_exp))
-    res = _sweep(spec, out, jobs, say)
+    res = sweep(spec, out, jobs, say)
     table = []
     for (t, case, e_exp), job in zip(cases, jobs):
         if job.label not in res:
@@ -259,7 +228,7 @@ def coating(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
               "|---|---|---|---|---|---|---|"]
     for r in table:
         report.append(f"| {r['thickness_nm']:g} | {r['case']} | {_blank(r['E_exp_GPa'])} | {_blank(r['bond_E_GPa'])} | "
-                      f"{r['youngs_modulus_GPa']:.3g} | {_fmt(r['strength_MPa'], '.3g')} | {r['wall_s']:.0f} |")
+                      f"{r['youngs_modulus_GPa']:.3g} | {fmt_value(r['strength_MPa'], '.3g')} | {r['wall_s']:.0f} |")
     report += ["", f"Paper (d = 15 nm, 8.05 um^2): uncoated E = 1.7 GPa, strength 41.1 MPa; 20 nm coated "
                f"E = {paper20['youngs_modulus_GPa']} GPa, strength {paper20['strength_MPa']} MPa "
                f"(density {paper20['density_kg_m3']} kg/m^3); the 34 nm strength within 2.2 % of experiment.",
@@ -292,10 +261,10 @@ def porosity(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
     jobs, keys = [], []
     for p in st.porosities:
         for s in st.seeds:
-            jobs.append(Job(f"p{_num(p)}_s{s}", job_spec(spec, ['pores.arrangement="random"', f"pores.porosity={p!r}",
+            jobs.append(Job(f"p{label_number(p)}_s{s}", job_spec(spec, ['pores.arrangement="random"', f"pores.porosity={p!r}",
                                                               f"pores.seed={s}", f"packing.seed={s}"])))
             keys.append((p, s))
-    res = _sweep(spec, out, jobs, say)
+    res = sweep(spec, out, jobs, say)
     runs = []
     for (p, s), job in zip(keys, jobs):
         if job.label not in res:
@@ -337,7 +306,7 @@ def porosity(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
                "| target porosity | seed | porosity | density (kg/m^3) | E (GPa) | strength (MPa) | wall (s) |",
                "|---|---|---|---|---|---|---|"]
     report += [f"| {r['target_porosity']:g} | {r['seed']} | {r['porosity']:.4f} | {r['density_kg_m3']:.0f} | "
-               f"{r['youngs_modulus_GPa']:.4g} | {_fmt(r['strength_MPa'], '.4g')} | {r['wall_s']:.0f} |" for r in runs]
+               f"{r['youngs_modulus_GPa']:.4g} | {fmt_value(r['strength_MPa'], '.4g')} | {r['wall_s']:.0f} |" for r in runs]
     report += ["", "![porosity](porosity.png)"]
     return summary, report
 
@@ -384,14 +353,14 @@ def convergence(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
     seen = set()
     for axis, cells, d in settings:
         for s in st.seeds:
-            label = f"c{cells[0]}x{cells[1]}_d{_num(d)}_s{s}"
+            label = f"c{cells[0]}x{cells[1]}_d{label_number(d)}_s{s}"
             if label in seen:
                 continue
             seen.add(label)
             jobs.append(Job(label, job_spec(spec, [f"pores.cells_x={cells[0]}", f"pores.cells_y={cells[1]}",
                                                   f"packing.diameter_nm={d!r}", f"packing.seed={s}"])))
             keys.append((cells, d, s))
-    res = _sweep(spec, out, jobs, say)
+    res = sweep(spec, out, jobs, say)
     by_setting: dict[tuple, list] = {}
     for (cells, d, s), job in zip(keys, jobs):
         if job.label not in res:
@@ -451,9 +420,9 @@ def convergence(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
     for axis, r in [("cells", r) for r in size_rows] + [("diameter", r) for r in diam_rows]:
         report.append(f"| {axis} | {r['cells'][0]}x{r['cells'][1]} | {r['diameter_nm']:g} | {r['area_um2']:.2f} | "
                       f"{r['n_particles']:.0f} | {r['E_mean_GPa']:.4g} | {r['E_std_GPa']:.2g} | "
-                      f"{100 * r[f'error_E_vs_finest_{axis}']:+.1f} % | {_fmt(r['strength_mean_MPa'], '.4g')} | "
-                      f"{_fmt(r['strength_std_MPa'], '.2g')} | "
-                      f"{_fmt(r[f'error_strength_vs_finest_{axis}'] and 100 * r[f'error_strength_vs_finest_{axis}'], '+.1f')} % | "
+                      f"{100 * r[f'error_E_vs_finest_{axis}']:+.1f} % | {fmt_value(r['strength_mean_MPa'], '.4g')} | "
+                      f"{fmt_value(r['strength_std_MPa'], '.2g')} | "
+                      f"{fmt_value(r[f'error_strength_vs_finest_{axis}'] and 100 * r[f'error_strength_vs_finest_{axis}'], '+.1f')} % | "
                       f"{r['wall_s_mean']:.0f} |")
     for name, c in cost.items():
         report.append("")
@@ -482,7 +451,7 @@ def _plot_convergence(rows, path: Path) -> None:
 
 
 RUNNERS = {"calibration": calibration, "bulk": bulk, "coating": coating, "porosity": porosity,
-           "convergence": convergence}
+           "convergence": convergence, "aerogel_models": aerogel_models, "aerogel_density": aerogel_density}
 
 
 def run(spec: StudyWorkflow, out: Path, say=print) -> dict:

@@ -5,7 +5,7 @@ from dataclasses import dataclass, field
 
 from opalflow.spec import WorkflowSpec, check, check_name
 
-STUDIES = ("calibration", "bulk", "coating", "porosity", "convergence")
+STUDIES = ("calibration", "bulk", "coating", "porosity", "convergence", "aerogel_models", "aerogel_density")
 
 
 @dataclass
@@ -35,6 +35,8 @@ class StudySpec:
     porosities: list[float] = field(default_factory=lambda: [0.30, 0.36, 0.42, 0.49, 0.55, 0.62])
     seeds: list[int] = field(default_factory=lambda: [1, 2, 3])
     cells: list[list[int]] = field(default_factory=lambda: [[1, 1], [2, 1], [2, 2]])
+    # aerogel_density
+    solid_fractions: list[float] = field(default_factory=lambda: [0.04, 0.05, 0.06, 0.08, 0.10])
 
 
 @dataclass
@@ -72,5 +74,7 @@ class StudyWorkflow(WorkflowSpec):
               st.porosities, "must be porosities in (0, 0.66]")
         check(len(st.seeds) >= 1 and all(s >= 0 for s in st.seeds) and len(set(st.seeds)) == len(st.seeds),
               "study.seeds", st.seeds, "must be distinct seeds >= 0")
+        check(len(st.solid_fractions) >= 2 and all(0 < f <= 0.5 for f in st.solid_fractions), "study.solid_fractions",
+              st.solid_fractions, "must be at least two solid fractions in (0, 0.5]")
         check(len(st.cells) >= 1 and all(len(c) == 2 and min(c) >= 1 for c in st.cells), "study.cells",
               st.cells, "must be [cells_x, cells_y] pairs >= 1")

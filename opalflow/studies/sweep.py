@@ -20,7 +20,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from opalflow import registry
-from opalflow.spec import WorkflowSpec
+from opalflow.resources import WORKFLOWS
+from opalflow.spec import SpecError, WorkflowSpec
 from opalflow.store import write_json_atomic
 
 
@@ -118,3 +119,38 @@ def run_jobs(jobs: list[Job], root: Path, *, workers: int = 0, np_: int = 1, say
 def _report(say, label: str, summary: dict, n: int, total: int, t0: float) -> None:
     state = f"FAILED: {summary['failed']}" if "failed" in summary else "done"
     say(f"job {label} {state} ({n}/{total}, {time.perf_counter() - t0:.0f} s)")
+
+
+# ----------------------------------------------------------------------------- a study's jobs
+def job_spec(spec, overrides: list[str]) -> WorkflowSpec:
+    """A study's (:class:`opalflow.studies.spec.StudyWorkflow`) base workflow with the study's and the
+    job's overrides."""
+    st = spec.study
+    base = st.paper_base if st.paper_scale else st.base
+    path = WORKFLOWS / f"{base}.toml"
+    if not path.exists():
+        raise SpecError("study.paper_base" if st.paper_scale else "study.base", base,
+                        f"no workflow {path.name} in {WORKFLOWS}")
+    static = ["compression.method=static", "compression.drop_loose=true"] if st.method == "static" else []
+    return registry.load_spec(path, [*static, *st.set, *overrides])
+
+
+#: label -> reason of the jobs of the running study that failed
+FAILED: dict[str, str] = {}
+
+
+def sweep(spec, out: Path, jobs: list[Job], say) -> dict[str, dict]:
+    """Run a study's jobs; failed ones are left out of the result and listed in FAILED (label -> reason)."""
+    res = run_jobs(jobs, out, workers=spec.study.workers, np_=spec.study.np, say=say)
+    FAILED.update({k: v["failed"] for k, v in res.items() if "failed" in v})
+    return {k: v for k, v in res.items() if "failed" not in v}
+
+
+def fmt_value(value, spec: str) -> str:
+    """``value`` formatted, or "-" where a static job has none (strength, strain at peak, broken bonds)."""
+    return "-" if value is None else format(value, spec)
+
+
+def label_number(x: float) -> str:
+    """A number as it appears in job labels."""
+    return f"{x:.6g}"

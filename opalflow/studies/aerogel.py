@@ -1,0 +1,192 @@
+"""The aerogel studies (Roy and Hossain, seed 002) as sweeps of ``aerogel`` compression jobs.
+
+``aerogel_models``: contact vs parallel bonds x linear vs Hertz-Mindlin contacts on the same aggregates
+(one per seed): E and strength with their spread, the stress-strain curves on one plot, the static E of
+the parallel-bond network beside the dynamic one, and a quasi-static check (the first combination and
+seed again at half the wall speed).
+
+``aerogel_density``: at each solid fraction x seed a static job (E: one linear solve of the slab, glued
+like the dynamic run) and a dynamic job (strength); fits E ~ rho^m and sigma ~ rho^n with 95 % intervals
+beside Ma et al. (2000) and silica-aerogel experiments (data/reference/aerogel_literature.toml).
+"""
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from opalflow.analysis.fits import fit_power_law
+from opalflow.resources import DATA, resource
+from opalflow.store import new_figure, save_figure
+from opalflow.studies.spec import StudyWorkflow
+from opalflow.studies.sweep import Job, fmt_value, job_spec, label_number, sweep
+
+COMBINATIONS = (("parallel", "hertz"), ("parallel", "linear"), ("contact", "hertz"), ("contact", "linear"))
+
+
+def literature() -> dict:
+    """Reference values of the aerogel track (data/reference/aerogel_literature.toml)."""
+    return tomllib.loads(resource(DATA / "reference", "aerogel_literature.toml").read_text())
+
+
+def _curve(out: Path, job: Job) -> tuple[np.ndarray, np.ndarray] | None:
+    """Strain and stress of a finished dynamic job (its results.h5)."""
+    import h5py
+
+    path = job.folder(out) / "results.h5"
+    if not path.exists():
+        return None
+    with h5py.File(path, "r") as h:
+        return h["curve/strain"][()], h["curve/stress_MPa"][()]
+
+
+def _mean_std(values: list[float]) -> tuple[float, float]:
+    v = np.array([x for x in values if x is not None], float)
+    return (float(v.mean()), float(v.std(ddof=1)) if len(v) > 1 else 0.0) if len(v) else (float("nan"), 0.0)
+
+
+def aerogel_models(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
+    st = spec.study
+    base = job_spec(spec, [])
+    jobs: dict[str, Job] = {}
+    for bond, contact in COMBINATIONS:
+        for s in st.seeds:
+            jobs[f"{bond}_{contact}_s{s}"] = Job(f"{bond}_{contact}_s{s}", job_spec(
+                spec, [f'bonds.model="{bond}"', f'contacts.model="{contact}"', f"aggregate.seed={s}"]))
+    for s in st.seeds:
+        jobs[f"static_s{s}"] = Job(f"static_s{s}", job_spec(
+            spec, ['bonds.model="parallel"', "compression.method=static", f"aggregate.seed={s}"]))
+    half = base.compression.plate_speed_m_s / 2
+    jobs["half_speed"] = Job("half_speed", job_spec(spec, [
+        'bonds.model="parallel"', 'contacts.model="hertz"', f"aggregate.seed={st.seeds[0]}",
+        f"compression.plate_speed_m_s={label_number(half)}"]))
+    res = sweep(spec, out, list(jobs.values()), say)
+    rows, curves = [], {}
+    for bond, contact in COMBINATIONS:
+        runs = [res[f"{bond}_{contact}_s{s}"] for s in st.seeds if f"{bond}_{contact}_s{s}" in res]
+        E = _mean_std([r["youngs_modulus_GPa"] * 1e6 for r in runs])
+        S = _mean_std([r["strength_MPa"] * 1e3 for r in runs])
+        rows.append({"bonds": bond, "contacts": contact, "runs": len(runs), "E_kPa": E[0], "E_std_kPa": E[1],
+                     "strength_kPa": S[0], "strength_std_kPa": S[1],
+                     "broken_bonds": _mean_std([r.get("broken_bonds") for r in runs])[0],
+                     "wall_s": float(sum(r["wall_s"] for r in runs))})
+        curves[(bond, contact)] = [c for s in st.seeds if (c := _curve(out, jobs[f"{bond}_{contact}_s{s}"]))]
+    static = _mean_std([res[f"static_s{s}"]["youngs_modulus_GPa"] * 1e6 for s in st.seeds if f"static_s{s}" in res])
+    first = f"parallel_hertz_s{st.seeds[0]}"
+    rate = None
+    if first in res and "half_speed" in res:
+        e1, e2 = res[first]["youngs_modulus_GPa"], res["half_speed"]["youngs_modulus_GPa"]
+        s1, s2 = res[first]["strength_MPa"], res["half_speed"]["strength_MPa"]
+        rate = {"speed_m_s": base.compression.plate_speed_m_s, "E_change": e2 / e1 - 1,
+                "strength_change": s2 / s1 - 1, "quasi_static": abs(e2 / e1 - 1) < 0.02}
+    _plot_models(curves, out / "models.png")
+    ph = rows[0]
+    summary = {"rows": rows, "static_E_kPa": static[0], "static_E_std_kPa": static[1], "rate_check": rate,
+               "headline": (f"parallel+hertz E = {ph['E_kPa']:.4g} +- {ph['E_std_kPa']:.2g} kPa (static "
+                            f"{static[0]:.4g}), contact+hertz E = {rows[2]['E_kPa']:.3g} kPa; half speed changes "
+                            f"E by {rate['E_change']:+.2%}" if rate else "incomplete")}
+    report = [f"The same {len(st.seeds)} aggregates (seeds {', '.join(map(str, st.seeds))}) with each bond and "
+              "contact model; E (fit of the linear part) and strength (peak stress) as mean +- standard deviation "
+              "over the seeds.", "",
+              "| bonds | contacts | runs | E (kPa) | strength (kPa) | broken bonds | wall (s) |", "|---|---|---|---|---|---|---|"]
+    report += [f"| {r['bonds']} | {r['contacts']} | {r['runs']} | {r['E_kPa']:.4g} +- {r['E_std_kPa']:.2g} | "
+               f"{r['strength_kPa']:.4g} +- {r['strength_std_kPa']:.2g} | {r['broken_bonds']:.0f} | {r['wall_s']:.0f} |"
+               for r in rows]
+    report += ["", f"Static solver (parallel bonds, same glued slab, linear): E = {static[0]:.4g} +- {static[1]:.2g} kPa. "
+               "Contact bonds have no static stiffness: they carry no moment, so a tree-like network of them is a "
+               "mechanism held only by its loops and by contacts that form as it folds."]
+    if rate:
+        report += ["", f"Quasi-static check (parallel + Hertz, seed {st.seeds[0]}): half the wall speed "
+                   f"({rate['speed_m_s'] / 2:g} m/s) changes E by {rate['E_change']:+.2%} and the strength by "
+                   f"{rate['strength_change']:+.2%} ({'quasi-static' if rate['quasi_static'] else 'NOT quasi-static'}: "
+                   "criterion |dE| < 2 %)."]
+    report += ["", "![stress-strain curves of the four models](models.png)"]
+    return summary, report
+
+
+def _plot_models(curves: dict, path: Path) -> None:
+    fig, ax = new_figure(figsize=(6.4, 4.4))
+    for k, ((bond, contact), runs) in enumerate(curves.items()):
+        for n, (strain, stress) in enumerate(runs):
+            ax.plot(strain * 100, stress * 1e3, color=f"C{k}", lw=1, alpha=0.8,
+                    label=f"{bond} bond, {contact} contact" if n == 0 else None)
+    ax.set_xlabel("strain (%)")
+    ax.set_ylabel("stress (kPa)")
+    ax.set_title("aerogel compression: bond x contact model (one line per seed)")
+    ax.legend(fontsize=8)
+    save_figure(fig, path)
+
+
+def aerogel_density(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
+    st = spec.study
+    jobs, keys = [], []
+    for f in st.solid_fractions:
+        for s in st.seeds:
+            common = [f"aggregate.solid_fraction={label_number(f)}", f"aggregate.seed={s}"]
+            jobs.append(Job(f"phi{label_number(f)}_s{s}_static", job_spec(spec, [*common, "compression.method=static"])))
+            jobs.append(Job(f"phi{label_number(f)}_s{s}", job_spec(spec, common)))
+            keys.append((f, s))
+    res = sweep(spec, out, jobs, say)
+    runs = []
+    for f, s in keys:
+        a, b = f"phi{label_number(f)}_s{s}_static", f"phi{label_number(f)}_s{s}"
+        if a not in res:
+            continue
+        r = {"target_solid_fraction": f, "seed": s, "solid_fraction": res[a]["solid_fraction"],
+             "density_kg_m3": res[a]["density_kg_m3"], "E_kPa": res[a]["youngs_modulus_GPa"] * 1e6,
+             "E_dynamic_kPa": res[b]["youngs_modulus_GPa"] * 1e6 if b in res else None,
+             "strength_kPa": res[b]["strength_MPa"] * 1e3 if b in res else None,
+             "wall_s": res[a]["wall_s"] + (res[b]["wall_s"] if b in res else 0.0)}
+        runs.append(r)
+    rho = np.array([r["density_kg_m3"] for r in runs])
+    fits = {"E": fit_power_law(rho, [r["E_kPa"] for r in runs])}
+    dyn = [r for r in runs if r["strength_kPa"]]
+    if len(dyn) >= 3:
+        fits["strength"] = fit_power_law([r["density_kg_m3"] for r in dyn], [r["strength_kPa"] for r in dyn])
+    ref = literature()["density_scaling"]
+    m = fits["E"]
+    n_txt = (f", n = {fits['strength'].exponent:.2f} [{fits['strength'].exponent_ci[0]:.2f}, "
+             f"{fits['strength'].exponent_ci[1]:.2f}]" if "strength" in fits else "")
+    summary = {"runs": runs, "fits": {k: v.as_dict() for k, v in fits.items()}, "literature": ref,
+               "headline": (f"E ~ rho^m with m = {m.exponent:.2f} [{m.exponent_ci[0]:.2f}, {m.exponent_ci[1]:.2f}]"
+                            f"{n_txt}; Ma et al. m = {ref['m_dlca_beams']}, experiments {ref['m_experiment_low']}-"
+                            f"{ref['m_experiment_high']}")}
+    _plot_density(runs, fits, out / "density.png")
+    report = [f"Solid fractions {', '.join(map(str, st.solid_fractions))} x seeds {', '.join(map(str, st.seeds))}: "
+              "E from the static solver (the slab glued between its bottom layer and the wall, as the dynamic run), "
+              "strength from the dynamic run; density = the slab's after the cut.", "",
+              "| law | exponent | 95 % interval | prefactor | R^2 | reference |", "|---|---|---|---|---|---|",
+              f"| E = a rho^m (kPa) | {m.exponent:.3f} | [{m.exponent_ci[0]:.3f}, {m.exponent_ci[1]:.3f}] | "
+              f"{m.prefactor:.4g} | {m.r2:.4f} | m = {ref['m_dlca_beams']} ({ref['m_dlca_beams_source']}); "
+              f"{ref['m_experiment_low']}-{ref['m_experiment_high']} ({ref['m_experiment_source']}) |"]
+    if "strength" in fits:
+        f = fits["strength"]
+        report.append(f"| sigma = a rho^n (kPa) | {f.exponent:.3f} | [{f.exponent_ci[0]:.3f}, {f.exponent_ci[1]:.3f}] | "
+                      f"{f.prefactor:.4g} | {f.r2:.4f} | - |")
+    report += ["", "| target solid fraction | seed | solid fraction | density (kg/m^3) | E static (kPa) | "
+               "E dynamic (kPa) | strength (kPa) | wall (s) |", "|---|---|---|---|---|---|---|---|"]
+    report += [f"| {r['target_solid_fraction']:g} | {r['seed']} | {r['solid_fraction']:.4f} | {r['density_kg_m3']:.1f} | "
+               f"{r['E_kPa']:.4g} | {fmt_value(r['E_dynamic_kPa'], '.4g')} | {fmt_value(r['strength_kPa'], '.4g')} | "
+               f"{r['wall_s']:.0f} |" for r in runs]
+    report += ["", "![E and strength against density](density.png)"]
+    return summary, report
+
+
+def _plot_density(runs, fits, path: Path) -> None:
+    fig, ax = new_figure(figsize=(6.4, 4.4))
+    rho = np.array([r["density_kg_m3"] for r in runs])
+    grid = np.geomspace(rho.min(), rho.max(), 50)
+    ax.loglog(rho, [r["E_kPa"] for r in runs], "o", color="C0", label="E (static), kPa")
+    f = fits["E"]
+    ax.loglog(grid, f.prefactor * grid**f.exponent, "-", color="C0", label=f"E ~ rho^{f.exponent:.2f}")
+    dyn = [r for r in runs if r["strength_kPa"]]
+    if "strength" in fits:
+        ax.loglog([r["density_kg_m3"] for r in dyn], [r["strength_kPa"] for r in dyn], "s", color="C3",
+                  label="strength (dynamic), kPa")
+        f = fits["strength"]
+        ax.loglog(grid, f.prefactor * grid**f.exponent, "--", color="C3", label=f"sigma ~ rho^{f.exponent:.2f}")
+    ax.set_xlabel("density (kg/m^3)")
+    ax.set_ylabel("kPa")
+    ax.legend(fontsize=8)
+    save_figure(fig, path)
