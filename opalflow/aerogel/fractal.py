@@ -3,9 +3,9 @@
 1. Mass-radius of the network: C(r), the mean number of sphere centres within r of a sphere centre
    (periodic cube, up to 4000 random centres), less the homogeneous background H(r) = n 4/3 pi r^3,
    grows as r^D inside the fractal range (the pair correlation g(r) - 1 ~ r^(D-3) integrated; Hasmy et
-   al., Phys. Rev. B 50, 6006, 1994).  The range is [2 d, r_4] with d the mean diameter (above the
-   contact shell) and r_4 the radius at which C = 4 H (the network still four times denser than the
-   mean, so the crossover to homogeneity at the correlation length has not set in).  A range shorter
+   al., Phys. Rev. B 50, 6006, 1994).  The range is [2 d, r_x] with d the mean diameter (above the
+   contact shell) and r_x the radius at which C = 2.5 H (the network still 2.5 times denser than the
+   mean: the crossover to homogeneity at the correlation length has barely set in).  A range shorter
    than a factor 1.5 is reported as none: dense gels are fractal over less than a diameter.
 2. Radius of gyration against mass during aggregation: R_g ~ N^(1/D) over every merger's new cluster
    with 10 <= N and R_g < L/4 (clusters smaller than the box, before they span it), averaged in bins of
@@ -25,6 +25,10 @@ from scipy.spatial import cKDTree
 
 from opalflow.aerogel.aggregation import Aggregate
 from opalflow.store import new_figure, save_figure
+
+
+#: the mass-radius fit ends where the network is this many times denser than the mean
+DENSER = 2.5
 
 
 @dataclass
@@ -57,12 +61,12 @@ def mass_radius(agg: Aggregate, *, centres: int = 4000, seed: int = 0) -> tuple[
     count = cKDTree(x[pick], boxsize=L).count_neighbors(cKDTree(x, boxsize=L), r) / len(pick) - 1.0
     background = (n - 1) / L**3 * 4 / 3 * np.pi * r**3
     curve = {"r_nm": r, "count": count, "background": background}
-    above = np.flatnonzero((r >= 2 * d) & (count < 4 * background))
+    above = np.flatnonzero((r >= 2 * d) & (count < DENSER * background))
     r_hi = float(r[above[0] - 1]) if len(above) and above[0] > 0 else float(r[-1])
     sel = (r >= 2 * d) & (r <= r_hi) & (count > background)
     if r_hi < 1.5 * 2 * d or sel.sum() < 4:
         return FractalFit("mass-radius", math.nan, (math.nan, math.nan), (2 * d, r_hi), int(sel.sum()),
-                          "no fractal range: the network is less than 4x denser than the mean beyond "
+                          f"no fractal range: the network is less than {DENSER}x denser than the mean beyond "
                           f"r = {r_hi:.3g} nm (< 3 d)"), curve
     slope, half = _linear_fit(np.log(r[sel]), np.log(count[sel] - background[sel]))
     return FractalFit("mass-radius", slope, (slope - half, slope + half), (2 * d, r_hi), int(sel.sum())), curve
