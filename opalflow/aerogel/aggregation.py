@@ -38,6 +38,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+#: seconds between progress lines
+PROGRESS_S = 3.0
 #: contact distance fraction by which a colliding cluster stops short (rounding never overlaps)
 BACKOFF = 1e-9
 
@@ -321,7 +323,7 @@ def place_grid(r: np.ndarray, box: float, rng: np.random.Generator) -> np.ndarra
 
 def aggregate(diameters: np.ndarray, box: float, *, seed: int, step_fraction: float = 0.5,
               mobility_exponent: float = -0.5, sticking_probability: float = 1.0, progress=None,
-              chunk_moves: int = 200_000, random_placement_max: float = 0.3) -> Aggregate:
+              chunk_moves: int = 20_000, random_placement_max: float = 0.3) -> Aggregate:
     """Aggregate spheres of these diameters in a periodic cube of edge ``box`` (see the module docstring).
 
     progress : ``progress(clusters_left, n, moves, moves_per_s, eta_s)`` between chunks of moves.
@@ -369,9 +371,13 @@ def aggregate(diameters: np.ndarray, box: float, *, seed: int, step_fraction: fl
     arrival = np.full(n, -1, np.int64)
     t_start = time.perf_counter()
     while state[0] > 1:
+        t_chunk = time.perf_counter()
         _aggregate(pos, upos, r, box, nc, head, nxt, prv, cell_of, cl, chead, cnext, ctail, csize, csum, csq,
                    active, where, state, step0, mobility_exponent, sticking_probability, chunk_moves,
                    rec_i, rec_j, rec_n, rec_rg2, arrival)
+        # about one progress line every PROGRESS_S seconds (the moves do not depend on the chunking)
+        grow = PROGRESS_S / max(time.perf_counter() - t_chunk, 1e-3)
+        chunk_moves = int(np.clip(chunk_moves * min(grow, 2.0), 1000, 10**8))
         if progress is not None:
             el = time.perf_counter() - t_start
             done = (n - state[0]) / max(n - 1, 1)

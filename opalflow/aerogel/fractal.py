@@ -8,8 +8,9 @@
    mean: the crossover to homogeneity at the correlation length has barely set in).  A range shorter
    than a factor 1.5 is reported as none: dense gels are fractal over less than a diameter.
 2. Radius of gyration against mass during aggregation: R_g ~ N^(1/D) over every merger's new cluster
-   with 10 <= N and R_g < L/4 (clusters smaller than the box, before they span it), averaged in bins of
-   ln N (a quarter of an e-fold), slope by least squares.
+   with N >= 30 (smaller clusters are too few spheres for the power law: their local slope wanders by
+   0.3) and R_g < L/4 (smaller than the box, before they span it), averaged in bins of ln N (a quarter
+   of an e-fold), slope by least squares.
 
 Intervals are the regression's 95 % (Student t) intervals; the points are correlated, so these are
 lower bounds of the uncertainty: seeds give the spread.
@@ -72,7 +73,7 @@ def mass_radius(agg: Aggregate, *, centres: int = 4000, seed: int = 0) -> tuple[
     return FractalFit("mass-radius", slope, (slope - half, slope + half), (2 * d, r_hi), int(sel.sum())), curve
 
 
-def radius_of_gyration(agg: Aggregate, *, n_min: int = 10) -> tuple[FractalFit, dict]:
+def radius_of_gyration(agg: Aggregate, *, n_min: int = 30) -> tuple[FractalFit, dict]:
     """D from R_g ~ N^(1/D) of the clusters made during aggregation (method 2), and the points."""
     N, rg = agg.merger_size.astype(float), agg.merger_rg
     keep = (N >= n_min) & (rg < agg.box / 4) & (rg > 0)

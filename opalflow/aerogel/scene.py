@@ -4,13 +4,15 @@ Bonds join every pair whose centre distance is within ``bonds.cutoff_factor`` of
 r_i + r_j (1.001 by default: the contacts the aggregation made, which leave a tree, plus near-contacts
 that close loops), across the periodic boundaries too.
 
-The slab for the compression (kind ``aerogel``): the periodic aggregate is cut open at the cube's z
-faces (bonds that cross z = 0 = L are dropped; x and y stay periodic, so the network is infinite
-sideways), the spheres whose centres lie within one mean diameter of the bottom face are the fixed
-substrate (the bottom wall the network is attached to), and every sphere with no bond path to the
-substrate (pieces the cut set free: they would float) is left out and counted.  The plate starts at
-the top of the highest sphere, as PFC's wall does: a contact-only wall, so the top is loaded where
-the network reaches it.
+The slab for the compression (kind ``aerogel``): the periodic aggregate is cut open by a horizontal
+plane (bonds that cross it are dropped; x and y stay periodic, so the network is infinite sideways);
+the spheres whose centres lie within one mean diameter above the plane are the fixed substrate (the
+bottom wall the network is attached to), and every sphere with no bond path to the substrate (pieces the
+cut set free: they would float) is left out and counted.  A DLCA network is nearly a tree, so a cut
+frees whole branches: of CUTS planes at heights k L / CUTS the one that keeps the most spheres is taken
+(deterministic).  The top is loaded by ``compression.loading``: "glued" (the aerogel workflows: the top
+layer moves with the wall, as the bottom layer is held by the substrate) or "plate" (PFC's contact-only
+wall, which loads the network where it reaches highest).
 """
 from __future__ import annotations
 
@@ -60,38 +62,52 @@ def periodic_structure(agg: Aggregate, cutoff_factor: float, material_name: str,
                      meta={"solid_fraction": agg.solid_fraction})
 
 
+#: candidate heights of the cut plane (fractions of the cube edge)
+CUTS = 16
+
+
+def _attached(z: np.ndarray, bonds: np.ndarray, box: float, d_mean: float) -> np.ndarray:
+    """Spheres with a bond path to the bottom layer (centres below d_mean) once bonds across z = 0 = box
+    are cut, for heights z in [0, box)."""
+    n = len(z)
+    keep = np.abs(z[bonds[:, 1]] - z[bonds[:, 0]]) < box / 2
+    b = bonds[keep]
+    _, label = connected_components(coo_matrix((np.ones(len(b)), (b[:, 0], b[:, 1])), shape=(n, n)), directed=False)
+    return np.isin(label, np.unique(label[z < d_mean]))
+
+
 def slab(agg: Aggregate, cutoff_factor: float, material_name: str, overrides=None) -> tuple[Structure, dict]:
-    """The aggregate cut open at z = 0 = L, its bottom layer fixed, free pieces left out (module docstring)."""
+    """The aggregate cut open at the best of CUTS heights, its bottom layer fixed, free pieces left out and
+    the box in z opened by half the height on both sides (see the module docstring)."""
     box = np.full(3, agg.box)
-    periodic = np.array([True, True, False])
     x = quantize(agg.positions, box, np.ones(3, bool))
-    bonds = find_bonds(x, agg.diameters, box, periodic, cutoff_factor)
-    n = len(x)
+    whole = find_bonds(x, agg.diameters, box, np.ones(3, bool), cutoff_factor)
     d_mean = float(np.mean(agg.diameters))
+    counts = [int(_attached(np.mod(x[:, 2] - k * agg.box / CUTS, agg.box), whole, agg.box, d_mean).sum())
+              for k in range(CUTS)]
+    best = int(np.argmax(counts))
+    x[:, 2] = np.mod(x[:, 2] - best * agg.box / CUTS, agg.box)
+    x = quantize(x, box, np.ones(3, bool))
+    keep = np.abs(x[whole[:, 1], 2] - x[whole[:, 0], 2]) < agg.box / 2
+    bonds = whole[keep]
+    n = len(x)
     substrate = x[:, 2] < d_mean
-    graph = coo_matrix((np.ones(len(bonds)), (bonds[:, 0], bonds[:, 1])), shape=(n, n))
-    _, label = connected_components(graph, directed=False)
-    attached = np.isin(label, np.unique(label[substrate]))
+    attached = _attached(x[:, 2], whole, agg.box, d_mean)
     rho = density_to_nano(material(material_name, overrides)["density_kg_m3"])
+    # z is not periodic: room for the network to bulge or lose pieces without atoms leaving the box
+    lo, hi = np.array([0.0, 0.0, -agg.box / 2]), np.array([agg.box, agg.box, 1.5 * agg.box])
     s = Structure(positions=x, diameters=agg.diameters.copy(), types=np.where(substrate, 2, 1).astype(np.int32),
-                  densities=np.full(n, rho), box_lo=np.zeros(3), box_hi=box, periodic=periodic, bonds=bonds,
-                  bond_types=np.ones(len(bonds), np.int32), molecules=np.ones(n, np.int32),
+                  densities=np.full(n, rho), box_lo=lo, box_hi=hi, periodic=np.array([True, True, False]),
+                  bonds=bonds, bond_types=np.ones(len(bonds), np.int32), molecules=np.ones(n, np.int32),
                   type_names=[material_name, "substrate"], bond_type_names=[material_name],
                   groups={"substrate": substrate})
     kept = s.select(attached)
     kept.meta = {"aggregate_solid_fraction": agg.solid_fraction,
                  "solid_fraction": float(np.sum(kept.particle_volumes()) / agg.box**3),
-                 "dropped_unattached": int(n - attached.sum()), "cut_bonds": int(_cut_bonds(agg, cutoff_factor)),
+                 "dropped_unattached": int(n - attached.sum()), "cut_bonds": int(len(whole) - len(bonds)),
+                 "cut_height_nm": best * agg.box / CUTS, "box_nm": agg.box,
                  "aggregation_s": agg.wall_s, "aggregation_moves": agg.moves}
     return kept, {"dropped": int(n - attached.sum())}
-
-
-def _cut_bonds(agg: Aggregate, cutoff_factor: float) -> int:
-    """Bonds across the z faces that the cut removes."""
-    box = np.full(3, agg.box)
-    whole = find_bonds(agg.positions, agg.diameters, box, np.ones(3, bool), cutoff_factor)
-    dz = np.abs(agg.positions[whole[:, 1], 2] - agg.positions[whole[:, 0], 2])
-    return int(np.sum(dz > agg.box / 2))
 
 
 def build_aerogel(spec: AerogelWorkflow, progress=None) -> Structure:
@@ -104,7 +120,7 @@ def statistics(s: Structure) -> dict:
     """Numbers about the slab for the build and run summaries."""
     n = s.n_particles
     z = coordination(n, s.bonds)
-    volume = float(np.prod(s.box_lengths))
+    volume = float(s.meta["box_nm"]) ** 3        # the cube the aggregate filled (the z box has room around it)
     mass = float(np.sum(s.densities * s.particle_volumes()))
     return {"n_particles": n, "n_bonds": s.n_bonds, "solid_fraction": s.meta["solid_fraction"],
             "aggregate_solid_fraction": s.meta["aggregate_solid_fraction"],

@@ -241,12 +241,14 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
         "plate": render("plate", plate_speed=num(v), plate_z0=num(top),
                         plate_contact=contact_args(contacts[1], plate_E[1], 2 * contacts[1].stiffness))
         if c.loading == "plate" else render("plate_glued", plate_speed=num(v)),
+        "affine_start": render("affine_start", plate_speed=num(v), base=num(base), top=num(top)),
         "snapshots": render("snapshots", next_snapshot=_next_snapshot(snaps)),
         "run": render("run", restart_every=num(restart_every), steps=num(steps)),
     }
     wanted = ["system", "groups", "bonds"] + (["contacts"] if spec.contacts.enabled else []) + \
              ["integrate"] + (["damping"] if c.global_damping > 0 else []) + \
-             ["plate", "output"] + (["snapshots"] if snaps else []) + ["run"]
+             ["plate"] + (["affine_start"] if c.loading == "glued" else []) + ["output"] + \
+             (["snapshots"] if snaps else []) + ["run"]
     title = f"# opalflow {__version__}: {name(spec.name)} - uniaxial compression by a plate\n"
 
     def deck(fresh: bool) -> str:
@@ -260,7 +262,7 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
             elif b == "system":
                 parts.append(render("system_restart", ghost_cutoff=common["ghost_cutoff"],
                                     restart_file="restart.*.bin"))
-            elif b != "groups":  # groups are stored in restart files
+            elif b not in ("groups", "affine_start"):  # groups are stored in restart files, velocities too
                 # bonds and contacts are given again: pair granular read back from a restart file
                 # blows up the first contacts of pairs whose bond broke (see templates/system_restart.lmp)
                 parts.append(blocks[b])
