@@ -186,11 +186,14 @@ def test_first_estimate_maps_kn_and_sn_to_the_bond():
         assert c.ks / c.kr == pytest.approx(0.5)
 
 
-def test_contact_bond_has_no_moment_and_linear_contacts_are_hooke():
+def test_contact_bond_is_a_central_spring_and_linear_contacts_are_hooke():
     spec = small_spec('bonds.model="contact"', 'contacts.model="linear"')
     deck = compression_deck(spec, small_structure(spec))
-    assert all(c.kb == 0 and c.kt == 0 and c.gr == 0 and c.gt == 0 for c in deck.coefficients)
-    assert all(c.kr > 0 and c.ks > 0 for c in deck.coefficients)
+    assert all(c.kb == 0 and c.kt == 0 and c.ks == 0 and c.kr > 0 for c in deck.coefficients)
+    assert "bond_style      bpm/spring normalize yes" in deck.in_lmp and "bpm/rotational" not in deck.in_lmp
+    # the spring breaks at the strain where its force reaches the bond strength
+    k, eps_c, gamma = deck.coefficients[0].spring_values()
+    assert k * eps_c == pytest.approx(deck.coefficients[0].fr_c) and gamma == deck.coefficients[0].gn
     assert "hooke" in deck.in_lmp and "linear_history" in deck.in_lmp and "hertz" not in deck.in_lmp
     deck = compression_deck(small_spec(), small_structure(spec))
     assert all(c.kb > 0 for c in deck.coefficients) and "hertz/material" in deck.in_lmp

@@ -224,15 +224,17 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
     gamma = 2 * c.global_damping * omega1 * float(np.mean(masses[~substrate]))
 
     substrate_type = s.type_names.index("substrate") + 1
-    bond_lines = "\n".join(f"bond_coeff      {t + 1} " + " ".join(num(x) for x in cf.values())
-                           for t, cf in enumerate(coeffs))
+    contact_bond = spec.bonds.model == "contact"
+    bond_lines = "\n".join(f"bond_coeff      {t + 1} " + " ".join(num(x) for x in (
+        cf.spring_values() if contact_bond else cf.values())) for t, cf in enumerate(coeffs))
     common = dict(ghost_cutoff=num(1.25 * float(np.max(r0, initial=d_mean)) + 0.2 * d_mean),
                   data_file="data.lmp", boundary="p p f" if s.periodic[0] else "m m f")
     blocks = {
         "system": render("system", **common),
         "groups": render("groups" if c.loading == "plate" else "groups_glued", substrate_type=num(substrate_type),
                          top_layer_z=num(top - 0.75 * d_mean)),
-        "bonds": render("bonds", breakable="yes" if spec.bonds.breakable else "no", bond_coeffs=bond_lines),
+        "bonds": render("bonds_spring" if contact_bond else "bonds", breakable="yes" if spec.bonds.breakable else "no",
+                        bond_coeffs=bond_lines),
         "contacts": render("contacts", pair_coeffs="\n".join(
             f"pair_coeff      {t} {t} {contact_args(cp)}" for t, cp in contacts.items())),
         "integrate": render("integrate", skin=num(0.2 * d_mean), timestep=num(dt)),

@@ -15,7 +15,8 @@ from opalflow.materials import OVERRIDABLE, material_names
 from opalflow.spec import WorkflowSpec, check, check_name, is_number
 
 SIDES = ("periodic", "open")
-#: bond models (Roy and Hossain, Fig. 10.8): parallel bond = force and moment, contact bond = force only
+#: bond models (Roy and Hossain, Fig. 10.8): parallel bond = force and moment (bpm/rotational), contact bond
+#: = force only (bpm/spring)
 BOND_MODELS = ("parallel", "contact")
 #: contact force laws between unbonded particles: Hertz-Mindlin or linear (PFC's two stiffness models)
 CONTACT_MODELS = ("hertz", "linear")
@@ -29,9 +30,8 @@ class BondsSpec:
     """Bonds: who is bonded (cutoff) and how they respond (bpm/rotational).
 
     ``model``: "parallel" (PFC's parallel bond: normal and shear force and bending and twisting moment
-    over the bond's cross-section) or "contact" (PFC's contact bond: normal and shear force at the
-    contact point and no moment: bpm/rotational with zero bending and twisting stiffness; see
-    :func:`opalflow.materials.bond_coefficients`).
+    over the bond's cross-section: bpm/rotational) or "contact" (PFC's contact bond: a force at the
+    contact point and no moment: bpm/spring; why, in :class:`opalflow.materials.BondCoefficients`).
     """
 
     model: str = "parallel"
