@@ -207,7 +207,7 @@ def small_structure(spec):
 @pytest.fixture(scope="module")
 def glued_runs(tmp_path_factory):
     out = tmp_path_factory.mktemp("aerogel")
-    dynamic = run_workflow(small_spec(), out / "dynamic", say=lambda *_: None)
+    dynamic = run_workflow(small_spec("contacts.enabled=false"), out / "dynamic", say=lambda *_: None)
     static = run_workflow(small_spec("compression.method=static"), out / "static", say=lambda *_: None)
     contact = run_workflow(small_spec('bonds.model="contact"', 'contacts.model="linear"'), out / "contact",
                            say=lambda *_: None)
@@ -216,11 +216,13 @@ def glued_runs(tmp_path_factory):
 
 def test_glued_dynamic_modulus_matches_the_static_solver(glued_runs):
     """The LAMMPS compression with the top layer glued to the wall and the static solve of the same slab
-    (top layer clamped) give the same E (the dynamic fit spans 1-2 % strain: geometric nonlinearity of
-    the bending-dominated network and the drag allow 10 %)."""
+    (top layer clamped) give the same E: measured 2.8 % apart (the dynamic fit spans about 1 % strain of a
+    bending-dominated network; half the wall speed changes it by < 0.1 %).  Contacts are off: unbonded
+    neighbours that touch as the network folds stiffen the dynamic run (+12 % here), and the static
+    solve has none."""
     dynamic, static, _ = glued_runs
     assert dynamic["complete"] and dynamic["youngs_modulus_GPa"] > 0
-    assert dynamic["youngs_modulus_GPa"] == pytest.approx(static["youngs_modulus_GPa"], rel=0.10)
+    assert dynamic["youngs_modulus_GPa"] == pytest.approx(static["youngs_modulus_GPa"], rel=0.05)
 
 
 def test_contact_bonds_are_far_softer_than_parallel_bonds(glued_runs):
