@@ -103,6 +103,22 @@ def _cell(x, box, nc):
 
 
 @njit(cache=True)
+def _neighbour_cells(c, nc):
+    """The 27 cells around cell c (itself included), periodic."""
+    cz = c % nc
+    cy = (c // nc) % nc
+    cx = c // (nc * nc)
+    out = np.empty(27, np.int64)
+    k = 0
+    for dx in range(-1, 2):
+        for dy in range(-1, 2):
+            for dz in range(-1, 2):
+                out[k] = (((cx + dx) % nc) * nc + (cy + dy) % nc) * nc + (cz + dz) % nc
+                k += 1
+    return out
+
+
+@njit(cache=True)
 def _insert(i, c, head, nxt, prv, cell_of):
     nxt[i] = head[c]
     prv[i] = -1
@@ -139,29 +155,17 @@ def _place_random(r, box, nc, head, nxt, prv, cell_of, pos, max_tries):
             for k in range(3):
                 x[k] = np.random.random() * box
             c = _cell(x, box, nc)
-            cz = c % nc
-            cy = (c // nc) % nc
-            cx = c // (nc * nc)
             ok = True
-            for dx in range(-1, 2):
-                for dy in range(-1, 2):
-                    for dz in range(-1, 2):
-                        cc = (((cx + dx) % nc) * nc + (cy + dy) % nc) * nc + (cz + dz) % nc
-                        j = head[cc]
-                        while j >= 0:
-                            s = r[i] + r[j]
-                            d2 = 0.0
-                            for k in range(3):
-                                dk = _min_image(x[k] - pos[j, k], box)
-                                d2 += dk * dk
-                            if d2 < s * s:
-                                ok = False
-                                break
-                            j = nxt[j]
-                        if not ok:
-                            break
-                    if not ok:
-                        break
+            for cc in _neighbour_cells(c, nc):
+                j = head[cc]
+                while j >= 0 and ok:
+                    s = r[i] + r[j]
+                    d2 = 0.0
+                    for k in range(3):
+                        dk = _min_image(x[k] - pos[j, k], box)
+                        d2 += dk * dk
+                    ok = d2 >= s * s
+                    j = nxt[j]
                 if not ok:
                     break
             if ok:
@@ -200,33 +204,26 @@ def _aggregate(pos, upos, r, box, nc, head, nxt, prv, cell_of, cl, chead, cnext,
         hit_j = -1
         i = chead[c]
         while i >= 0:
-            ci = cell_of[i]
-            cz = ci % nc
-            cy = (ci // nc) % nc
-            cx = ci // (nc * nc)
-            for dx in range(-1, 2):
-                for dy in range(-1, 2):
-                    for dz in range(-1, 2):
-                        cc = (((cx + dx) % nc) * nc + (cy + dy) % nc) * nc + (cz + dz) % nc
-                        j = head[cc]
-                        while j >= 0:
-                            if cl[j] != c:
-                                b = 0.0
-                                ww = 0.0
-                                for k in range(3):
-                                    w[k] = _min_image(pos[i, k] - pos[j, k], box)
-                                    b += w[k] * u[k]
-                                    ww += w[k] * w[k]
-                                if b < 0.0:
-                                    s = r[i] + r[j]
-                                    disc = b * b - (ww - s * s)
-                                    if disc > 0.0:
-                                        t = -b - math.sqrt(disc)
-                                        if t < tmin:
-                                            tmin = max(t, 0.0)
-                                            hit_i = i
-                                            hit_j = j
-                            j = nxt[j]
+            for cc in _neighbour_cells(cell_of[i], nc):
+                j = head[cc]
+                while j >= 0:
+                    if cl[j] != c:
+                        b = 0.0
+                        ww = 0.0
+                        for k in range(3):
+                            w[k] = _min_image(pos[i, k] - pos[j, k], box)
+                            b += w[k] * u[k]
+                            ww += w[k] * w[k]
+                        if b < 0.0:           # approaching: the first root of |w + t u| = r_i + r_j
+                            s = r[i] + r[j]
+                            disc = b * b - (ww - s * s)
+                            if disc > 0.0:
+                                t = -b - math.sqrt(disc)
+                                if t < tmin:
+                                    tmin = max(t, 0.0)
+                                    hit_i = i
+                                    hit_j = j
+                    j = nxt[j]
             i = cnext[i]
         t = tmin
         if hit_i >= 0:
