@@ -29,20 +29,24 @@ LITERATURE = {"dlca": ("1.75-1.85 at low concentration, rising with it", "Hasmy 
 
 
 def plot_network(agg: Aggregate, z: np.ndarray, path) -> None:
-    """The network: 3D view coloured by arrival (when the sphere's cluster joined), and a slab a fifth of
-    the box thick seen along z, coloured by coordination; marker areas follow the diameters."""
+    """The network: 3D view of an eighth of the cube coloured by arrival (the rank of the merger at which
+    the sphere's cluster joined another), and a slab a fifth of the box thick seen along z, coloured by
+    coordination; marker areas follow the diameters."""
     import matplotlib
+    from scipy.stats import rankdata
 
     fig = new_figure(figsize=(11, 5))[0]
     fig.clf()
     ax = fig.add_subplot(1, 2, 1, projection="3d")
     x = agg.positions
-    order = np.where(agg.arrival < 0, len(agg.contacts), agg.arrival) / max(len(agg.contacts), 1)
+    rank = rankdata(agg.arrival) / len(x)
+    corner = np.all(x < agg.box / 2, axis=1)
     size = (agg.diameters / agg.box * 330) ** 2
-    sc = ax.scatter(x[:, 0], x[:, 1], x[:, 2], c=order, s=size, cmap="viridis", depthshade=True, linewidths=0)
+    sc = ax.scatter(x[corner, 0], x[corner, 1], x[corner, 2], c=rank[corner], s=size[corner] * 4, cmap="viridis",
+                    depthshade=True, linewidths=0)
     ax.set_box_aspect((1, 1, 1))
-    ax.set_title("aggregate (colour: when its cluster joined)")
-    fig.colorbar(sc, ax=ax, shrink=0.6, label="arrival / mergers")
+    ax.set_title(f"an eighth of the cube ({int(corner.sum())} spheres)")
+    fig.colorbar(sc, ax=ax, shrink=0.6, label="arrival (rank of its last merger)")
     b = fig.add_subplot(1, 2, 2)
     sel = x[:, 2] < agg.box / 5
     cmap = matplotlib.colormaps["plasma"].resampled(5)
