@@ -106,15 +106,22 @@ def aerogel_models(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]
 
 
 def _plot_models(curves: dict, path: Path) -> None:
-    fig, ax = new_figure(figsize=(6.4, 4.4))
+    """All four models in kPa, and the contact-bond ones again in Pa (a thousand times softer)."""
+    fig, axes = new_figure(1, 2, figsize=(11, 4.2))
     for k, ((bond, contact), runs) in enumerate(curves.items()):
         for n, (strain, stress) in enumerate(runs):
-            ax.plot(strain * 100, stress * 1e3, color=f"C{k}", lw=1, alpha=0.8,
-                    label=f"{bond} bond, {contact} contact" if n == 0 else None)
-    ax.set_xlabel("strain (%)")
-    ax.set_ylabel("stress (kPa)")
-    ax.set_title("aerogel compression: bond x contact model (one line per seed)")
-    ax.legend(fontsize=8)
+            style = dict(color=f"C{k}", lw=1, alpha=0.8, ls="-" if contact == "hertz" else "--",
+                         label=f"{bond} bond, {contact} contact" if n == 0 else None)
+            axes[0].plot(strain * 100, stress * 1e3, **style)
+            if bond == "contact":
+                axes[1].plot(strain * 100, stress * 1e6, **style)
+    axes[0].set_ylabel("stress (kPa)")
+    axes[0].set_title("bond x contact model (one line per seed)")
+    axes[1].set_ylabel("stress (Pa)")
+    axes[1].set_title("contact bonds only (a mechanism: no moments)")
+    for ax in axes:
+        ax.set_xlabel("strain (%)")
+        ax.legend(fontsize=8)
     save_figure(fig, path)
 
 
