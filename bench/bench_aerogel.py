@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import platform
 import time
 from pathlib import Path
@@ -65,9 +66,14 @@ def main() -> None:
             fractal.append(row)
             print(f"{algo} phi = {phi} seed {seed}: D = {row['mass_radius']['D']:.3f} (mass-radius), "
                   f"{row['rg']['D']:.3f} (R_g(N)), {row['seconds']:.0f} s", flush=True)
-    result = {"machine": platform.processor() or platform.machine(), "cpus": __import__("os").cpu_count(),
-              "timing": timing, "time_exponent": slope, "fractal": fractal}
-    (HERE / "results" / "aerogel.json").write_text(json.dumps(result, indent=2) + "\n")
+    path = HERE / "results" / "aerogel.json"
+    old = json.loads(path.read_text()) if path.exists() else {}
+    # a run with no sizes (or no fractions) keeps the other part of the previous results
+    result = {"machine": platform.processor() or platform.machine(), "cpus": os.cpu_count(),
+              "timing": timing or old.get("timing", []),
+              "time_exponent": slope if timing else old.get("time_exponent", math.nan),
+              "fractal": fractal or old.get("fractal", [])}
+    path.write_text(json.dumps(result, indent=2) + "\n")
     (HERE / "results" / "aerogel.md").write_text(markdown(result))
 
 
