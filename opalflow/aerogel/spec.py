@@ -38,7 +38,7 @@ class AggregateSpec:
     def validate(self) -> None:
         check(2 <= self.particles <= 5_000_000, "aggregate.particles", self.particles, "must be in [2, 5e6]")
         check(0 < self.solid_fraction <= 0.5, "aggregate.solid_fraction", self.solid_fraction, "must be in (0, 0.5]")
-        check(0 < self.diameter_nm <= 1e5, "aggregate.diameter_nm", self.diameter_nm, "must be in (0, 1e5] nm")
+        check(1e-3 <= self.diameter_nm <= 1e5, "aggregate.diameter_nm", self.diameter_nm, "must be in [1e-3, 1e5] nm")
         check(self.diameter_std_nm >= 0, "aggregate.diameter_std_nm", self.diameter_std_nm, "must be >= 0")
         z = 2.326                                          # P(d <= 0) = 1 % at mean = 2.326 std
         check(self.diameter_std_nm * z <= self.diameter_nm, "aggregate.diameter_std_nm", self.diameter_std_nm,

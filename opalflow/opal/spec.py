@@ -79,7 +79,7 @@ class OpalWorkflow(BpmWorkflow):
     def validate(self) -> None:
         super().validate()
         k = self.packing
-        check(k.diameter_nm > 0, "packing.diameter_nm", k.diameter_nm, "must be > 0")
+        check(1e-3 <= k.diameter_nm <= 1e5, "packing.diameter_nm", k.diameter_nm, "must be in [1e-3, 1e5] nm")
         check(0.05 <= k.solid_fraction <= 0.64, "packing.solid_fraction", k.solid_fraction,
               "must be in [0.05, 0.64] (random close packing of spheres is about 0.64)")
         check(0 <= k.diameter_std_nm <= 0.3 * k.diameter_nm, "packing.diameter_std_nm", k.diameter_std_nm,
