@@ -36,7 +36,7 @@ def test_bad_spec_exit_code_from_shell(tmp_path):
                            "--set", "packing.diameter_nm=-1"], capture_output=True, text=True)
     assert proc.returncode == 2
     assert proc.stderr.strip().splitlines() == [
-        "error: packing.diameter_nm = -1.0: must be > 0"]
+        "error: packing.diameter_nm = -1.0: must be in [1e-3, 1e5] nm"]
     assert not out.exists()
 
 

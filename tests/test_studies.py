@@ -109,7 +109,7 @@ def test_newton_calibration_on_a_known_model(tmp_path, monkeypatch):
                                "wall_s": 0.0}
         return out_
 
-    monkeypatch.setattr(studies, "_sweep", fake_sweep)
+    monkeypatch.setattr(studies, "sweep", fake_sweep)
     for jacobian in ("decoupled", "full"):
         calls.clear()
         spec = load_spec(WORKFLOWS / "calibrate_silica.toml", [f'study.jacobian="{jacobian}"'])
