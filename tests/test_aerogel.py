@@ -230,3 +230,13 @@ def test_contact_bonds_are_far_softer_than_parallel_bonds(glued_runs):
     dynamic, _, contact = glued_runs
     assert contact["complete"]
     assert contact["youngs_modulus_GPa"] < 0.2 * dynamic["youngs_modulus_GPa"]
+
+
+def test_glued_aerogel_passes_the_stability_check(tmp_path):
+    """The energy account counts what the start gives (affine field, glued top layer) as no created energy:
+    the deck's time step passes, 3 x it fails."""
+    from opalflow.bpm.stability import check_workflow
+
+    assert check_workflow(small_spec(), tmp_path / "ok", say=lambda *_: None, steps=1500)["passed"]
+    assert not check_workflow(small_spec(), tmp_path / "x3", say=lambda *_: None, steps=1500,
+                              timestep_factor=3.0)["passed"]

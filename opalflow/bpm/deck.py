@@ -126,6 +126,7 @@ class CompressionDeck:
     viscous_gamma: float = 0.0
     top_z0_nm: float = 0.0
     top_layer: np.ndarray | None = None     # the top particle layer (LAMMPS group "top")
+    initial_ke_zJ: float = 0.0              # kinetic energy given at the start (glued: affine field, top layer)
 
     def info(self) -> dict:
         return {
@@ -221,6 +222,11 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
     snaps = sorted({max(1, int(round(e * steps_per_strain))) for e in c.snapshot_strains})
 
     omega1, modulus_affine = fundamental_mode(data, coeffs, height, area, masses, r0)
+    initial_ke = 0.0
+    if c.loading == "glued":     # the start gives the mobile particles the affine field, fix move the top v
+        moving = ~substrate & ~top_group
+        v_z = v * np.clip((s.positions[:, 2] - base) / height, 0.0, 1.0)
+        initial_ke = float(0.5 * np.sum(masses[moving] * v_z[moving] ** 2) + 0.5 * np.sum(masses[top_group]) * v**2)
     gamma = 2 * c.global_damping * omega1 * float(np.mean(masses[~substrate]))
 
     substrate_type = s.type_names.index("substrate") + 1
@@ -275,7 +281,7 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
                            restart_every=restart_every, snapshot_steps=snaps, height_nm=height,
                            area_nm2=area, plate_z0_nm=top, plate_speed_nm_ns=v, blocks=wanted,
                            modulus_affine_MPa=modulus_affine, omega1_per_ns=omega1, viscous_gamma=gamma,
-                           top_z0_nm=top_z0, top_layer=top_group)
+                           top_z0_nm=top_z0, top_layer=top_group, initial_ke_zJ=initial_ke)
 
 
 def fundamental_mode(s: Structure, coeffs: list[BondCoefficients], height: float, area: float,

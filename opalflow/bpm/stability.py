@@ -107,7 +107,7 @@ def run_check(deck: CompressionDeck, folder: Path, *, factor: float = 1.0, steps
     step, ke, erot, p_plate, p_drag = v[:, 0], v[:, 1], v[:, 2], v[:, 3], v[:, 4]
     # running means of the power since the fix was defined (step 0) -> work to each step
     w_in = (p_plate + p_drag) * step * deck.dt_ns * factor
-    ke_tot = ke + erot
+    ke_tot = ke + erot - deck.initial_ke_zJ          # what the start gave is no energy the run created
     criteria = {}
     finite = bool(len(v)) and bool(np.all(np.isfinite(v)))
     criteria["finite"] = (finite, "all values finite" if finite else
@@ -191,8 +191,9 @@ def check_workflow(spec: BpmWorkflow, out: Path, *, say=print, steps: int = 3000
                         "estimate_over_bisected": deck.timestep.limit_ns * 1e-9 / dt_max if dt_max else None,
                         "bisection": [{"factor": r.timestep_factor, "timestep_s": r.timestep_s, "passed": r.passed,
                                        "failed": r.failed()} for r in runs]})
+        ratio = summary["estimate_over_bisected"]
         say(f"largest stable dt found {dt_max:.3g} s; estimated limit {deck.timestep.limit_ns * 1e-9:.3g} s "
-            f"(ratio {summary['estimate_over_bisected']:.2f}); the deck uses {deck.dt_ns * 1e-9:.3g} s")
+            f"(ratio {'-' if ratio is None else format(ratio, '.2f')}); the deck uses {deck.dt_ns * 1e-9:.3g} s")
     verdict = "stable" if result.passed else f"UNSTABLE ({result.failed()})"
     summary["headline"] = f"{spec.name}: {verdict} at dt = {result.timestep_s:.3g} s over {result.steps} steps{upto}"
     summary["wall_s"] = time.perf_counter() - t0
