@@ -135,7 +135,7 @@ def test_slab_build_is_byte_identical(tmp_path):
 def test_slab_is_cut_at_z_and_every_sphere_hangs_on_the_substrate():
     spec = small_spec()
     agg = make_aggregate(spec.aggregate)
-    s, info = slab(agg, spec.bonds.cutoff_factor, "silica")
+    s = slab(agg, spec.bonds.cutoff_factor, "silica")
     assert not s.periodic[2] and s.periodic[0] and s.periodic[1]
     dz = np.abs(np.diff(s.positions[s.bonds][:, :, 2], axis=1))
     assert dz.max() < agg.diameters.max() * 1.01                     # no bond across z = 0 = L
@@ -145,7 +145,7 @@ def test_slab_is_cut_at_z_and_every_sphere_hangs_on_the_substrate():
     n = s.n_particles
     _, label = connected_components(coo_matrix((np.ones(s.n_bonds), tuple(s.bonds.T)), shape=(n, n)), directed=False)
     assert np.isin(label, label[s.groups["substrate"]]).all()
-    assert info["dropped"] + n == 600
+    assert s.meta["dropped_unattached"] + n == 600
 
 
 @pytest.mark.parametrize("sets, field", [
@@ -201,7 +201,7 @@ def test_contact_bond_is_a_central_spring_and_linear_contacts_are_hooke():
 
 def small_structure(spec):
     agg = make_aggregate(spec.aggregate)
-    return slab(agg, spec.bonds.cutoff_factor, spec.material)[0]
+    return slab(agg, spec.bonds.cutoff_factor, spec.material)
 
 
 @pytest.fixture(scope="module")

@@ -76,7 +76,7 @@ def _attached(z: np.ndarray, bonds: np.ndarray, box: float, d_mean: float) -> np
     return np.isin(label, np.unique(label[z < d_mean]))
 
 
-def slab(agg: Aggregate, cutoff_factor: float, material_name: str, overrides=None) -> tuple[Structure, dict]:
+def slab(agg: Aggregate, cutoff_factor: float, material_name: str, overrides=None) -> Structure:
     """The aggregate cut open at the best of CUTS heights, its bottom layer fixed, free pieces left out and
     the box in z opened by half the height on both sides (see the module docstring)."""
     box = np.full(3, agg.box)
@@ -107,13 +107,12 @@ def slab(agg: Aggregate, cutoff_factor: float, material_name: str, overrides=Non
                  "dropped_unattached": int(n - attached.sum()), "cut_bonds": int(len(whole) - len(bonds)),
                  "cut_height_nm": best * agg.box / CUTS, "box_nm": agg.box,
                  "aggregation_s": agg.wall_s, "aggregation_moves": agg.moves}
-    return kept, {"dropped": int(n - attached.sum())}
+    return kept
 
 
 def build_aerogel(spec: AerogelWorkflow, progress=None) -> Structure:
     agg = make_aggregate(spec.aggregate, progress)
-    s, _ = slab(agg, spec.bonds.cutoff_factor, spec.material, spec.materials)
-    return s
+    return slab(agg, spec.bonds.cutoff_factor, spec.material, spec.materials)
 
 
 def statistics(s: Structure) -> dict:
