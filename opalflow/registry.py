@@ -122,6 +122,8 @@ def _compression(name: str, spec: str, scene: str, summary: str) -> Kind:
 _TERSOFF_REFUSAL = ("atomistic workflows run in-process and take seconds; stability.workers sets how many "
                     "MD runs go at once")
 
+_POLYCRYSTAL_REFUSAL = "the samples run batched in-process (JAX); --resume skips finished runs"
+
 BUILTIN = {k.name: k for k in (
     _compression("opal", "opalflow.opal.spec:OpalWorkflow", "opalflow.opal.scene:SCENE",
                  "inverse opal (packing, pores, coating, substrate) compressed by a plate"),
@@ -140,6 +142,12 @@ BUILTIN = {k.name: k for k in (
          refusal=_TERSOFF_REFUSAL, summary="fit of a Tersoff set to target properties (loss eq. 13)"),
     Kind("tersoff_stability", "opalflow.tersoff.spec:TersoffWorkflow", "opalflow.tersoff.workflow:run_stability",
          refusal=_TERSOFF_REFUSAL, summary="MD stability of a Tersoff set under four boundary conditions"),
+    Kind("polycrystal_tension", "opalflow.tersoff.polycrystal.spec:PolycrystalWorkflow",
+         "opalflow.tersoff.polycrystal.run:run_tension", options=("resume",), refusal=_POLYCRYSTAL_REFUSAL,
+         summary="polycrystal of tetrahedral elements with 64-atom Tersoff samples: tension -> E, Poisson ratio"),
+    Kind("polycrystal_waves", "opalflow.tersoff.polycrystal.spec:PolycrystalWorkflow",
+         "opalflow.tersoff.polycrystal.run:run_waves", options=("resume",), refusal=_POLYCRYSTAL_REFUSAL,
+         summary="polycrystal of tetrahedral elements: plate, rod and shear wave speeds"),
     Kind("stability_matrix", "opalflow.bpm.spec:StabilityMatrixWorkflow", "opalflow.bpm.matrix:run_matrix",
          refusal="each row is a short in-process run; matrix.steps sets its length",
          summary="the stability check with bisection over corner cases of bonded-particle scenes"),

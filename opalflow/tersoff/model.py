@@ -66,30 +66,41 @@ def _cutoff(r, R, D):
     return jnp.where(r < R - D, 1.0, jnp.where(r > R + D, 0.0, inner))
 
 
-def energy_per_atom(x, a: float, F, u, neighbors: tuple[np.ndarray, np.ndarray]):
-    """Tersoff energy per atom (eV) of the diamond crystal with lattice constant ``a`` (A).
+def site_energies(x, rv):
+    """Tersoff energy of each atom, 1/2 sum_k V_ik (eV), from its bond vectors ``rv`` (..., K, 3).
 
-    ``x``: the 14 parameters in COLUMNS order (m must be 1 or 3, as in LAMMPS);
-    ``F``: 3x3 deformation gradient; ``u``: internal displacement (A) of the second sublattice.
+    ``x``: the 14 parameters in COLUMNS order (m must be 1 or 3, as in LAMMPS); ``rv[..., k, :]``
+    is the vector from the atom to its k-th candidate neighbour (Angstrom).  Candidates beyond
+    R + D contribute nothing (f_C = 0), so any list holding every atom within the cutoff gives
+    LAMMPS's energy.  The leading axes are batch axes (atoms, samples).
     """
-    vec0, flip = neighbors
     g = {k: x[i] for k, i in INDEX.items()}
-    rv = jnp.einsum("ij,skj->ski", F, a * vec0) + flip[:, :, None] * u    # (2, K, 3)
-    r = jnp.sqrt(jnp.sum(rv ** 2, axis=-1))                               # (2, K)
+    r = jnp.sqrt(jnp.sum(rv ** 2, axis=-1))                               # (..., K)
     fc = _cutoff(r, g["R"], g["D"])
-    cos = jnp.einsum("sji,ski->sjk", rv, rv) / (r[:, :, None] * r[:, None, :])
+    cos = jnp.einsum("...ji,...ki->...jk", rv, rv) / (r[..., :, None] * r[..., None, :])
     c2, d2 = g["c"] ** 2, g["d"] ** 2
     gth = g["gamma"] * (1.0 + c2 / d2 - c2 / (d2 + (cos - g["costheta0"]) ** 2))
-    dr = r[:, :, None] - r[:, None, :]                                    # r_ij - r_ik
+    dr = r[..., :, None] - r[..., None, :]                                # r_ij - r_ik
     arg = jnp.where(g["m"] == 3.0, (g["lambda3"] * dr) ** 3, g["lambda3"] * dr)
-    k = r.shape[1]
+    k = r.shape[-1]
     off = 1.0 - np.eye(k)
-    zeta = jnp.sum(off[None] * fc[:, None, :] * gth * jnp.exp(arg), axis=2)   # (2, K)
+    zeta = jnp.sum(off * fc[..., None, :] * gth * jnp.exp(arg), axis=-1)   # (..., K)
     n = g["n"]
     bij = (1.0 + (g["beta"] * zeta) ** n) ** (-0.5 / n)
     fr = g["A"] * jnp.exp(-g["lambda1"] * r)
     fa = -g["B"] * jnp.exp(-g["lambda2"] * r)
-    return 0.25 * jnp.sum(fc * (fr + bij * fa))       # 1/2 per pair, 2 atoms per cell
+    return 0.5 * jnp.sum(fc * (fr + bij * fa), axis=-1)
+
+
+def energy_per_atom(x, a: float, F, u, neighbors: tuple[np.ndarray, np.ndarray]):
+    """Tersoff energy per atom (eV) of the diamond crystal with lattice constant ``a`` (A).
+
+    ``x``: the 14 parameters in COLUMNS order; ``F``: 3x3 deformation gradient; ``u``: internal
+    displacement (A) of the second sublattice.
+    """
+    vec0, flip = neighbors
+    rv = jnp.einsum("ij,skj->ski", F, a * vec0) + flip[:, :, None] * u    # (2, K, 3)
+    return jnp.mean(site_energies(x, rv))
 
 
 def _strained(s):

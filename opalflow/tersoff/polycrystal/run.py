@@ -1,0 +1,583 @@
+"""Kinds ``polycrystal_tension`` and ``polycrystal_waves``: the last stage of seed 003.
+
+Each run folder gets ``results.h5`` (every dataset with ``units``, tables with ``columns``),
+``summary.json`` (``youngs_modulus_GPa``, ``poisson_ratio`` or the three ``wave_speed_*_m_s``,
+``wall_s``; written last), ``report.md`` beside the references, the plots, ``.vtu`` meshes, and
+``jobs/`` with one JSON per finished job, so ``--resume`` skips what is done.
+"""
+from __future__ import annotations
+
+import io
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from opalflow.store import json_text, new_figure, save_figure, staged_files, write_json_atomic
+from opalflow.tersoff.parameters import load_parameters
+from opalflow.tersoff.polycrystal.crystal import check_sample_hessian, longitudinal_speed_nm_ps, single_crystal
+from opalflow.tersoff.polycrystal.dynamics import M_PER_S, Polycrystal, polycrystal_bounds, speeds
+from opalflow.tersoff.polycrystal.mesh import block
+from opalflow.tersoff.polycrystal.output import plot_mesh, write_vtu
+from opalflow.tersoff.polycrystal.samples import Samples, random_rotations, relax_md, relax_minimize
+from opalflow.tersoff.polycrystal.spec import PolycrystalWorkflow
+from opalflow.version import __version__
+
+#: seed 003, section 3: polycrystalline silicon (their ref. 30)
+REFERENCE = {"youngs_modulus_GPa": 160.0, "poisson_ratio": 0.22, "wave_speed_plate_m_s": 8850.0,
+             "wave_speed_rod_m_s": 8290.0, "wave_speed_shear_m_s": 5280.0}
+SOURCE = ("Zhuravlev, Abgaryan, Reviznikov, Multiscale Discrete Element Modeling, Symmetry 13, 219 (2021), "
+          "doi:10.3390/sym13020219, section 3")
+VOIGT = ((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))
+
+
+class Progress:
+    """Prints step, rate and time left every few seconds."""
+
+    def __init__(self, say, label: str, total: int, every_s: float = 5.0):
+        self.say, self.label, self.total, self.every = say, label, max(total, 1), every_s
+        self.t0 = self.last = time.perf_counter()
+
+    def __call__(self, step: int, extra: str = "") -> None:
+        now = time.perf_counter()
+        if now - self.last < self.every and step < self.total:
+            return
+        self.last = now
+        rate = step / max(now - self.t0, 1e-9)
+        left = max(self.total - step, 0) / rate if rate > 0 else math.inf
+        self.say(f"  {self.label}: macro step {step}/{self.total}, {rate:.1f} steps/s, ~{left:.0f} s left {extra}")
+
+
+def setup(spec: PolycrystalWorkflow) -> tuple:
+    """The potential, its single crystal and the batched samples (every check before anything is written)."""
+    params = load_parameters(spec.tersoff.potential, spec.tersoff.element)
+    crystal = single_crystal(params)
+    samples = Samples(params.values(), params.cutoff(), crystal["a0_A"])
+    check_sample_hessian(samples, params.element)
+    return params, crystal, samples
+
+
+def constants(crystal: dict) -> tuple[float, float, float]:
+    return crystal["C11_GPa"], crystal["C12_GPa"], crystal["C44_GPa"]
+
+
+def realised_bounds(pc: Polycrystal) -> dict:
+    """Voigt and Reuss bounds of E_x and nu for the orientations this mesh actually drew.
+
+    Voigt: uniform strain, <C> (volume average) inverted; Reuss: uniform stress, <C^-1>.
+    E_x = 1/S_11, nu = -(S_12 + S_13) / (2 S_11) (the mean lateral contraction).
+    """
+    c6 = np.stack([[pc.stiffness_tensors[:, i, j, k, l] for (k, l) in VOIGT] for (i, j) in VOIGT]).transpose(2, 0, 1)
+    w = pc.volume0 / pc.volume0.sum()
+    s_voigt = np.linalg.inv(np.einsum("e,eab->ab", w, c6))
+    s_reuss = np.einsum("e,eab->ab", w, np.linalg.inv(c6))
+    return {name: {"E_GPa": 1.0 / s[0, 0], "nu": -(s[0, 1] + s[0, 2]) / (2.0 * s[0, 0])}
+            for name, s in (("voigt", s_voigt), ("reuss", s_reuss))}
+
+
+def slope(x: np.ndarray, y: np.ndarray) -> float:
+    """Least-squares slope of y against x (with an intercept)."""
+    return float(np.polyfit(x, y, 1)[0])
+
+
+# ---------------------------------------------------------------- tension
+def tension_job(spec: PolycrystalWorkflow, samples: Samples, crystal: dict, cubes: int, cube_nm: float, seed: int,
+                say, label: str) -> tuple[dict, Polycrystal]:
+    """One tension experiment: periodic along x, free sides; stress-strain and volume-strain."""
+    t = spec.tension
+    t0 = time.perf_counter()
+    mesh = block((cubes, cubes, cubes), cube_nm, (True, False, False))
+    pc = Polycrystal(mesh, samples, random_rotations(mesh.elements, seed), constants(crystal),
+                     spec.samples.relaxation, spec.samples.force_tol_eV_A)
+    length = cubes * cube_nm
+    dt = pc.stable_timestep(t.timestep_safety)
+    gamma = t.damping * math.pi * longitudinal_speed_nm_ps(crystal) / length
+    points = int(round(t.max_strain / t.strain_step))
+    rate_ps = t.strain_rate_per_ns * 1e-3
+    deform = max(1, math.ceil(t.strain_step / (rate_ps * dt)))
+    volume0 = pc.volume()
+    rows = [[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0, 0]]
+    steps = 0
+    progress = Progress(say, label, points * (deform + 100) if t.method == "dynamic" else points)
+    for k in range(1, points + 1):
+        relax = 0
+        if t.method == "static":
+            _stretch(pc, mesh.box[0] * (1.0 + k * t.strain_step))
+            relax = pc.solve_static(t.residual_tol)
+            progress(k)
+        else:
+            for _ in range(deform):
+                _stretch(pc, pc.box[0] + mesh.box[0] * t.strain_step / deform)
+                pc.verlet(dt, gamma)
+                steps += 1
+            while pc.residual > t.residual_tol:
+                if relax >= t.max_relax_steps:
+                    raise RuntimeError(f"{label}: residual {pc.residual:.3g} after {relax} relaxation steps at strain "
+                                       f"{k * t.strain_step:g} (tension.max_relax_steps = {t.max_relax_steps})")
+                pc.verlet(dt, gamma)
+                relax += 1
+                steps += 1
+                progress(steps, f"(strain {k * t.strain_step:g}, residual {pc.residual:.1e})")
+            progress.total = steps + (points - k) * (deform + relax)
+        s = pc.mean_stress()
+        rows.append([pc.box[0] / mesh.box[0] - 1.0, *(s[a, b] for a, b in VOIGT), pc.volume() / volume0,
+                     pc.residual, relax, pc.evaluations])
+    curve = np.array(rows, dtype=float)
+    strain, sxx, vol = curve[:, 0], curve[:, 1], curve[:, 7]
+    e_mod = slope(strain, sxx)
+    nu = 0.5 * (1.0 - slope(strain, vol - 1.0))
+    job = {"cubes": cubes, "cube_nm": cube_nm, "seed": seed, "elements": mesh.elements, "edge_nm": length,
+           "method": t.method, "timestep_ps": dt, "damping_per_ps": gamma, "deform_steps": deform, "macro_steps": steps,
+           "evaluations": pc.evaluations, "youngs_modulus_GPa": e_mod, "poisson_ratio": nu,
+           "bounds_realised": realised_bounds(pc), "wall_s": time.perf_counter() - t0,
+           "curve_columns": ["strain", "sxx_GPa", "syy_GPa", "szz_GPa", "syz_GPa", "sxz_GPa", "sxy_GPa",
+                             "volume_ratio", "residual", "relax_steps", "sample_evaluations"],
+           "curve": curve.tolist()}
+    job["s_per_macro_step"] = job["wall_s"] / max(steps, 1) if t.method == "dynamic" else None
+    return job, pc
+
+
+def _stretch(pc: Polycrystal, length: float) -> None:
+    """Set the periodic length along x, every vertex remapped affinely (as LAMMPS fix deform remap x)."""
+    ratio = length / pc.box[0]
+    pc.box[0] = length
+    pc.x[:, 0] *= ratio
+
+
+def relaxation_comparison(samples: Samples, seed: int, force_tol: float, count: int = 8) -> dict:
+    """Both steady states of eq. 8 on ``count`` elements strained by 0.5 % in random directions."""
+    rng = np.random.default_rng(seed)
+    rot = random_rotations(count, seed + 1000)
+    eps = rng.normal(0.0, 0.005, (count, 3, 3))
+    eps = 0.5 * (eps + eps.transpose(0, 2, 1))
+    cells = np.einsum("eab,ebc->eac", np.eye(3) + eps, samples.reference_cells(rot))
+    x = samples.positions(cells)
+    t = time.perf_counter()
+    mini = relax_minimize(samples, x, cells, rot, force_tol)
+    t_min = time.perf_counter() - t
+    t = time.perf_counter()
+    md, _ = relax_md(samples, x, cells, force_tol)
+    t_md = time.perf_counter() - t
+    return {"elements": count, "strain_rms": 0.005, "minimize_evaluations": mini.evaluations, "minimize_s": t_min,
+            "md_steps": md.evaluations, "md_s": t_md,
+            "max_stress_difference_GPa": float(np.abs(mini.evaluation.stress - md.evaluation.stress).max()),
+            "max_stress_GPa": float(np.abs(mini.evaluation.stress).max())}
+
+
+def run_tension(spec: PolycrystalWorkflow, out: Path, say=print, resume: bool = False) -> dict:
+    t0 = time.perf_counter()
+    params, crystal, samples = setup(spec)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "jobs").mkdir(exist_ok=True)
+    t = spec.tension
+    bounds = polycrystal_bounds(*constants(crystal), samples.density_kg_m3)
+    say(f"polycrystal tension with {spec.tersoff.potential}: a0 = {crystal['a0_A']:.5f} A, C11 {crystal['C11_GPa']:.1f}, "
+        f"C12 {crystal['C12_GPa']:.1f}, C44 {crystal['C44_GPa']:.1f} GPa; Voigt E {bounds['voigt']['E_GPa']:.1f}, "
+        f"Reuss E {bounds['reuss']['E_GPa']:.1f} GPa")
+    check = _lammps_check(spec, params, samples, out)
+    relax_cmp = relaxation_comparison(samples, spec.samples.seeds[0], spec.samples.force_tol_eV_A)
+    say(f"relaxation: minimize {relax_cmp['minimize_evaluations']} evaluations, damped MD {relax_cmp['md_steps']} "
+        f"steps; stresses differ by {relax_cmp['max_stress_difference_GPa']:.1e} GPa")
+    jobs, last = [], {}
+    total = len(t.cubes) * len(spec.samples.seeds)
+    for i, (n, h) in enumerate(zip(t.cubes, t.cube_nm)):
+        for seed in spec.samples.seeds:
+            name = f"tension_{6 * n ** 3}el_{h:g}nm_seed{seed}"
+            path = out / "jobs" / f"{name}.json"
+            label = f"[{len(jobs) + 1}/{total}] {6 * n ** 3} elements, edge {n * h:g} nm, seed {seed}"
+            if resume and path.exists():
+                import json
+                jobs.append(json.loads(path.read_text()))
+                say(f"{label}: done before (resume)")
+                continue
+            say(f"{label}: {t.method}")
+            job, pc = tension_job(spec, samples, crystal, n, h, seed, say, label)
+            write_json_atomic(path, job)
+            jobs.append(job)
+            last[i] = pc
+            say(f"{label}: E = {job['youngs_modulus_GPa']:.2f} GPa, nu = {job['poisson_ratio']:.4f} "
+                f"({job['macro_steps']} macro steps, {job['evaluations']} sample evaluations, {job['wall_s']:.1f} s)")
+    summary = _tension_summary(spec, jobs, bounds, check, relax_cmp, crystal, samples)
+    with staged_files(out) as stage:
+        _plot_curves(stage("stress_strain.png"), stage("volume_strain.png"), jobs, summary)
+        for i, pc in last.items():
+            n, h = t.cubes[i], t.cube_nm[i]
+            write_vtu(stage(f"mesh_{6 * n ** 3}el_{h:g}nm.vtu"), pc)
+        if last:
+            i, pc = next(iter(last.items()))
+            plot_mesh(stage("mesh.png"), pc, f"{pc.mesh.elements} elements at strain {t.max_strain:g} "
+                      f"(seed {spec.samples.seeds[-1]})")
+        stage("results.h5").write_bytes(_tension_h5(jobs))
+        summary["wall_s"] = time.perf_counter() - t0
+        stage("report.md").write_text(_tension_report(spec, summary, jobs))
+        stage("summary.json").write_text(json_text(summary))
+    return summary
+
+
+def _lammps_check(spec: PolycrystalWorkflow, params, samples: Samples, out: Path) -> dict | None:
+    if spec.samples.lammps_check == 0:
+        return None
+    from opalflow.tersoff.polycrystal.check import compare_with_lammps
+    return compare_with_lammps(samples, params, out / "lammps_check", count=spec.samples.lammps_check)
+
+
+def _stats(values) -> dict:
+    v = np.asarray(values, dtype=float)
+    return {"mean": float(v.mean()), "std": float(v.std(ddof=1)) if len(v) > 1 else 0.0,
+            "min": float(v.min()), "max": float(v.max()), "n": len(v)}
+
+
+def _tension_summary(spec, jobs, bounds, check, relax_cmp, crystal, samples) -> dict:
+    groups = {}
+    for j in jobs:
+        groups.setdefault((j["cubes"], j["cube_nm"]), []).append(j)
+    experiments = [{"elements": 6 * n ** 3, "cubes": n, "cube_nm": h, "edge_nm": n * h,
+                    "youngs_modulus_GPa": _stats([j["youngs_modulus_GPa"] for j in js]),
+                    "poisson_ratio": _stats([j["poisson_ratio"] for j in js]),
+                    "wall_s": _stats([j["wall_s"] for j in js]),
+                    "s_per_macro_step": _stats([j["s_per_macro_step"] for j in js]) if js[0]["s_per_macro_step"] else None,
+                    "inside_realised_bounds": all(j["bounds_realised"]["reuss"]["E_GPa"] <= j["youngs_modulus_GPa"]
+                                                  <= j["bounds_realised"]["voigt"]["E_GPa"] for j in js)}
+                   for (n, h), js in groups.items()]
+    e_all = _stats([j["youngs_modulus_GPa"] for j in jobs])
+    nu_all = _stats([j["poisson_ratio"] for j in jobs])
+    e, nu = e_all["mean"], nu_all["mean"]
+    return {"youngs_modulus_GPa": e, "poisson_ratio": nu, "youngs_modulus": e_all, "poisson": nu_all,
+            "experiments": experiments, "reference": REFERENCE | {"source": SOURCE},
+            "error_vs_reference": {"youngs_modulus_relative": (e - REFERENCE["youngs_modulus_GPa"]) / 160.0,
+                                   "poisson_ratio_absolute": nu - REFERENCE["poisson_ratio"]},
+            "bounds": bounds, "inside_bounds": bounds["reuss"]["E_GPa"] <= e <= bounds["voigt"]["E_GPa"],
+            "single_crystal": crystal, "density_kg_m3": samples.density_kg_m3, "lammps_check": check,
+            "relaxation_comparison": relax_cmp, "potential": spec.tersoff.potential, "method": spec.tension.method,
+            "opalflow_version": __version__, "spec": spec.to_dict(),
+            "headline": (f"E = {e:.2f} +- {e_all['std']:.2f} GPa ({100 * (e - 160.0) / 160.0:+.1f} % of 160; Voigt "
+                         f"{bounds['voigt']['E_GPa']:.1f}, Reuss {bounds['reuss']['E_GPa']:.1f}), nu = {nu:.4f} +- "
+                         f"{nu_all['std']:.4f} (0.22), {len(jobs)} runs")}
+
+
+def _plot_curves(stress_path: Path, volume_path: Path, jobs: list[dict], summary: dict) -> None:
+    for path, col, ylabel, ref in ((stress_path, 1, "sigma_xx (GPa)", lambda e: REFERENCE["youngs_modulus_GPa"] * e),
+                                   (volume_path, 7, "V / V0 - 1", lambda e: (1 - 2 * REFERENCE["poisson_ratio"]) * e)):
+        fig, ax = new_figure(figsize=(6, 4.5))
+        for j in jobs:
+            c = np.array(j["curve"])
+            ax.plot(c[:, 0] * 100, c[:, col] - (1.0 if col == 7 else 0.0), "o-", ms=3, lw=1,
+                    label=f"{j['elements']} el, {j['edge_nm']:g} nm, seed {j['seed']}")
+        e = np.linspace(0, max(np.array(j["curve"])[:, 0].max() for j in jobs), 20)
+        ax.plot(e * 100, ref(e), "k--", label="linear elasticity, E = 160 GPa, nu = 0.22 (seed 003)")
+        ax.set_xlabel("strain (%)")
+        ax.set_ylabel(ylabel)
+        ax.legend(fontsize=7)
+        ax.grid(alpha=0.3)
+        ax.set_title("Polycrystal tension: " + ("stress-strain (Fig. 3)" if col == 1 else "volume-strain (Fig. 4)"))
+        save_figure(fig, path)
+
+
+def _h5_bytes(write) -> bytes:
+    import h5py
+    buffer = io.BytesIO()
+    with h5py.File(buffer, "w") as h:
+        h.attrs["opalflow_version"] = __version__
+        write(h)
+    return buffer.getvalue()
+
+
+def _tension_h5(jobs: list[dict]) -> bytes:
+    units = ["1", "GPa", "GPa", "GPa", "GPa", "GPa", "GPa", "1", "1", "1", "1"]
+
+    def write(h):
+        for j in jobs:
+            g = h.create_group(f"tension_{j['elements']}el_{j['cube_nm']:g}nm_seed{j['seed']}")
+            d = g.create_dataset("curve", data=np.array(j["curve"]))
+            d.attrs["columns"] = j["curve_columns"]
+            d.attrs["units"] = units
+            for key, unit in (("youngs_modulus_GPa", "GPa"), ("poisson_ratio", "1"), ("timestep_ps", "ps"),
+                              ("wall_s", "s")):
+                s = g.create_dataset(key, data=j[key])
+                s.attrs["units"] = unit
+    return _h5_bytes(write)
+
+
+def _bounds_rows(bounds: dict) -> list[str]:
+    rows = ["| average | E (GPa) | nu | G (GPa) | plate (m/s) | rod (m/s) | shear (m/s) |", "|---|---|---|---|---|---|---|"]
+    for name in ("voigt", "hill", "reuss"):
+        b = bounds[name]
+        rows.append(f"| {name.capitalize()} | {b['E_GPa']:.2f} | {b['nu']:.4f} | {b['G_GPa']:.2f} | "
+                    f"{b['wave_speed_plate_m_s']:.0f} | {b['wave_speed_rod_m_s']:.0f} | {b['wave_speed_shear_m_s']:.0f} |")
+    return rows
+
+
+def _crystal_lines(summary: dict, spec) -> list[str]:
+    c = summary["single_crystal"]
+    lines = [f"Potential `{spec.tersoff.potential}`: a0 = {c['a0_A']:.5f} A, C11 = {c['C11_GPa']:.2f}, C12 = "
+             f"{c['C12_GPa']:.2f}, C44 = {c['C44_GPa']:.2f} GPa (relaxed; C44^0 = {c['C44_0_GPa']:.2f}), sample density "
+             f"{summary['density_kg_m3']:.1f} kg/m^3. Isotropic averages of this single crystal (the polycrystal's "
+             "bounds) and the speeds they imply:", "", *_bounds_rows(summary["bounds"]), ""]
+    chk = summary.get("lammps_check")
+    if chk:
+        lines += [f"Batched Tersoff (JAX) against LAMMPS `pair_style tersoff` on {chk['samples']} random samples "
+                  f"(strain up to {chk['strain']:g}, thermal displacements {chk['displacement_A']:g} A): largest relative "
+                  f"differences energy {chk['max_relative_energy']:.1e}, forces {chk['max_relative_forces']:.1e}, virial "
+                  f"{chk['max_relative_virial']:.1e}.", ""]
+    return lines
+
+
+def _tension_report(spec, summary: dict, jobs: list[dict]) -> str:
+    t, s = spec.tension, spec.samples
+    e, nu = summary["youngs_modulus"], summary["poisson"]
+    rc = summary["relaxation_comparison"]
+    lines = [f"# Polycrystal tension ({spec.name})", "",
+             f"Cubes split into 6 tetrahedra, each with a 64-atom Tersoff sample in a uniformly random orientation; "
+             f"periodic along x, free sides, stretched along x to {t.max_strain:g} in steps of {t.strain_step:g} "
+             + ("(dynamic: deformation steps at " f"{t.strain_rate_per_ns:g}/ns with the vertices remapped, then damped "
+                f"velocity-Verlet relaxation until the force residual is below {t.residual_tol:g})"
+                if t.method == "dynamic" else f"(static: modified Newton to residual {t.residual_tol:g})")
+             + f". Samples relaxed by {s.relaxation} to a largest atomic force of {s.force_tol_eV_A:g} eV/A. E = slope of "
+             "the volume-averaged sigma_xx against strain; nu = (1 - dV/V0/d strain) / 2 (seed 003, Figs. 3-4).", "",
+             *_crystal_lines(summary, spec),
+             "## Result", "",
+             "| quantity | this run | reference (seed 003) | error |", "|---|---|---|---|",
+             f"| E (GPa) | {e['mean']:.2f} +- {e['std']:.2f} | 160 | {100 * (e['mean'] - 160) / 160:+.2f} % |",
+             f"| nu | {nu['mean']:.4f} +- {nu['std']:.4f} | 0.22 | {nu['mean'] - 0.22:+.4f} |", "",
+             f"E lies {'inside' if summary['inside_bounds'] else 'OUTSIDE'} the isotropic Reuss-Voigt interval of the "
+             f"potential ({summary['bounds']['reuss']['E_GPa']:.2f} - {summary['bounds']['voigt']['E_GPa']:.2f} GPa). "
+             "The reference is measured polycrystalline silicon; the model can only give what its potential's single "
+             "crystal bounds, and with one grain per element (constant strain in each) it sits near the Voigt (uniform "
+             "strain) side. A finite set of orientations has its own bounds (columns 'realised'): they differ from the "
+             "isotropic ones by the sampling scatter of the orientations.", "",
+             "## Runs", "",
+             "| elements | edge (nm) | seed | E (GPa) | nu | realised Reuss - Voigt E (GPa) | macro steps | sample "
+             "evaluations | dt (ps) | wall (s) |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for j in jobs:
+        b = j["bounds_realised"]
+        lines.append(f"| {j['elements']} | {j['edge_nm']:g} | {j['seed']} | {j['youngs_modulus_GPa']:.2f} | "
+                     f"{j['poisson_ratio']:.4f} | {b['reuss']['E_GPa']:.2f} - {b['voigt']['E_GPa']:.2f} | "
+                     f"{j['macro_steps']} | {j['evaluations']} | {j['timestep_ps']:.4f} | {j['wall_s']:.1f} |")
+    lines += ["", "| elements | edge (nm) | E (GPa) mean +- std | nu mean +- std | wall per run (s) | s per macro step |",
+              "|---|---|---|---|---|---|"]
+    for x in summary["experiments"]:
+        sp = x["s_per_macro_step"]
+        lines.append(f"| {x['elements']} | {x['edge_nm']:g} | {x['youngs_modulus_GPa']['mean']:.2f} +- "
+                     f"{x['youngs_modulus_GPa']['std']:.2f} | {x['poisson_ratio']['mean']:.4f} +- "
+                     f"{x['poisson_ratio']['std']:.4f} | {x['wall_s']['mean']:.1f} | "
+                     + (f"{sp['mean']:.3f} |" if sp else "- |"))
+    lines += ["", "## Steady state of the samples (eq. 8): minimisation against damped MD", "",
+              f"{rc['elements']} elements strained by {rc['strain_rms']:g} rms in random directions: preconditioned "
+              f"Newton minimisation {rc['minimize_evaluations']} force evaluations ({rc['minimize_s']:.2f} s), damped "
+              f"MD (1 fs, gamma 20/ps) {rc['md_steps']} steps ({rc['md_s']:.2f} s); the stresses differ by at most "
+              f"{rc['max_stress_difference_GPa']:.1e} GPa (largest stress {rc['max_stress_GPa']:.2f} GPa).", "",
+              "![stress-strain](stress_strain.png)", "", "![volume-strain](volume_strain.png)", "",
+              "![mesh](mesh.png)", "",
+              f"Wall time {summary['wall_s']:.1f} s on this machine. opalflow {__version__}."]
+    return "\n".join(lines) + "\n"
+
+
+# ---------------------------------------------------------------- waves
+WAVE_AXIS = {"plate": 2, "rod": 2, "shear": 0}          # velocity component the piston drives
+WAVE_KEY = {"plate": "wave_speed_plate_m_s", "rod": "wave_speed_rod_m_s", "shear": "wave_speed_shear_m_s"}
+
+
+def wave_job(spec: PolycrystalWorkflow, samples: Samples, crystal: dict, bounds: dict, name: str, say) -> tuple[dict, Polycrystal]:
+    """A piston on z = 0 drives the column; the front is where the section-averaged velocity reaches half the
+    piston's.
+
+    plate: periodic in x and y (a laterally infinite plate: uniaxial strain, P wave), piston along z;
+    rod: free sides, piston along z (E wave for wavelengths long against the width);
+    shear: periodic in x and y, piston along x (plane shear wave).  The piston's velocity is held
+    (a step), so the half-amplitude point travels at the long-wave speed; arrival times at each
+    vertex layer in the fit range give the speed (least squares, with its standard error).
+    """
+    w = spec.waves
+    t0 = time.perf_counter()
+    lateral = name != "rod"
+    mesh = block(tuple(w.cubes), w.cube_nm, (lateral, lateral, False))
+    pc = Polycrystal(mesh, samples, random_rotations(mesh.elements, w.seed), constants(crystal),
+                     spec.samples.relaxation, spec.samples.force_tol_eV_A)
+    dt = pc.stable_timestep(w.timestep_safety)
+    length = w.cubes[2] * w.cube_nm
+    slowest = bounds["reuss"][WAVE_KEY[name]] / M_PER_S * 0.95
+    steps = int(math.ceil(w.travel * length / slowest / dt))
+    layer = np.rint(mesh.vertices[:, 2] / w.cube_nm).astype(int)
+    counts = np.bincount(layer)
+    axis = WAVE_AXIS[name]
+    v0 = w.piston_m_s / M_PER_S
+    fixed = np.zeros_like(pc.x, dtype=bool)
+    fixed[layer == 0, axis] = True
+    prescribed = np.where(fixed, v0, 0.0)
+    pc.v[fixed] = v0
+    history = [np.zeros(len(counts))]
+    progress = Progress(say, f"{name} wave", steps)
+    for step in range(1, steps + 1):
+        pc.verlet(dt, 0.0, fixed, prescribed)
+        history.append(np.bincount(layer, pc.v[:, axis], minlength=len(counts)) / counts)
+        progress(step)
+    profile = np.array(history) / v0                 # (steps + 1, layers): section velocity / piston velocity
+    times = np.arange(steps + 1) * dt
+    stations = np.arange(len(counts)) * w.cube_nm
+    arrival = np.full(len(counts), np.nan)
+    for k in range(len(counts)):
+        above = np.nonzero(profile[:, k] >= 0.5)[0]
+        if len(above) and above[0] > 0:
+            i = above[0]
+            f0, f1 = profile[i - 1, k], profile[i, k]
+            arrival[k] = times[i - 1] + (0.5 - f0) / (f1 - f0) * dt
+    lo, hi = w.fit_range
+    use = (stations >= lo * length) & (stations <= hi * length) & np.isfinite(arrival)
+    if use.sum() < 3:
+        raise RuntimeError(f"{name} wave: the front reached {int(np.isfinite(arrival).sum())} stations; too few to fit")
+    coef, cov = np.polyfit(arrival[use], stations[use], 1, cov=True)
+    speed = coef[0] * M_PER_S
+    job = {"experiment": name, "elements": mesh.elements, "cubes": list(w.cubes), "cube_nm": w.cube_nm,
+           "length_nm": length, "lateral": "periodic" if lateral else "free", "piston_m_s": w.piston_m_s,
+           "timestep_ps": dt, "macro_steps": steps, "evaluations": pc.evaluations, "speed_m_s": speed,
+           "speed_stderr_m_s": float(np.sqrt(cov[0, 0])) * M_PER_S, "stations_used": int(use.sum()),
+           "wall_s": time.perf_counter() - t0, "s_per_macro_step": (time.perf_counter() - t0) / steps,
+           "times_ps": times.tolist(), "stations_nm": stations.tolist(), "arrival_ps": arrival.tolist(),
+           "profile": profile.tolist()}
+    return job, pc
+
+
+def run_waves(spec: PolycrystalWorkflow, out: Path, say=print, resume: bool = False) -> dict:
+    t0 = time.perf_counter()
+    params, crystal, samples = setup(spec)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "jobs").mkdir(exist_ok=True)
+    w = spec.waves
+    bounds = polycrystal_bounds(*constants(crystal), samples.density_kg_m3)
+    say(f"polycrystal waves with {spec.tersoff.potential}: {', '.join(w.experiments)} in a {w.cubes[0]}x{w.cubes[1]}x"
+        f"{w.cubes[2]} column of cubes ({6 * int(np.prod(w.cubes))} elements), edge {w.cube_nm:g} nm")
+    check = _lammps_check(spec, params, samples, out)
+    import json
+    measured_path = out / "jobs" / "static_tension.json"
+    if resume and measured_path.exists():
+        measured = json.loads(measured_path.read_text())
+    else:
+        say("E and nu of the same potential: static tension of 384 elements")
+        tension = PolycrystalWorkflow(name="moduli", kind="polycrystal_tension", tersoff=spec.tersoff, samples=spec.samples)
+        tension.tension.method = "static"
+        job, _ = tension_job(tension, samples, crystal, 4, w.cube_nm, w.seed, say, "static tension")
+        measured = {"youngs_modulus_GPa": job["youngs_modulus_GPa"], "poisson_ratio": job["poisson_ratio"],
+                    "elements": job["elements"], "seed": w.seed, "wall_s": job["wall_s"]}
+        measured.update(speeds(measured["youngs_modulus_GPa"], measured["poisson_ratio"], samples.density_kg_m3))
+        write_json_atomic(measured_path, measured)
+    jobs, states = [], {}
+    for name in w.experiments:
+        path = out / "jobs" / f"wave_{name}.json"
+        if resume and path.exists():
+            jobs.append(json.loads(path.read_text()))
+            say(f"{name} wave: done before (resume)")
+            continue
+        job, pc = wave_job(spec, samples, crystal, bounds, name, say)
+        write_json_atomic(path, job)
+        jobs.append(job)
+        states[name] = pc
+        say(f"{name} wave: {job['speed_m_s']:.0f} +- {job['speed_stderr_m_s']:.0f} m/s ({job['macro_steps']} macro steps, "
+            f"{job['wall_s']:.1f} s)")
+    summary = _waves_summary(spec, jobs, bounds, measured, check, crystal, samples)
+    with staged_files(out) as stage:
+        _plot_fronts(stage("wavefront.png"), jobs, summary)
+        _plot_profiles(stage("profiles.png"), jobs)
+        for name, pc in states.items():
+            write_vtu(stage(f"wave_{name}.vtu"), pc, pc.v * M_PER_S)
+        if states:
+            name, pc = next(iter(states.items()))
+            plot_mesh(stage("mesh.png"), pc, f"{name} wave: {pc.mesh.elements} elements at the end of the run")
+        stage("results.h5").write_bytes(_waves_h5(jobs))
+        summary["wall_s"] = time.perf_counter() - t0
+        stage("report.md").write_text(_waves_report(spec, summary, jobs))
+        stage("summary.json").write_text(json_text(summary))
+    return summary
+
+
+def _waves_summary(spec, jobs, bounds, measured, check, crystal, samples) -> dict:
+    out = {"bounds": bounds, "measured_moduli": measured, "single_crystal": crystal, "density_kg_m3": samples.density_kg_m3,
+           "lammps_check": check, "reference": REFERENCE | {"source": SOURCE}, "potential": spec.tersoff.potential,
+           "opalflow_version": __version__, "spec": spec.to_dict(), "experiments": {}}
+    parts = []
+    for j in jobs:
+        key = WAVE_KEY[j["experiment"]]
+        ref, pred = REFERENCE[key], measured[key]
+        out[key] = j["speed_m_s"]
+        out["experiments"][j["experiment"]] = {k: v for k, v in j.items() if k not in ("times_ps", "profile", "arrival_ps",
+                                                                                        "stations_nm")} | {
+            "error_vs_reference": (j["speed_m_s"] - ref) / ref, "error_vs_measured_moduli": (j["speed_m_s"] - pred) / pred}
+        parts.append(f"{j['experiment']} {j['speed_m_s']:.0f} m/s ({100 * (j['speed_m_s'] - ref) / ref:+.1f} % of {ref:.0f})")
+    out["headline"] = "; ".join(parts)
+    return out
+
+
+def _plot_fronts(path: Path, jobs: list[dict], summary: dict) -> None:
+    fig, ax = new_figure(figsize=(6.5, 4.5))
+    for j, colour in zip(jobs, ("C0", "C1", "C2")):
+        arr, st = np.array(j["arrival_ps"]), np.array(j["stations_nm"])
+        ok = np.isfinite(arr)
+        ax.plot(arr[ok] * 1e-3, st[ok], "o", ms=3, color=colour, label=f"{j['experiment']}: {j['speed_m_s']:.0f} m/s")
+        ref = REFERENCE[WAVE_KEY[j["experiment"]]]
+        t = np.linspace(0, np.nanmax(arr), 10)
+        ax.plot(t * 1e-3, ref * t * 1e-3, "--", color=colour, lw=1, label=f"{j['experiment']} reference {ref:.0f} m/s")
+    ax.set_xlabel("time (ns)")
+    ax.set_ylabel("wavefront position z (nm)")
+    ax.set_title("Wavefront (half the piston velocity) against time")
+    ax.legend(fontsize=7)
+    ax.grid(alpha=0.3)
+    save_figure(fig, path)
+
+
+def _plot_profiles(path: Path, jobs: list[dict]) -> None:
+    fig, axes = new_figure(1, len(jobs), figsize=(4.2 * len(jobs), 3.8), squeeze=False)
+    for ax, j in zip(axes[0], jobs):
+        prof, times, st = np.array(j["profile"]), np.array(j["times_ps"]), np.array(j["stations_nm"])
+        for frac in (0.33, 0.66, 1.0):
+            i = int(frac * (len(times) - 1))
+            ax.plot(st, prof[i], label=f"t = {times[i] * 1e-3:.3f} ns")
+            ref = REFERENCE[WAVE_KEY[j["experiment"]]] * times[i] * 1e-3
+            ax.axvline(ref, color=ax.lines[-1].get_color(), ls=":", lw=1)
+        ax.set_xlabel("z (nm)")
+        ax.set_ylabel("section velocity / piston velocity")
+        ax.set_title(f"{j['experiment']} ({j['lateral']} sides); dotted: reference front")
+        ax.legend(fontsize=7)
+        ax.grid(alpha=0.3)
+    save_figure(fig, path)
+
+
+def _waves_h5(jobs: list[dict]) -> bytes:
+    def write(h):
+        for j in jobs:
+            g = h.create_group(f"wave_{j['experiment']}")
+            for key, unit in (("times_ps", "ps"), ("stations_nm", "nm"), ("arrival_ps", "ps"), ("speed_m_s", "m/s"),
+                              ("speed_stderr_m_s", "m/s"), ("timestep_ps", "ps")):
+                d = g.create_dataset(key, data=np.asarray(j[key]))
+                d.attrs["units"] = unit
+            d = g.create_dataset("profile", data=np.array(j["profile"]))
+            d.attrs["units"] = "1 (section-averaged velocity / piston velocity)"
+            d.attrs["columns"] = [f"z = {z:g} nm" for z in j["stations_nm"]]
+    return _h5_bytes(write)
+
+
+def _waves_report(spec, summary: dict, jobs: list[dict]) -> str:
+    w = spec.waves
+    m = summary["measured_moduli"]
+    lines = [f"# Polycrystal waves ({spec.name})", "",
+             f"A column of {w.cubes[0]} x {w.cubes[1]} x {w.cubes[2]} cubes of {w.cube_nm:g} nm "
+             f"({6 * int(np.prod(w.cubes))} tetrahedra, 64-atom samples, orientation seed {w.seed}); a piston on z = 0 moves "
+             f"at {w.piston_m_s:g} m/s from t = 0 (held). Velocity Verlet on the vertices, no damping. Front = where the "
+             "section-averaged velocity reaches half the piston's; speed = least-squares slope of station position "
+             f"against arrival time over {w.fit_range[0]:g}-{w.fit_range[1]:g} of the length.", "",
+             *_crystal_lines(summary, spec),
+             f"E and nu measured on the same potential (static tension, {m['elements']} elements, seed {m['seed']}): "
+             f"E = {m['youngs_modulus_GPa']:.2f} GPa, nu = {m['poisson_ratio']:.4f}; the speeds they imply are the "
+             "'from measured E, nu' column.", "",
+             "| wave | sides | speed (m/s) | reference (seed 003) | error | from measured E, nu | error | Reuss - Voigt "
+             "| macro steps | wall (s) |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for j in jobs:
+        key = WAVE_KEY[j["experiment"]]
+        ref, pred = REFERENCE[key], m[key]
+        b = summary["bounds"]
+        lines.append(f"| {j['experiment']} | {j['lateral']} | {j['speed_m_s']:.0f} +- {j['speed_stderr_m_s']:.0f} | {ref:.0f} | "
+                     f"{100 * (j['speed_m_s'] - ref) / ref:+.2f} % | {pred:.0f} | {100 * (j['speed_m_s'] - pred) / pred:+.2f} % | "
+                     f"{b['reuss'][key]:.0f} - {b['voigt'][key]:.0f} | {j['macro_steps']} | {j['wall_s']:.1f} |")
+    lines += ["", "The references are measured polycrystalline silicon; the speeds the potential can give are bounded by "
+              "its Reuss and Voigt averages.", "", "![wavefront](wavefront.png)", "", "![profiles](profiles.png)", "",
+              "![mesh](mesh.png)", "", f"Wall time {summary['wall_s']:.1f} s on this machine. opalflow {__version__}."]
+    return "\n".join(lines) + "\n"
