@@ -512,11 +512,11 @@ def _plot_fronts(path: Path, jobs: list[dict], summary: dict) -> None:
     for j, colour in zip(jobs, ("C0", "C1", "C2")):
         arr, st = np.array(j["arrival_ps"]), np.array(j["stations_nm"])
         ok = np.isfinite(arr)
-        ax.plot(arr[ok] * 1e-3, st[ok], "o", ms=3, color=colour, label=f"{j['experiment']}: {j['speed_m_s']:.0f} m/s")
+        ax.plot(arr[ok], st[ok], "o", ms=3, color=colour, label=f"{j['experiment']}: {j['speed_m_s']:.0f} m/s")
         ref = REFERENCE[WAVE_KEY[j["experiment"]]]
         t = np.linspace(0, np.nanmax(arr), 10)
-        ax.plot(t * 1e-3, ref * t * 1e-3, "--", color=colour, lw=1, label=f"{j['experiment']} reference {ref:.0f} m/s")
-    ax.set_xlabel("time (ns)")
+        ax.plot(t, ref * t * 1e-3, "--", color=colour, lw=1, label=f"{j['experiment']} reference {ref:.0f} m/s")
+    ax.set_xlabel("time (ps)")
     ax.set_ylabel("wavefront position z (nm)")
     ax.set_title("Wavefront (half the piston velocity) against time")
     ax.legend(fontsize=7)
@@ -530,7 +530,7 @@ def _plot_profiles(path: Path, jobs: list[dict]) -> None:
         prof, times, st = np.array(j["profile"]), np.array(j["times_ps"]), np.array(j["stations_nm"])
         for frac in (0.33, 0.66, 1.0):
             i = int(frac * (len(times) - 1))
-            ax.plot(st, prof[i], label=f"t = {times[i] * 1e-3:.3f} ns")
+            ax.plot(st, prof[i], label=f"t = {times[i]:.1f} ps")
             ref = REFERENCE[WAVE_KEY[j["experiment"]]] * times[i] * 1e-3
             ax.axvline(ref, color=ax.lines[-1].get_color(), ls=":", lw=1)
         ax.set_xlabel("z (nm)")
