@@ -25,7 +25,8 @@ from opalflow.spec import InputError, read_toml
 BASES = {"opal": "opal_quick", "lattice": "lattice_sc", "datafile": "lattice_sc",
          "tersoff_properties": "tersoff_properties", "tersoff_fit": "tersoff_fit",
          "tersoff_stability": "tersoff_stability", "study": "calibrate_silica",
-         "stability_matrix": "stability_matrix", "aerogel": "aerogel_compression", "aggregation": "aerogel_dlca"}
+         "stability_matrix": "stability_matrix", "aerogel": "aerogel_compression", "aggregation": "aerogel_dlca",
+         "polycrystal_tension": "polycrystal_tension", "polycrystal_waves": "polycrystal_waves"}
 METACHARACTERS = ["a$b", "${x}", "a&b", "a#b", "a;b", "{x}", 'a"b', "a'b", "a\nshell rm -rf /",
                   "silica; shell ls", "x\tpair_style zero", ""]
 VALUES = [None, "x", "random", 0, 1, -1, 2, 7, 2**62, -(2**62), 0.0, 0.5, -0.5, 1e-300, 1e308, -1e308,

@@ -158,7 +158,10 @@ class DiamondModel:
         a = self.a if a0 is None else a0
         for _ in range(50):
             p = self.properties(x, a)
-            step = float(p["dE_da_eV_per_A"]) / float(p["d2E_da2"])
+            curvature = float(p["d2E_da2"])
+            if not np.isfinite(curvature) or curvature <= 0:
+                raise RuntimeError(f"lattice constant: no energy minimum near a = {a:.4f} A (d2E/da2 = {curvature:g})")
+            step = float(p["dE_da_eV_per_A"]) / curvature
             a -= step
             if abs(step) < tol * a:
                 return a

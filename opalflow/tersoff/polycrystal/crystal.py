@@ -29,25 +29,25 @@ def _constants(values: tuple, element: str) -> dict:
     return {"a0_A": a0, **model.evaluate(p, a0)}
 
 
-def single_crystal(params: TersoffParameters, where: str = "tersoff.potential") -> dict:
+def single_crystal(params: TersoffParameters, potential: str, where: str = "tersoff.potential") -> dict:
     """a0 (A), Ec (eV) and the elastic constants (GPa) of the diamond crystal; SpecError if unstable."""
     c = _constants(tuple(float(v) for v in params.values()), params.element)
     if c["a0_A"] is None or not np.isfinite(c["a0_A"]):
-        raise SpecError(where, params.element, "fails the stability check: no zero-pressure diamond lattice constant")
+        raise SpecError(where, potential, "fails the stability check: no zero-pressure diamond lattice constant")
     c11, c12, c44 = c["C11_GPa"], c["C12_GPa"], c["C44_GPa"]
     if not (c11 - c12 > 0 and c11 + 2 * c12 > 0 and c44 > 0 and c["Ec_eV"] < 0):
-        raise SpecError(where, params.element, f"fails the stability check: C11 = {c11:.1f}, C12 = {c12:.1f}, "
+        raise SpecError(where, potential, f"fails the stability check: C11 = {c11:.1f}, C12 = {c12:.1f}, "
                         f"C44 = {c44:.1f} GPa, Ec = {c['Ec_eV']:.3f} eV (needs C11 - C12 > 0, C11 + 2 C12 > 0, "
                         "C44 > 0 (Born) and Ec < 0)")
     return c
 
 
-def check_sample_hessian(samples, element: str, where: str = "tersoff.potential") -> None:
+def check_sample_hessian(samples, potential: str, where: str = "tersoff.potential") -> None:
     """Refuse a set whose unstrained 64-atom sample is not a minimum (negative Hessian eigenvalue)."""
     pinv = samples.hessian_pinv()
     lam = np.linalg.eigvalsh(0.5 * (pinv + pinv.T))
     if lam.min() < -1e-8 * abs(lam).max():
-        raise SpecError(where, element, "fails the stability check: the 64-atom sample's Hessian has a "
+        raise SpecError(where, potential, "fails the stability check: the 64-atom sample's Hessian has a "
                         "negative eigenvalue (a soft phonon; the sample would not relax to the crystal)")
 
 

@@ -50,13 +50,24 @@ class Mesh:
         return np.linalg.det(self.shape_matrices(self.vertices if x is None else x, box)) / 6.0
 
     def boundary_faces(self) -> np.ndarray:
-        """Faces (F, 3) that belong to one element only (the outer surface; periodic seams are shared)."""
-        faces = np.concatenate([self.tets[:, [1, 2, 3]], self.tets[:, [0, 2, 3]], self.tets[:, [0, 1, 3]],
-                                self.tets[:, [0, 1, 2]]])
-        # a face on a periodic seam is shared by two elements that see it through different images
-        key = np.sort(faces, axis=1)
-        _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-        return faces[counts[inverse.ravel()] == 1]
+        """The outer surface: (F, 2) rows [element, k] for the face opposite vertex k that no other element shares.
+
+        Faces are keyed by their vertex ids and their centroid wrapped into the box along the periodic
+        axes, so a face on a periodic seam is found shared and, in a box only two cubes wide, two faces
+        with the same vertex ids in different images are told apart.
+        """
+        p = self.element_vertices(self.vertices)
+        keys = {}
+        for k in range(4):
+            loc = [i for i in range(4) if i != k]
+            centre = p[:, loc].mean(1)
+            per = np.asarray(self.periodic)
+            centre[:, per] = np.mod(centre[:, per], self.box[per])
+            ids = np.sort(self.tets[:, loc], axis=1)
+            for e in range(self.elements):
+                key = (*ids[e], *np.round(centre[e] / self.cube_nm * 6).astype(int))
+                keys.setdefault(key, []).append((e, k))
+        return np.array([v[0] for v in keys.values() if len(v) == 1], dtype=int).reshape(-1, 2)
 
 
 def block(cubes: tuple[int, int, int], cube_nm: float, periodic: tuple[bool, bool, bool]) -> Mesh:

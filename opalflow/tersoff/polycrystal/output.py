@@ -51,13 +51,13 @@ def plot_mesh(path: Path, pc: Polycrystal, title: str) -> None:
     fig.clf()
     mesh = pc.mesh
     faces = mesh.boundary_faces()
-    owner = _face_owner(mesh, faces)
+    local = np.array([[i for i in range(4) if i != k] for k in range(4)])[faces[:, 1]]      # (F, 3)
     corners = pc.mesh.element_vertices(pc.x, pc.box)
-    tri = np.stack([corners[owner[:, 0], owner[:, k]] for k in (1, 2, 3)], axis=1)
-    sxx = pc.stress[owner[:, 0], 0, 0]
+    tri = corners[faces[:, :1], local]                                                     # (F, 3, 3)
+    sxx = pc.stress[faces[:, 0], 0, 0]
     norm = matplotlib.colors.Normalize(sxx.min(), sxx.max() if sxx.max() > sxx.min() else sxx.min() + 1)
     cmap = matplotlib.colormaps["coolwarm"]
-    for i, (colours, label) in enumerate(((orientation_colours(pc.rotations)[owner[:, 0]], "orientation "
+    for i, (colours, label) in enumerate(((orientation_colours(pc.rotations)[faces[:, 0]], "orientation "
                                            "(crystal direction along z as RGB)"),
                                           (cmap(norm(sxx)), "sigma_xx of the element (GPa)"))):
         ax = fig.add_subplot(1, 2, i + 1, projection="3d")
@@ -75,13 +75,3 @@ def plot_mesh(path: Path, pc: Polycrystal, title: str) -> None:
             fig.colorbar(matplotlib.cm.ScalarMappable(norm=norm, cmap=cmap), ax=ax, shrink=0.6, label="GPa")
     fig.suptitle(title)
     save_figure(fig, path)
-
-
-def _face_owner(mesh, faces: np.ndarray) -> np.ndarray:
-    """For each boundary face (F, 3): [element, local index of its three vertices] (F, 4)."""
-    local = ((1, 2, 3), (0, 2, 3), (0, 1, 3), (0, 1, 2))
-    lookup = {}
-    for e, tet in enumerate(mesh.tets):
-        for loc in local:
-            lookup[tuple(sorted(tet[list(loc)]))] = (e, *loc)
-    return np.array([lookup[tuple(sorted(f))] for f in faces])

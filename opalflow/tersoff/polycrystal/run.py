@@ -21,7 +21,7 @@ from opalflow.tersoff.polycrystal.dynamics import M_PER_S, Polycrystal, polycrys
 from opalflow.tersoff.polycrystal.mesh import block
 from opalflow.tersoff.polycrystal.output import plot_mesh, write_vtu
 from opalflow.tersoff.polycrystal.samples import Samples, random_rotations, relax_md, relax_minimize
-from opalflow.tersoff.polycrystal.spec import PolycrystalWorkflow
+from opalflow.tersoff.polycrystal.spec import PolycrystalWorkflow, TensionWorkflow, WavesWorkflow
 from opalflow.version import __version__
 
 #: seed 003, section 3: polycrystalline silicon (their ref. 30)
@@ -52,10 +52,16 @@ class Progress:
 def setup(spec: PolycrystalWorkflow) -> tuple:
     """The potential, its single crystal and the batched samples (every check before anything is written)."""
     params = load_parameters(spec.tersoff.potential, spec.tersoff.element)
-    crystal = single_crystal(params)
+    crystal = single_crystal(params, spec.tersoff.potential)
     samples = Samples(params.values(), params.cutoff(), crystal["a0_A"])
-    check_sample_hessian(samples, params.element)
+    check_sample_hessian(samples, spec.tersoff.potential)
     return params, crystal, samples
+
+
+def start_folder(out: Path, spec: PolycrystalWorkflow) -> None:
+    """The run folder with ``run.json`` (the spec, for ``--resume``) and ``jobs/`` (one JSON per finished run)."""
+    (out / "jobs").mkdir(parents=True, exist_ok=True)
+    write_json_atomic(out / "run.json", {"kind": spec.kind, "spec": spec.to_dict(), "opalflow_version": __version__})
 
 
 def constants(crystal: dict) -> tuple[float, float, float]:
@@ -82,7 +88,7 @@ def slope(x: np.ndarray, y: np.ndarray) -> float:
 
 
 # ---------------------------------------------------------------- tension
-def tension_job(spec: PolycrystalWorkflow, samples: Samples, crystal: dict, cubes: int, cube_nm: float, seed: int,
+def tension_job(spec: TensionWorkflow, samples: Samples, crystal: dict, cubes: int, cube_nm: float, seed: int,
                 say, label: str) -> tuple[dict, Polycrystal]:
     """One tension experiment: periodic along x, free sides; stress-strain and volume-strain."""
     t = spec.tension
@@ -111,6 +117,7 @@ def tension_job(spec: PolycrystalWorkflow, samples: Samples, crystal: dict, cube
                 _stretch(pc, pc.box[0] + mesh.box[0] * t.strain_step / deform)
                 pc.verlet(dt, gamma)
                 steps += 1
+                progress(steps, f"(stretching to strain {k * t.strain_step:g})")
             while pc.residual > t.residual_tol:
                 if relax >= t.max_relax_steps:
                     raise RuntimeError(f"{label}: residual {pc.residual:.3g} after {relax} relaxation steps at strain "
@@ -165,11 +172,10 @@ def relaxation_comparison(samples: Samples, seed: int, force_tol: float, count: 
             "max_stress_GPa": float(np.abs(mini.evaluation.stress).max())}
 
 
-def run_tension(spec: PolycrystalWorkflow, out: Path, say=print, resume: bool = False) -> dict:
+def run_tension(spec: TensionWorkflow, out: Path, say=print, resume: bool = False) -> dict:
     t0 = time.perf_counter()
     params, crystal, samples = setup(spec)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "jobs").mkdir(exist_ok=True)
+    start_folder(out, spec)
     t = spec.tension
     bounds = polycrystal_bounds(*constants(crystal), samples.density_kg_m3)
     say(f"polycrystal tension with {spec.tersoff.potential}: a0 = {crystal['a0_A']:.5f} A, C11 {crystal['C11_GPa']:.1f}, "
@@ -378,7 +384,7 @@ WAVE_AXIS = {"plate": 2, "rod": 2, "shear": 0}          # velocity component the
 WAVE_KEY = {"plate": "wave_speed_plate_m_s", "rod": "wave_speed_rod_m_s", "shear": "wave_speed_shear_m_s"}
 
 
-def wave_job(spec: PolycrystalWorkflow, samples: Samples, crystal: dict, bounds: dict, name: str, say) -> tuple[dict, Polycrystal]:
+def wave_job(spec: WavesWorkflow, samples: Samples, crystal: dict, bounds: dict, name: str, say) -> tuple[dict, Polycrystal]:
     """A piston on z = 0 drives the column; the front is where the section-averaged velocity reaches half the
     piston's.
 
@@ -438,11 +444,10 @@ def wave_job(spec: PolycrystalWorkflow, samples: Samples, crystal: dict, bounds:
     return job, pc
 
 
-def run_waves(spec: PolycrystalWorkflow, out: Path, say=print, resume: bool = False) -> dict:
+def run_waves(spec: WavesWorkflow, out: Path, say=print, resume: bool = False) -> dict:
     t0 = time.perf_counter()
     params, crystal, samples = setup(spec)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "jobs").mkdir(exist_ok=True)
+    start_folder(out, spec)
     w = spec.waves
     bounds = polycrystal_bounds(*constants(crystal), samples.density_kg_m3)
     say(f"polycrystal waves with {spec.tersoff.potential}: {', '.join(w.experiments)} in a {w.cubes[0]}x{w.cubes[1]}x"
@@ -454,7 +459,7 @@ def run_waves(spec: PolycrystalWorkflow, out: Path, say=print, resume: bool = Fa
         measured = json.loads(measured_path.read_text())
     else:
         say("E and nu of the same potential: static tension of 384 elements")
-        tension = PolycrystalWorkflow(name="moduli", kind="polycrystal_tension", tersoff=spec.tersoff, samples=spec.samples)
+        tension = TensionWorkflow(name="moduli", kind="polycrystal_tension", tersoff=spec.tersoff, samples=spec.samples)
         tension.tension.method = "static"
         job, _ = tension_job(tension, samples, crystal, 4, w.cube_nm, w.seed, say, "static tension")
         measured = {"youngs_modulus_GPa": job["youngs_modulus_GPa"], "poisson_ratio": job["poisson_ratio"],
