@@ -49,13 +49,15 @@ class Progress:
         self.say(f"  {self.label}: macro step {step}/{self.total}, {rate:.1f} steps/s, ~{left:.0f} s left {extra}")
 
 
-def setup(spec: PolycrystalWorkflow) -> tuple:
-    """The potential, its single crystal and the batched samples (every check before anything is written)."""
+def setup(spec: PolycrystalWorkflow, out: Path) -> tuple:
+    """The potential, its single crystal, the batched samples and the crystal's bounds; every check is made
+    before the run folder is started."""
     params = load_parameters(spec.tersoff.potential, spec.tersoff.element)
     crystal = single_crystal(params, spec.tersoff.potential)
     samples = Samples(params.values(), params.cutoff(), crystal["a0_A"])
     check_sample_hessian(samples, spec.tersoff.potential)
-    return params, crystal, samples
+    start_folder(out, spec)
+    return params, crystal, samples, polycrystal_bounds(*constants(crystal), samples.density_kg_m3)
 
 
 def start_folder(out: Path, spec: PolycrystalWorkflow) -> None:
@@ -174,10 +176,8 @@ def relaxation_comparison(samples: Samples, seed: int, force_tol: float, count: 
 
 def run_tension(spec: TensionWorkflow, out: Path, say=print, resume: bool = False) -> dict:
     t0 = time.perf_counter()
-    params, crystal, samples = setup(spec)
-    start_folder(out, spec)
+    params, crystal, samples, bounds = setup(spec, out)
     t = spec.tension
-    bounds = polycrystal_bounds(*constants(crystal), samples.density_kg_m3)
     say(f"polycrystal tension with {spec.tersoff.potential}: a0 = {crystal['a0_A']:.5f} A, C11 {crystal['C11_GPa']:.1f}, "
         f"C12 {crystal['C12_GPa']:.1f}, C44 {crystal['C44_GPa']:.1f} GPa; Voigt E {bounds['voigt']['E_GPa']:.1f}, "
         f"Reuss E {bounds['reuss']['E_GPa']:.1f} GPa")
@@ -446,10 +446,8 @@ def wave_job(spec: WavesWorkflow, samples: Samples, crystal: dict, bounds: dict,
 
 def run_waves(spec: WavesWorkflow, out: Path, say=print, resume: bool = False) -> dict:
     t0 = time.perf_counter()
-    params, crystal, samples = setup(spec)
-    start_folder(out, spec)
+    params, crystal, samples, bounds = setup(spec, out)
     w = spec.waves
-    bounds = polycrystal_bounds(*constants(crystal), samples.density_kg_m3)
     say(f"polycrystal waves with {spec.tersoff.potential}: {', '.join(w.experiments)} in a {w.cubes[0]}x{w.cubes[1]}x"
         f"{w.cubes[2]} column of cubes ({6 * int(np.prod(w.cubes))} elements), edge {w.cube_nm:g} nm")
     check = _lammps_check(spec, params, samples, out)
