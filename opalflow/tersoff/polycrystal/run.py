@@ -8,6 +8,7 @@ Each run folder gets ``results.h5`` (every dataset with ``units``, tables with `
 from __future__ import annotations
 
 import io
+import json
 import math
 import time
 from pathlib import Path
@@ -64,6 +65,12 @@ def start_folder(out: Path, spec: PolycrystalWorkflow) -> None:
     """The run folder with ``run.json`` (the spec, for ``--resume``) and ``jobs/`` (one JSON per finished run)."""
     (out / "jobs").mkdir(parents=True, exist_ok=True)
     write_json_atomic(out / "run.json", {"kind": spec.kind, "spec": spec.to_dict(), "opalflow_version": __version__})
+
+
+def finished(path: Path, job: dict) -> dict:
+    """Keep a finished run as ``jobs/NAME.json`` (what ``--resume`` re-uses) and return it."""
+    write_json_atomic(path, job)
+    return job
 
 
 def constants(crystal: dict) -> tuple[float, float, float]:
@@ -193,20 +200,17 @@ def run_tension(spec: TensionWorkflow, out: Path, say=print, resume: bool = Fals
             path = out / "jobs" / f"{name}.json"
             label = f"[{len(jobs) + 1}/{total}] {6 * n ** 3} elements, edge {n * h:g} nm, seed {seed}"
             if resume and path.exists():
-                import json
                 jobs.append(json.loads(path.read_text()))
                 say(f"{label}: done before (resume)")
                 continue
             say(f"{label}: {t.method}")
-            job, pc = tension_job(spec, samples, crystal, n, h, seed, say, label)
-            write_json_atomic(path, job)
-            jobs.append(job)
-            last[i] = pc
+            job, last[i] = tension_job(spec, samples, crystal, n, h, seed, say, label)
+            jobs.append(finished(path, job))
             say(f"{label}: E = {job['youngs_modulus_GPa']:.2f} GPa, nu = {job['poisson_ratio']:.4f} "
                 f"({job['macro_steps']} macro steps, {job['evaluations']} sample evaluations, {job['wall_s']:.1f} s)")
     summary = _tension_summary(spec, jobs, bounds, check, relax_cmp, crystal, samples)
     with staged_files(out) as stage:
-        _plot_curves(stage("stress_strain.png"), stage("volume_strain.png"), jobs, summary)
+        _plot_curves(stage("stress_strain.png"), stage("volume_strain.png"), jobs)
         for i, pc in last.items():
             n, h = t.cubes[i], t.cube_nm[i]
             write_vtu(stage(f"mesh_{6 * n ** 3}el_{h:g}nm.vtu"), pc)
@@ -262,7 +266,7 @@ def _tension_summary(spec, jobs, bounds, check, relax_cmp, crystal, samples) -> 
                          f"{nu_all['std']:.4f} (0.22), {len(jobs)} runs")}
 
 
-def _plot_curves(stress_path: Path, volume_path: Path, jobs: list[dict], summary: dict) -> None:
+def _plot_curves(stress_path: Path, volume_path: Path, jobs: list[dict]) -> None:
     for path, col, ylabel, ref in ((stress_path, 1, "sigma_xx (GPa)", lambda e: REFERENCE["youngs_modulus_GPa"] * e),
                                    (volume_path, 7, "V / V0 - 1", lambda e: (1 - 2 * REFERENCE["poisson_ratio"]) * e)):
         fig, ax = new_figure(figsize=(6, 4.5))
@@ -451,7 +455,6 @@ def run_waves(spec: WavesWorkflow, out: Path, say=print, resume: bool = False) -
     say(f"polycrystal waves with {spec.tersoff.potential}: {', '.join(w.experiments)} in a {w.cubes[0]}x{w.cubes[1]}x"
         f"{w.cubes[2]} column of cubes ({6 * int(np.prod(w.cubes))} elements), edge {w.cube_nm:g} nm")
     check = _lammps_check(spec, params, samples, out)
-    import json
     measured_path = out / "jobs" / "static_tension.json"
     if resume and measured_path.exists():
         measured = json.loads(measured_path.read_text())
@@ -463,7 +466,7 @@ def run_waves(spec: WavesWorkflow, out: Path, say=print, resume: bool = False) -
         measured = {"youngs_modulus_GPa": job["youngs_modulus_GPa"], "poisson_ratio": job["poisson_ratio"],
                     "elements": job["elements"], "seed": w.seed, "wall_s": job["wall_s"]}
         measured.update(speeds(measured["youngs_modulus_GPa"], measured["poisson_ratio"], samples.density_kg_m3))
-        write_json_atomic(measured_path, measured)
+        finished(measured_path, measured)
     jobs, states = [], {}
     for name in w.experiments:
         path = out / "jobs" / f"wave_{name}.json"
@@ -471,15 +474,13 @@ def run_waves(spec: WavesWorkflow, out: Path, say=print, resume: bool = False) -
             jobs.append(json.loads(path.read_text()))
             say(f"{name} wave: done before (resume)")
             continue
-        job, pc = wave_job(spec, samples, crystal, bounds, name, say)
-        write_json_atomic(path, job)
-        jobs.append(job)
-        states[name] = pc
+        job, states[name] = wave_job(spec, samples, crystal, bounds, name, say)
+        jobs.append(finished(path, job))
         say(f"{name} wave: {job['speed_m_s']:.0f} +- {job['speed_stderr_m_s']:.0f} m/s ({job['macro_steps']} macro steps, "
             f"{job['wall_s']:.1f} s)")
     summary = _waves_summary(spec, jobs, bounds, measured, check, crystal, samples)
     with staged_files(out) as stage:
-        _plot_fronts(stage("wavefront.png"), jobs, summary)
+        _plot_fronts(stage("wavefront.png"), jobs)
         _plot_profiles(stage("profiles.png"), jobs)
         for name, pc in states.items():
             write_vtu(stage(f"wave_{name}.vtu"), pc, pc.v * M_PER_S)
@@ -510,7 +511,7 @@ def _waves_summary(spec, jobs, bounds, measured, check, crystal, samples) -> dic
     return out
 
 
-def _plot_fronts(path: Path, jobs: list[dict], summary: dict) -> None:
+def _plot_fronts(path: Path, jobs: list[dict]) -> None:
     fig, ax = new_figure(figsize=(6.5, 4.5))
     for j, colour in zip(jobs, ("C0", "C1", "C2")):
         arr, st = np.array(j["arrival_ps"]), np.array(j["stations_nm"])
