@@ -1,34 +1,16 @@
-"""Command line: ``python -m opalflow info | list | build | run | check | analyze``; what each kind does comes from
-:mod:`opalflow.registry`."""
+"""Command line: ``python -m opalflow info | list | build | run | check | analyze``: each verb parses its
+arguments and calls the Python API of the same name (:mod:`opalflow.api`); what each kind does comes from
+:mod:`opalflow.registry`.  Bad input: one line, exit 2; a failed LAMMPS run: its log tail, exit 1; Ctrl-C:
+one line saying where it stopped and how to resume, exit 130."""
 from __future__ import annotations
 
 import argparse
 import errno
-import json
 import sys
-import tomllib
-from pathlib import Path
 
-from opalflow import registry
-from opalflow.resources import WORKFLOWS
-from opalflow.spec import InputError, SpecError
+from opalflow import api, registry
+from opalflow.spec import InputError
 from opalflow.version import __version__
-
-
-def _say(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
-
-
-def workflow_path(arg: str) -> Path:
-    """A workflow file: a path, or the name of a file in workflows/ (with or without .toml)."""
-    p = Path(arg)
-    if p.exists():
-        return p
-    for cand in (WORKFLOWS / arg, WORKFLOWS / f"{arg}.toml"):
-        if cand.exists():
-            return cand
-    raise SpecError("workflow", arg, f"no such file, nor a workflow in {WORKFLOWS} "
-                    "(python -m opalflow list shows them)")
 
 
 def cmd_info(args) -> int:
@@ -52,91 +34,58 @@ def cmd_info(args) -> int:
 
 def cmd_list(args) -> int:
     """The workflows in workflows/: name, kind, description."""
-    for path in sorted(WORKFLOWS.glob("*.toml")):
-        raw = tomllib.loads(path.read_text())
-        print(f"{path.stem:<20} {raw.get('kind', registry.DEFAULT_KIND):<19} {raw.get('description', '')}")
+    for name, w in api.workflows().items():
+        print(f"{name:<20} {w['kind']:<19} {w['description']}")
     return 0
 
 
 def cmd_build(args) -> int:
     """Everything a run writes before it runs (structure, deck, run.sh, summary.json); no run."""
-    spec = registry.load_spec(workflow_path(args.workflow), args.set)
-    registry.get(spec.kind).build_workflow(spec, _out_folder(args.out), say=_say)
+    api.build(args.workflow, args.out, set=args.set)
     return 0
-
-
-def _out_folder(path: str) -> Path:
-    out = Path(path)
-    if out.exists() and not out.is_dir():
-        raise SpecError("--out", str(out), "exists and is not a folder")
-    return out
 
 
 def cmd_run(args) -> int:
     from opalflow.lammps.engine import EngineError
 
-    out = _out_folder(args.out)
-    if args.resume:
-        spec = registry.spec_from_dict(_run_json(out, "--resume")["spec"])
-    elif args.workflow is None:
-        raise SpecError("workflow", None, "give a workflow file or name (or --resume with --out)")
-    else:
-        spec = registry.load_spec(workflow_path(args.workflow), args.set)
-    if args.np < 1:
-        raise SpecError("--np", args.np, "must be >= 1")
-    if args.suffix:
-        from opalflow.lammps.engine import lammps_info
-
-        usable = lammps_info()["accelerators"]
-        if args.suffix not in usable:
-            raise SpecError("--suffix", args.suffix, f"this LAMMPS build offers {', '.join(usable) or 'none'}")
     try:
-        summary = registry.get(spec.kind).run_workflow(spec, out, np_=args.np, resume=args.resume, say=_say,
-                                                        suffix=args.suffix)
+        summary = api.run(args.workflow, args.out, set=args.set, np=args.np, resume=args.resume, suffix=args.suffix)
     except EngineError as exc:
         print(f"error: {exc}", file=sys.stderr)
-        print(f"run folder kept: {out}", file=sys.stderr)
+        print(f"run folder kept: {args.out}", file=sys.stderr)
         return 1
-    print(f"{summary['headline']}, {summary['wall_s']:.1f} s -> {out}/report.md")
+    print(f"{summary['headline']}, {summary['wall_s']:.1f} s -> {args.out}/report.md")
     return 0
 
 
 def cmd_check(args) -> int:
     """A short run of the scene's real deck judged for numerical stability (exit 1 if unstable)."""
-    if args.steps < 100:
-        raise SpecError("--steps", args.steps, "must be >= 100")
-    if not 0 < args.timestep_factor <= 100:
-        raise SpecError("--timestep-factor", args.timestep_factor, "must be in (0, 100]")
-    if args.strain is not None and not 0 < args.strain <= 0.9:
-        raise SpecError("--strain", args.strain, "must be in (0, 0.9] (compress the sample this far)")
-    spec = registry.load_spec(workflow_path(args.workflow), args.set)
-    summary = registry.get(spec.kind).check_workflow(spec, _out_folder(args.out), say=_say, steps=args.steps,
-                                                     timestep_factor=args.timestep_factor, bisect=args.bisect,
-                                                     strain=args.strain)
+    summary = api.check(args.workflow, args.out, set=args.set, steps=args.steps, timestep_factor=args.timestep_factor,
+                        strain=args.strain, bisect=args.bisect)
     print(f"{summary['headline']} -> {args.out}/stability.md")
     return 0 if summary["passed"] else 1
 
 
-def _run_json(out: Path, field: str) -> dict:
-    """The run.json of a prepared run folder."""
-    path = out / "run.json"
-    if not path.exists():
-        raise SpecError(field, str(out), "no run.json: this folder holds no prepared run")
-    try:
-        info = json.loads(path.read_text())
-        info["spec"]["kind"]
-    except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError) as exc:
-        raise SpecError(field, str(out), f"run.json is damaged ({type(exc).__name__}: {exc}); build the "
-                        "folder again") from None
-    return info
-
-
 def cmd_analyze(args) -> int:
-    out = Path(args.folder)
-    kind = _run_json(out, "folder")["spec"].get("kind", registry.DEFAULT_KIND)
-    summary = registry.get(kind).analyze_folder(out)
-    print(f"{summary['headline']} -> {out}/report.md")
+    summary = api.analyze(args.folder)
+    print(f"{summary['headline']} -> {args.folder}/report.md")
     return 0
+
+
+def interrupted(args, exc: KeyboardInterrupt) -> str:
+    """The one line Ctrl-C prints: where the run stopped and how to go on."""
+    step = getattr(exc, "step", None)
+    where = f" at step {step}" if step is not None else ""
+    out = getattr(args, "out", None)
+    if args.command != "run" or out is None:
+        return f"interrupted{where}"
+    try:
+        kind = registry.get(api.run_json(out)["spec"]["kind"])
+    except InputError:
+        return f"interrupted{where}; nothing was prepared in {out} yet: run the same command again"
+    if "resume" in kind.options:
+        return f"interrupted{where}; resume with: python -m opalflow run --out {out} --resume"
+    return f"interrupted{where}; finished parts are kept in {out}: run the same command again to go on"
 
 
 def parser() -> argparse.ArgumentParser:
@@ -184,6 +133,9 @@ def main(argv: list[str] | None = None) -> int:
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt as exc:
+        print(interrupted(args, exc), file=sys.stderr)
+        return 130
     except OSError as exc:
         if exc.errno not in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT):
             raise

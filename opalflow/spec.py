@@ -80,15 +80,21 @@ def apply_overrides(raw: dict, overrides: list[str]) -> dict:
         if "=" not in item:
             raise SpecError("--set", item, "expected section.key=value")
         path, text = item.split("=", 1)
-        keys = path.strip().split(".")
-        if not all(NAME_RE.fullmatch(k) for k in keys):
-            raise SpecError("--set", item, "keys must match [A-Za-z0-9_]+ separated by dots")
-        node = raw
-        for k in keys[:-1]:
-            node = node.setdefault(k, {})
-            if not isinstance(node, dict):
-                raise SpecError(path, item, f"'{k}' is not a section")
-        node[keys[-1]] = parse_value(text.strip())
+        set_value(raw, path.strip(), parse_value(text.strip()), item)
+    return raw
+
+
+def set_value(raw: dict, path: str, value: Any, item: Any = None) -> dict:
+    """Set ``section.key`` of the raw TOML dict to ``value`` (a Python value: the API's ``set={...}``)."""
+    keys = path.split(".")
+    if not all(NAME_RE.fullmatch(k) for k in keys):
+        raise SpecError("--set", item if item is not None else path, "keys must match [A-Za-z0-9_]+ separated by dots")
+    node = raw
+    for k in keys[:-1]:
+        node = node.setdefault(k, {})
+        if not isinstance(node, dict):
+            raise SpecError(path, item if item is not None else value, f"'{k}' is not a section")
+    node[keys[-1]] = value
     return raw
 
 

@@ -137,14 +137,48 @@ def new_figure(*args, **kwargs):
     return plt.subplots(*args, **kwargs)
 
 
-def save_figure(fig, path: str | os.PathLike) -> None:
-    """Write a figure under a temporary name, then rename it; the figure is closed."""
+def save_figure(fig, path: str | os.PathLike, tight: bool = True) -> None:
+    """Write a figure under a temporary name, then rename it; the figure is closed.  ``tight``: lay it out
+    with tight_layout first (figures with colour bars spanning several axes lay themselves out)."""
     import matplotlib.pyplot as plt
 
     path = Path(path)
-    fig.tight_layout()
+    if tight:
+        fig.tight_layout()
     try:
         with atomic_path(path, path.stem + ".tmp.png") as tmp:
             fig.savefig(tmp, dpi=120)
     finally:
         plt.close(fig)
+
+
+def put(h5, path: str, data, units: str, columns: list[str] | None = None, **attrs):
+    """Dataset ``path`` of an open HDF5 file with its ``units`` ("1": a count or a ratio) and, for a table,
+    the name of each column (``columns``); every dataset of results.h5 is written through here."""
+    d = h5.create_dataset(path, data=data)
+    d.attrs["units"] = units
+    if columns is not None:
+        d.attrs["columns"] = list(columns)
+    for k, v in attrs.items():
+        d.attrs[k] = v
+    return d
+
+
+def h5_bytes(fill, **attrs) -> bytes:
+    """An HDF5 file made in memory by ``fill(h5)`` (file attributes ``attrs``), as bytes.
+
+    Written by Python afterwards, a full disk is a plain OSError before the rename (HDF5 writing to a
+    full disk itself reports it only at close, or not at all)."""
+    import io
+
+    import h5py
+
+    from opalflow.version import __version__
+
+    buffer = io.BytesIO()
+    with h5py.File(buffer, "w") as h:
+        h.attrs["opalflow_version"] = __version__
+        for k, v in attrs.items():
+            h.attrs[k] = v
+        fill(h)
+    return buffer.getvalue()

@@ -83,6 +83,58 @@ class Structure:
         d = self.minimum_image(self.positions[j] - self.positions[i])
         return np.sqrt(np.einsum("ij,ij->i", d, d))
 
+    def image_flags(self) -> np.ndarray:
+        """LAMMPS image flags (N, 3) that make every bond short when positions are unwrapped, where any can.
+
+        Each bonded cluster is unwrapped along a spanning tree (breadth first from its first particle):
+        a particle's image is its tree parent's plus the box crossings of the bond between them,
+        summed from the root by pointer jumping (log2(depth) vectorised passes).  A cluster whose
+        bonds close a loop around the periodic box along x or y (an infinite network, the usual
+        opal and aerogel sample) cannot be made whole that way: some bond on that loop stays a box
+        length long whatever the flags (LAMMPS manual, Errors_warnings "Inconsistent image flags":
+        "the bond image flags *must* be inconsistent for the one bond that reaches back").  For such
+        a cluster the flags along that direction stay 0, which puts the unavoidable long bonds on
+        the box faces, the fewest a plane can cut (:meth:`wrapping_bonds` counts them).
+        """
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import breadth_first_order, connected_components
+
+        n = self.n_particles
+        flags = np.zeros((n, 3), np.int64)
+        if not self.n_bonds or not self.periodic.any():
+            return flags
+        i, j = self.bonds.T
+        graph = coo_matrix((np.ones(self.n_bonds), (i, j)), shape=(n, n)).tocsr()
+        n_comp, comp = connected_components(graph, directed=False)
+        parent = np.arange(n)
+        for root in np.unique(comp, return_index=True)[1]:
+            order, pred = breadth_first_order(graph, root, directed=False)
+            parent[order[1:]] = pred[order[1:]]
+        L = self.box_lengths
+        shift = np.zeros((n, 3), np.int64)
+        for k in np.flatnonzero(self.periodic):    # crossings of the bond child -> parent
+            shift[:, k] = np.round((self.positions[parent, k] - self.positions[:, k]) / L[k]).astype(np.int64)
+        up = parent.copy()
+        while np.any(up != up[up]):                # pointer jumping: shift sums the path to the root
+            shift += shift[up]
+            up = up[up]
+        for k in np.flatnonzero(self.periodic):
+            d = self.positions[j, k] + shift[j, k] * L[k] - self.positions[i, k] - shift[i, k] * L[k]
+            wraps = np.zeros(n_comp, bool)
+            wraps[comp[i[np.abs(d) > L[k] / 2]]] = True
+            flags[:, k] = np.where(wraps[comp], 0, shift[:, k])
+        return flags
+
+    def wrapping_bonds(self, flags: np.ndarray | None = None) -> np.ndarray:
+        """Per direction, how many bonds are longer than half the box when unwrapped with ``flags``
+        (default :meth:`image_flags`): the bonds LAMMPS calls inconsistent."""
+        flags = self.image_flags() if flags is None else flags
+        i, j = self.bonds.T
+        unwrapped = self.positions + flags * self.box_lengths
+        d = np.abs(unwrapped[j] - unwrapped[i])
+        return np.array([int(np.sum(d[:, k] > self.box_lengths[k] / 2)) if self.periodic[k] else 0
+                         for k in range(3)])
+
     def particle_volumes(self) -> np.ndarray:
         """Sphere volumes pi d^3 / 6 in nm^3."""
         return np.pi / 6.0 * self.diameters**3

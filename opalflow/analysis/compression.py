@@ -1,7 +1,7 @@
 """Compression output -> stress-strain curve, Young's modulus, strength, particle stresses.
 
 Readers for the files the deck writes (``curve.txt`` from fix ave/time, the
-``snapshots/stress.*.txt`` custom dumps and ``snapshots/bonds.*.txt`` local dumps)
+``snapshots/particles.*.dump`` custom dumps and ``snapshots/bonds.*.txt`` local dumps)
 and the mechanics computed from them.
 """
 from __future__ import annotations
@@ -14,6 +14,11 @@ import numpy as np
 
 from opalflow.store import write_text_atomic
 
+#: order of the six stress components (LAMMPS compute stress/atom)
+STRESS_COLUMNS = ["xx", "yy", "zz", "xy", "xz", "yz"]
+#: units of the curve.txt columns (results.h5 writes them beside each dataset)
+CURVE_UNITS = {"step": "1", "plate_dz_nm": "nm", "plate_fz_pN": "pN", "substrate_fz_pN": "pN", "intact_bonds": "1",
+               "ke_zJ": "zJ", "top_z_nm": "nm"}
 CURVE_COLUMNS = ["step", "plate_dz_nm", "plate_fz_pN", "substrate_fz_pN", "intact_bonds", "ke_zJ", "top_z_nm"]
 
 
@@ -99,10 +104,11 @@ def read_dump_local(path: Path) -> np.ndarray:
     return np.array(data.split(), dtype=float).reshape(-1, len(names.split()))
 
 
-def snapshot_files(folder: Path, kind: str) -> dict[int, Path]:
+def snapshot_files(folder: Path, kind: str, suffix: str = "txt") -> dict[int, Path]:
+    """The snapshots ``snapshots/KIND.STEP.SUFFIX`` of a run folder by step."""
     out = {}
-    for p in (Path(folder) / "snapshots").glob(f"{kind}.*.txt"):
-        m = re.match(rf"{kind}\.(\d+)\.txt$", p.name)
+    for p in (Path(folder) / "snapshots").glob(f"{kind}.*.{suffix}"):
+        m = re.match(rf"{kind}\.(\d+)\.{suffix}$", p.name)
         if m:
             out[int(m.group(1))] = p
     return dict(sorted(out.items()))
@@ -115,6 +121,8 @@ def particle_stress(dump: dict[str, np.ndarray]) -> np.ndarray:
     negative virial; bonds tally the full bond force along the centre-centre vector,
     contacts likewise), so sigma = stress/atom / V_p.  Columns xx yy zz xy xz yz.
     """
+    if "sigma_xx" in dump:          # the snapshots' own columns (templates/snapshots.lmp)
+        return np.column_stack([dump[f"sigma_{c}"] for c in STRESS_COLUMNS])
     vol = 4.0 / 3.0 * np.pi * dump["radius"] ** 3
     return np.column_stack([dump[f"c_stress[{k}]"] for k in range(1, 7)]) / vol[:, None]
 
@@ -149,26 +157,69 @@ def stress_table(stress_by_strain: dict[str, dict[str, dict]], digits: int = 1) 
     return lines
 
 
-def plot_stress_histograms(path: Path, sigma: np.ndarray, types: np.ndarray, type_names: list[str],
-                           strain: float) -> None:
-    """sigma_xx and sigma_zz histograms per material (substrate left out) at one strain, into ``path``."""
+def plot_stress_histograms(path: Path, snapshots: list[tuple[float, np.ndarray, np.ndarray]],
+                           type_names: list[str]) -> None:
+    """sigma_xx and sigma_zz histograms per material (substrate left out) at each snapshot (rows), with
+    each material's mean +- std (the Table 2 format of Dosta et al.) in the legend, into ``path``.
+
+    ``snapshots``: (strain, sigma (n, 6) MPa, types) per snapshot.  The range of each column is the
+    middle 99.8 % of all snapshots' stresses, so one range compares the rows."""
     from opalflow.store import new_figure, save_figure
 
-    fig, axes = new_figure(1, 2, figsize=(8, 3.4))
-    for col, ax, label in ((0, axes[0], "sigma_xx"), (2, axes[1], "sigma_zz")):
-        for t, name in enumerate(type_names):
-            sel = types == t + 1
-            if name != "substrate" and sel.any():
-                ax.hist(sigma[sel, col], bins=60, histtype="step", weights=np.full(sel.sum(), 1 / len(sel)),
-                        label=name)
-        ax.set_xlabel(f"{label} (MPa) at strain {100 * strain:.2f} %")
-        ax.set_ylabel("fraction")
-    axes[0].legend()
+    rows = len(snapshots)
+    fig, axes = new_figure(rows, 2, figsize=(8.5, 2.3 * rows + 0.6), squeeze=False, sharex="col")
+    for col, (k, label) in enumerate(((0, "sigma_xx"), (2, "sigma_zz"))):
+        every = np.concatenate([sig[:, k] for _, sig, _ in snapshots])
+        lo, hi = np.percentile(every, [0.1, 99.9]) if len(every) else (-1.0, 1.0)
+        bins = np.linspace(lo, hi if hi > lo else lo + 1.0, 61)
+        for row, (strain, sigma, types) in enumerate(snapshots):
+            ax = axes[row, col]
+            for t, name in enumerate(type_names):
+                sel = types == t + 1
+                if name == "substrate" or not sel.any():
+                    continue
+                v = sigma[sel, k]
+                ax.hist(np.clip(v, bins[0], bins[-1]), bins=bins, histtype="step", weights=np.full(sel.sum(), 1 / sel.sum()),
+                        label=f"{name}: {v.mean():.1f} +- {v.std():.1f} MPa")
+            ax.axvline(0, color="0.8", lw=0.6)
+            ax.set_ylabel(f"fraction\nstrain {100 * strain:.2f} %", fontsize=8)
+            ax.legend(fontsize=7, loc="upper right")
+        axes[-1, col].set_xlabel(f"{label} (MPa, tension +)")
     save_figure(fig, path)
 
 
-def bond_strain_histogram(local: np.ndarray, bins: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Fraction of intact bonds per strain bin (Fig. 7 format); strain = r / r0 - 1."""
-    strain = local[:, 0] / local[:, 1] - 1.0
-    counts, edges = np.histogram(np.clip(strain, bins[0], bins[-1]), bins=bins)
-    return counts / max(1, len(strain)), edges
+def bond_strains(local: np.ndarray) -> np.ndarray:
+    """Strain r / r0 - 1 of each intact bond of a ``snapshots/bonds.*.txt`` dump (columns dist, r0)."""
+    return local[:, 0] / local[:, 1] - 1.0
+
+
+def strain_bins(samples: list[np.ndarray], n: int = 80) -> np.ndarray:
+    """Bin edges for bond-strain histograms set by the data: the middle 99.8 % of all samples together
+    (values beyond fall into the end bins), so the bins resolve where the bonds are."""
+    every = np.concatenate(samples) if samples else np.zeros(0)
+    lo, hi = np.percentile(every, [0.1, 99.9]) if len(every) else (-0.01, 0.01)
+    if hi <= lo:
+        lo, hi = lo - 1e-6, hi + 1e-6
+    return np.linspace(lo, hi, n + 1)
+
+
+def histogram_fraction(values: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """Fraction of ``values`` per bin of ``edges`` (those outside counted in the end bins; Fig. 7 format)."""
+    counts, _ = np.histogram(np.clip(values, edges[0], edges[-1]), bins=edges)
+    return counts / max(1, len(values))
+
+
+def plot_bond_strains(path: Path, edges: np.ndarray, fractions: dict[str, np.ndarray]) -> None:
+    """Bond-strain histograms (Dosta et al. Fig. 7), one line per label, on a log axis so the tails that
+    break show beside the peak."""
+    from opalflow.store import new_figure, save_figure
+
+    fig, ax = new_figure(figsize=(5, 3.4))
+    mids = 0.5 * (edges[1:] + edges[:-1])
+    for label, frac in fractions.items():
+        ax.step(100 * mids, np.where(frac > 0, frac, np.nan), where="mid", label=label)
+    ax.set_yscale("log")
+    ax.set_xlabel("bond strain r/r0 - 1 (%)")
+    ax.set_ylabel("fraction of bonds")
+    ax.legend(fontsize=8)
+    save_figure(fig, path)

@@ -25,6 +25,11 @@ from opalflow.structure import Structure
 from opalflow.version import __version__
 
 DIAMOND = "diamond"
+#: the bonds of each particle at the start, for the broken-bond count of the snapshots (a run 0 makes
+#: compute nbond/atom current; the bond reference states it sets are those of the first step anyway)
+COUNT_BONDS = """variable        bonds_now atom c_bonds_per_atom
+run             0 post no
+set             group all i_bonds0 v_bonds_now"""
 #: more steps than this is a time step far too small for the scene, not a run to start
 MAX_STEPS = 10**10
 
@@ -137,8 +142,10 @@ class CompressionDeck:
             "modulus_affine_GPa": self.modulus_affine_MPa / 1e3, "omega1_per_ns": self.omega1_per_ns,
             "viscous_gamma": self.viscous_gamma, "top_z0_nm": self.top_z0_nm,
             "timestep_estimate_s": self.timestep.as_seconds(),
-            "bond_types": [{"material": m, "length_nm": L, "count": c}
-                           for m, L, c in zip(self.bins.materials, self.bins.lengths, self.bins.counts)],
+            "bond_types": [{"material": m, "length_nm": L, "count": c, "kr_pN": cf.kr, "ks_pN": cf.ks,
+                            "kt_pN_nm": cf.kt, "kb_pN_nm": cf.kb, "fr_c_pN": cf.fr_c, "fs_c_pN": cf.fs_c}
+                           for m, L, c, cf in zip(self.bins.materials, self.bins.lengths, self.bins.counts,
+                                                  self.coefficients)],
             "bond_stiffness_error_max": self.bins.stiffness_error_max,
             "bond_stiffness_error_rms": self.bins.stiffness_error_rms,
         }
@@ -250,7 +257,7 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
                         plate_contact=contact_args(contacts[1], plate_E[1], 2 * contacts[1].stiffness))
         if c.loading == "plate" else render("plate_glued", plate_speed=num(v)),
         "affine_start": render("affine_start", plate_speed=num(v), base=num(base), top=num(top)),
-        "snapshots": render("snapshots", next_snapshot=_next_snapshot(snaps)),
+        "snapshots": render("snapshots", next_snapshot=_next_snapshot(snaps), count_bonds=COUNT_BONDS),
         "run": render("run", restart_every=num(restart_every), steps=num(steps)),
     }
     wanted = ["system", "groups", "bonds"] + (["contacts"] if spec.contacts.enabled else []) + \
@@ -270,6 +277,9 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
             elif b == "system":
                 parts.append(render("system_restart", ghost_cutoff=common["ghost_cutoff"],
                                     restart_file="restart.*.bin"))
+            elif b == "snapshots":     # the bond counts at the start come back from the restart file
+                parts.append(render("snapshots", next_snapshot=_next_snapshot(snaps),
+                                    count_bonds="# i_bonds0: the bond counts at the start, from the restart file"))
             elif b not in ("groups", "affine_start"):  # groups are stored in restart files, velocities too
                 # bonds and contacts are given again: pair granular read back from a restart file
                 # blows up the first contacts of pairs whose bond broke (see templates/system_restart.lmp)

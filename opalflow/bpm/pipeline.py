@@ -11,7 +11,6 @@ temporary names and renamed, so a failed run never replaces earlier results.
 from __future__ import annotations
 
 import dataclasses
-import io
 import json
 import subprocess
 import time
@@ -20,14 +19,18 @@ from pathlib import Path
 import numpy as np
 
 from opalflow.analysis import compression as mech
-from opalflow.bpm.deck import CompressionDeck, compression_deck
+from opalflow.analysis import fracture
+from opalflow.bpm import report
+from opalflow.bpm.deck import CompressionDeck, compression_deck, particle_material
 from opalflow.bpm.scene import scene_of, solid_fraction
 from opalflow.bpm.spec import BpmWorkflow
 from opalflow.lammps.datafile import write_data
 from opalflow.lammps.engine import EngineError, lammps_info, run_in_process, run_script_sh, run_subprocess, session
+from opalflow.materials import material
 from opalflow.resources import ROOT
 from opalflow.spec import SpecError
-from opalflow.store import json_text, new_figure, save_figure, staged_files, write_json_atomic, write_text_atomic
+from opalflow.store import (h5_bytes, json_text, new_figure, put, save_figure, staged_files, write_json_atomic,
+                            write_text_atomic)
 from opalflow.structure import Structure
 from opalflow.version import __version__
 
@@ -56,6 +59,10 @@ def prepare(spec: BpmWorkflow, out: Path, progress=None) -> CompressionDeck:
     info = {"workflow": spec.name, "spec": spec.to_dict(), "opalflow_version": __version__,
             "type_names": deck.structure.type_names, "n_particles": s.n_particles, "n_bonds": s.n_bonds,
             "solid_fraction": solid_fraction(s), "build_s": build_s, "references": spec.references(),
+            "mean_diameter_nm": float(np.mean(s.diameters)), "box_nm": s.box_lengths.tolist(),
+            "periodic": s.periodic.tolist(),
+            "materials": {n: material(particle_material(n, spec.material), spec.materials)
+                          for n in dict.fromkeys(particle_material(t, spec.material) for t in s.type_names)},
             **deck.info()}
     if scene.run_keys:
         stats = scene.statistics(deck.source)
@@ -160,25 +167,24 @@ def analyze(out: Path, wall_s: float | None = None, lammps_s: float | None = Non
     n_bonds0 = info["n_bonds"]
     broken = n_bonds0 - curve["intact_bonds"]
 
-    snapshots = {}
-    phi = info["solid_fraction"]
     # curve rows are averages over the preceding `every` steps: they belong to the middle step
     mid_step = curve["step"] - (info["output_every_steps"] - 1) / 2
-    for step, path in mech.snapshot_files(out, "stress").items():
+    snapshots = {}
+    for step, path in (mech.snapshot_files(out, "particles", "dump") or mech.snapshot_files(out, "stress")).items():
         dump = mech.read_dump_custom(path)
         sigma = mech.particle_stress(dump)
-        snap_strain = float(np.interp(step, mid_step, strain))
-        snapshots[step] = {"strain": snap_strain, "id": dump["id"].astype(np.int64),
+        types = dump["type"].astype(np.int32)
+        snapshots[step] = {"strain": float(np.interp(step, mid_step, strain)), "id": dump["id"].astype(np.int64),
                            "position_nm": np.column_stack([dump["x"], dump["y"], dump["z"]]),
-                           "type": dump["type"].astype(np.int32), "sigma_MPa": sigma,
-                           "by_material": mech.stress_by_material(sigma, dump["type"].astype(int),
-                                                                  info["type_names"])}
-    histograms = {}
-    bins = np.linspace(-0.02, 0.02, 81)
-    for step, path in mech.snapshot_files(out, "bonds").items():
-        frac, edges = mech.bond_strain_histogram(mech.read_dump_local(path), bins)
-        histograms[step] = {"strain": float(np.interp(step, mid_step, strain)),
-                            "fraction": frac, "edges": edges}
+                           "radius_nm": dump["radius"], "type": types, "sigma_MPa": sigma,
+                           "broken_bonds": dump.get("broken_bonds", np.zeros(len(types))).astype(np.int32),
+                           "by_material": mech.stress_by_material(sigma, types, info["type_names"])}
+    bond_strains = {step: mech.bond_strains(mech.read_dump_local(path))
+                    for step, path in mech.snapshot_files(out, "bonds").items()}
+    edges = mech.strain_bins(list(bond_strains.values()))
+    histograms = {step: {"strain": float(np.interp(step, mid_step, strain)),
+                         "fraction": mech.histogram_fraction(e, edges), "edges": edges}
+                  for step, e in bond_strains.items()}
 
     E_GPa = fit.modulus_MPa / 1e3
     summary = {
@@ -194,7 +200,7 @@ def analyze(out: Path, wall_s: float | None = None, lammps_s: float | None = Non
         "wall_s": wall_s, "lammps_s": lammps_s,
         "broken_bonds": int(broken[-1]), "n_particles": info["n_particles"], "n_bonds": n_bonds0,
         "stress_by_material": {f"{v['strain']:.4f}": v["by_material"] for v in snapshots.values()},
-        "solid_fraction": phi,
+        "solid_fraction": info["solid_fraction"],
         "bond_stiffness_error_max": info["bond_stiffness_error_max"],
         "timestep_estimate_s": info["timestep_estimate_s"],
         **info.get("structure", {}),
@@ -209,53 +215,53 @@ def analyze(out: Path, wall_s: float | None = None, lammps_s: float | None = Non
     if not summary["complete"]:
         summary["headline"] = (f"INCOMPLETE run (stopped at step {summary['steps']} of {info['steps']}): "
                                + summary["headline"])
+    frames = fracture.frames_at_peak_and_after(list(snapshots.values()), summary["strain_at_peak"])
 
     # all results or none (a full disk leaves the earlier set whole); summary.json, the mark of a
     # finished run, is renamed last
     with staged_files(out) as stage:
-        _write_h5(stage("results.h5"), info, curve, strain, stress, stress_plate, stress_substrate, broken,
-                  snapshots, histograms, summary)
+        stage("results.h5").write_bytes(h5_bytes(lambda h: _fill_h5(
+            h, info, curve, strain, stress, stress_plate, stress_substrate, broken, snapshots, histograms, summary)))
         _plots(stage, strain, stress, stress_plate, stress_substrate, fit, snapshots, histograms,
                info["type_names"])
-        stage("report.md").write_text(_report(info, summary, fit))
+        if frames:
+            fracture.plot_fracture(stage("fracture.png"), frames, info["box_nm"], info["mean_diameter_nm"],
+                                   title=f"{info['workflow']} ({'open' if not info['periodic'][0] else 'periodic'} "
+                                         "sides)")
+        stage("report.md").write_text(report.compression_report(info, summary, fit, bool(frames)))
         stage("summary.json").write_text(json_text(summary))
     return summary
 
 
-def _write_h5(path, info, curve, strain, stress, stress_plate, stress_substrate, broken, snapshots,
-              histograms, summary):
-    import h5py
-
-    # the file is made in memory and written by Python: a full disk is then a plain OSError before the
-    # rename (HDF5 writing to a full disk itself reports it only at close, or not at all)
-    buffer = io.BytesIO()
-    with h5py.File(buffer, "w") as h:
-        _fill_h5(h, info, curve, strain, stress, stress_plate, stress_substrate, broken, snapshots, histograms,
-                 summary)
-    path.write_bytes(buffer.getvalue())
-
-
 def _fill_h5(h, info, curve, strain, stress, stress_plate, stress_substrate, broken, snapshots, histograms,
              summary):
-    c = h.create_group("curve")
     for k, v in curve.items():
-        c[k] = v
-    c["strain"], c["stress_MPa"], c["stress_substrate_MPa"], c["broken_bonds"] = \
-        strain, stress, stress_substrate, broken
-    c["stress_plate_MPa"] = stress_plate
-    c["strain_specimen"] = (info["top_z0_nm"] - curve["top_z_nm"]) / info["height_nm"]
+        put(h, f"curve/{k}", v, mech.CURVE_UNITS[k])
+    for k, v, unit in (("strain", strain, "1"), ("stress_MPa", stress, "MPa"),
+                       ("stress_plate_MPa", stress_plate, "MPa"), ("stress_substrate_MPa", stress_substrate, "MPa"),
+                       ("broken_bonds", broken, "1"),
+                       ("strain_specimen", (info["top_z0_nm"] - curve["top_z_nm"]) / info["height_nm"], "1")):
+        put(h, f"curve/{k}", v, unit)
+    h["curve"].attrs["description"] = ("averages over each output interval of the plate's displacement and force, "
+                                       "the substrate's force, intact bonds, kinetic energy and the top layer's "
+                                       "height; stress_MPa = mean of plate and substrate stress (compression +)")
     for step, snap in snapshots.items():
         g = h.create_group(f"snapshots/{step}")
         g.attrs["strain"] = snap["strain"]
-        g["id"], g["type"], g["sigma_MPa"] = snap["id"], snap["type"], snap["sigma_MPa"]
-        g["position_nm"] = snap["position_nm"]
+        put(g, "id", snap["id"], "1")
+        put(g, "type", snap["type"], "1", type_names=info["type_names"])
+        put(g, "position_nm", snap["position_nm"], "nm", ["x", "y", "z"])
+        put(g, "radius_nm", snap["radius_nm"], "nm")
+        put(g, "sigma_MPa", snap["sigma_MPa"], "MPa", mech.STRESS_COLUMNS,
+            description="Cauchy stress per particle, eq. 21 with V_p = 4/3 pi r^3, tension positive")
+        put(g, "broken_bonds", snap["broken_bonds"], "1", description="bonds of the particle that broke so far")
     for step, hist in histograms.items():
         g = h.create_group(f"bond_strain_histograms/{step}")
         g.attrs["strain"] = hist["strain"]
-        g["fraction"], g["edges"] = hist["fraction"], hist["edges"]
+        put(g, "fraction", hist["fraction"], "1", description="fraction of intact bonds per bin")
+        put(g, "edges", hist["edges"], "1", description="bin edges of the bond strain r / r0 - 1")
     p = h.create_group("provenance")
     p.attrs["spec"] = json.dumps(info["spec"])
-    p.attrs["opalflow_version"] = __version__
     p.attrs["lammps_version"] = lammps_info()["version"]
     p.attrs["git_commit"] = git_commit()
     p.attrs["seeds"] = json.dumps({name: section["seed"] for name, section in info["spec"].items()
@@ -271,57 +277,18 @@ def _plots(stage, strain, stress, stress_plate, stress_substrate, fit, snapshots
     ax.plot(100 * strain, stress, lw=1.4, label="sample (mean)")
     xs = np.array(fit.window)
     ax.plot(100 * xs, fit.modulus_MPa * xs + fit.intercept_MPa, "--", label=f"E = {fit.modulus_MPa / 1e3:.3g} GPa")
+    for snap in snapshots.values():
+        ax.axvline(100 * snap["strain"], color="0.85", lw=0.8, zorder=0)
     ax.set_xlabel("strain (%)")
     ax.set_ylabel("stress (MPa)")
     ax.legend()
     save_figure(fig, stage("stress_strain.png"))
     if snapshots:
-        snap = list(snapshots.values())[-1]
-        mech.plot_stress_histograms(stage("stress_hist.png"), snap["sigma_MPa"], snap["type"], type_names,
-                                    snap["strain"])
+        mech.plot_stress_histograms(stage("stress_hist.png"), [(s["strain"], s["sigma_MPa"], s["type"])
+                                                               for s in snapshots.values()], type_names)
     if histograms:
-        fig, ax = new_figure(figsize=(5, 3.4))
-        for hist in histograms.values():
-            mids = 0.5 * (hist["edges"][1:] + hist["edges"][:-1])
-            ax.step(100 * mids, hist["fraction"], where="mid", label=f"strain {100 * hist['strain']:.2f} %")
-        ax.set_xlabel("bond strain (%)")
-        ax.set_ylabel("fraction of bonds")
-        ax.legend()
-        save_figure(fig, stage("bond_strain.png"))
-
-
-def _report(info, summary, fit) -> str:
-    lines = [f"# {info['workflow']}: uniaxial compression", "",
-             *([f"**Incomplete run**: the output stops at step {summary['steps']} of {info['steps']} "
-                f"(strain {summary['steps'] / info['steps'] * info['spec']['compression']['strain_max']:.4f} of "
-                f"{info['spec']['compression']['strain_max']:g}); the figures below cover only that part. "
-                "`python -m opalflow run --out DIR --resume` continues it from its newest restart file.", ""]
-               if not summary["complete"] else []),
-             f"{info['n_particles']} particles, {info['n_bonds']} bonds; time step {summary['timestep_s']:.3g} s "
-             f"({summary['steps']} steps); plate {info['plate_speed_m_s']:g} m/s; "
-             + (f"wall {summary['wall_s']:.1f} s (LAMMPS {summary['lammps_s']:.1f} s)."
-                if summary["wall_s"] is not None else "run outside opalflow (analyze only)."), "",
-             "| quantity | value | reference | error |", "|---|---|---|---|"]
-    for key, label, fmt in (("youngs_modulus_GPa", "Young's modulus (GPa)", "{:.4g}"),
-                            ("youngs_modulus_specimen_GPa", "Young's modulus, top-layer strain (GPa)", "{:.4g}"),
-                            ("strength_MPa", "compressive strength (MPa)", "{:.4g}"),
-                            ("strain_at_peak", "strain at peak", "{:.4f}"),
-                            ("broken_bonds", "broken bonds at the end", "{}")):
-        ref = summary["reference"].get(key)
-        ref_txt = f"{ref['value']:g} ({ref['source']})" if ref else "-"
-        err_txt = f"{100 * ref['error']:+.1f} %" if ref else "-"
-        lines.append(f"| {label} | {fmt.format(summary[key])} | {ref_txt} | {err_txt} |")
-    lines += ["", f"Elastic window: strain {fit.window[0]:.4f} - {fit.window[1]:.4f}, R^2 = {fit.r2:.5f} "
-              f"({fit.points} points).",
-              f"Bond stiffness error from {info['spec']['bonds']['length_bins']} length bins: "
-              f"max {100 * summary['bond_stiffness_error_max']:.2f} %.", ""]
-    lines += mech.stress_table(summary["stress_by_material"])
-    if "rate_check" in summary:
-        rc = summary["rate_check"]
-        lines += ["", f"Rate check (half plate speed): E changes by {100 * rc['youngs_modulus_change']:+.2f} %, "
-                  f"strength by {100 * rc['strength_change']:+.2f} % (limits 2 % and 5 %)."]
-    lines += ["", "Plots: stress_strain.png, stress_hist.png, bond_strain.png. Data: results.h5, summary.json."]
-    return "\n".join(lines) + "\n"
+        mech.plot_bond_strains(stage("bond_strain.png"), next(iter(histograms.values()))["edges"],
+                               {f"strain {100 * h['strain']:.2f} %": h["fraction"] for h in histograms.values()})
 
 
 def analyze_folder(out: Path) -> dict:

@@ -152,21 +152,11 @@ def _plots(stage, data, res: StaticResult, snapshots, strain_unit, strains) -> N
     ax.set_title("displacement per unit strain (static)")
     save_figure(fig, stage("displacement.png"))
     if snapshots:
-        e, snap = list(snapshots.items())[0]
-        mech.plot_stress_histograms(stage("stress_hist.png"), snap["sigma_MPa"], data.types, data.type_names, e)
-        fig, ax = new_figure(figsize=(5, 3.4))
-        # the range from the data: the middle 99.8 % of the bonds at the largest strain (outliers clipped
-        # into the end bins), a log axis so that the tails show beside the peak
-        lo, hi = np.percentile(100 * strain_unit * max(strains), [0.1, 99.9])
-        for e in strains:
-            values = np.clip(100 * strain_unit * e, lo, hi)
-            ax.hist(values, bins=np.linspace(lo, hi, 81), histtype="step",
-                    weights=np.full(len(values), 1 / len(values)), label=f"strain {100 * e:.2f} %")
-        ax.set_yscale("log")
-        ax.set_xlabel("bond strain (%)")
-        ax.set_ylabel("fraction of bonds")
-        ax.legend()
-        save_figure(fig, stage("bond_strain.png"))
+        mech.plot_stress_histograms(stage("stress_hist.png"), [(e, snap["sigma_MPa"], data.types)
+                                                               for e, snap in snapshots.items()], data.type_names)
+        edges = mech.strain_bins([strain_unit * max(strains)])
+        mech.plot_bond_strains(stage("bond_strain.png"), edges, {
+            f"strain {100 * e:.2f} %": mech.histogram_fraction(strain_unit * e, edges) for e in strains})
 
 
 def _report(spec: BpmWorkflow, info: dict, summary: dict, res: StaticResult) -> str:

@@ -1,8 +1,10 @@
 """LAMMPS data files for ``atom_style bpm/sphere``: writer and reader.
 
-Atoms lines are ``id molecule type diameter density x y z`` (LAMMPS ``read_data``,
+Atoms lines are ``id molecule type diameter density x y z ix iy iz`` (LAMMPS ``read_data``,
 atom style bpm/sphere; nm and attogram/nm^3 in ``units nano``, as the Structure
-holds them), Bonds lines ``id type atom1 atom2``.
+holds them; image flags from :meth:`Structure.image_flags`, so bonds are short when
+unwrapped wherever a network does not wrap around the periodic box), Bonds lines
+``id type atom1 atom2``.
 
 Writing tens of millions of lines with ``%``-formatting costs minutes in Python; here
 each column becomes fixed-width ASCII digits by integer arithmetic on numpy arrays
@@ -61,10 +63,10 @@ def _fixed(values: np.ndarray, decimals: int) -> np.ndarray:
     return np.hstack([ints, dot, fr])
 
 
-def _lookup(values: np.ndarray) -> np.ndarray:
-    """Few distinct reals (diameters, densities) as right-aligned repr text, (n, width) uint8."""
+def _lookup(values: np.ndarray, text=lambda u: repr(float(u))) -> np.ndarray:
+    """Few distinct values (diameters, densities, image flags) as right-aligned text, (n, width) uint8."""
     uniq, inv = np.unique(values, return_inverse=True)
-    texts = [repr(float(u)) for u in uniq]
+    texts = [text(u) for u in uniq]
     w = max(len(t) for t in texts)
     table = np.array([list(t.rjust(w).encode()) for t in texts], dtype=np.uint8)
     return table[inv]
@@ -96,6 +98,11 @@ def write_data(path: str | os.PathLike, s: Structure, title: str = "opalflow") -
     names = " ".join(f"{t + 1}={nm}" for t, nm in enumerate(s.type_names))
     if names:
         head.insert(1, f"# atom types: {names}")
+    flags = s.image_flags()
+    if m and s.periodic.any():
+        x, y, z = s.wrapping_bonds(flags)
+        head.insert(1, f"# image flags: bonds that wrap around the periodic box (long when unwrapped, as in any "
+                       f"infinite network): x {x}, y {y}, z {z}")
     with open(tmp, "wb") as f:
         f.write("\n".join(head).encode())
         wid = _width(n)
@@ -107,6 +114,7 @@ def write_data(path: str | os.PathLike, s: Structure, title: str = "opalflow") -
                     _lookup(s.diameters[a:b]),
                     _lookup(s.densities[a:b])]
             cols += [_fixed(s.positions[a:b, k], DECIMALS) for k in range(3)]
+            cols += [_lookup(flags[a:b, k], str) for k in range(3)]
             f.write(_join(cols))
         if m:
             f.write(b"\nBonds\n\n")
@@ -131,11 +139,14 @@ class DataFileError(InputError):
         super().__init__(f"data file {path}: {what}")
 
 
-def _table(path, name: str, body: bytes, ncol: int, expected: int | None) -> np.ndarray:
-    """Whitespace-separated numbers (comments stripped) as an (n, ncol) float64 array."""
+def _table(path, name: str, body: bytes, ncols: tuple[int, ...], expected: int | None) -> np.ndarray:
+    """Whitespace-separated numbers (comments stripped) as an (n, ncol) float64 array, ncol one of ``ncols``
+    (the same on every line)."""
     if b"#" in body:
         body = re.sub(rb"#[^\n]*", b"", body)
     lines = [line for line in body.splitlines() if line.strip()]
+    if not lines:
+        return np.zeros((0, ncols[0]))
     with warnings.catch_warnings():
         warnings.simplefilter("error", DeprecationWarning)
         try:
@@ -144,10 +155,11 @@ def _table(path, name: str, body: bytes, ncol: int, expected: int | None) -> np.
             values = None
     if values is None or not np.all(np.isfinite(values)):
         raise DataFileError(path, f"the {name} section holds text that is not a finite number")
-    if values.size % ncol or len(lines) * ncol != values.size:
-        raise DataFileError(path, f"the {name} section needs {ncol} numbers on every line; it has "
-                                  f"{values.size} numbers on {len(lines)} lines"
-                                  + (" (atom style bpm/sphere: id mol type diameter density x y z)"
+    ncol = values.size // max(len(lines), 1)
+    if ncol not in ncols or len(lines) * ncol != values.size:
+        raise DataFileError(path, f"the {name} section needs {' or '.join(map(str, ncols))} numbers on every line; "
+                                  f"it has {values.size} numbers on {len(lines)} lines"
+                                  + (" (atom style bpm/sphere: id mol type diameter density x y z [ix iy iz])"
                                      if name == "Atoms" else " (id type atom1 atom2)"))
     if expected is not None and len(lines) != expected:
         raise DataFileError(path, f"the header declares {expected} {name.lower()} but the section has "
@@ -195,7 +207,7 @@ def read_data(path: str | os.PathLike, periodic=(True, True, False)) -> Structur
     if styles["Atoms"] not in ("", "bpm/sphere"):
         raise DataFileError(path, f"atom style {styles['Atoms']!r}; opalflow reads bpm/sphere "
                                   "(id mol type diameter density x y z)")
-    atoms = _table(path, "Atoms", bodies["Atoms"], 8, counts.get("atoms"))
+    atoms = _table(path, "Atoms", bodies["Atoms"], (8, 11), counts.get("atoms"))
     atoms = atoms[np.argsort(atoms[:, 0], kind="stable")]
     ids = atoms[:, 0]
     if len(ids) == 0:
@@ -209,7 +221,7 @@ def read_data(path: str | os.PathLike, periodic=(True, True, False)) -> Structur
     bonds = np.zeros((0, 2), np.int64)
     bond_types = np.zeros(0, np.int32)
     if "Bonds" in bodies:
-        braw = _table(path, "Bonds", bodies["Bonds"], 4, counts.get("bonds"))
+        braw = _table(path, "Bonds", bodies["Bonds"], (4,), counts.get("bonds"))
         if np.any(braw != np.round(braw)) or np.any(braw[:, 1] < 1):
             raise DataFileError(path, "bond lines must be integers 'id type atom1 atom2' with type >= 1")
         braw = braw.astype(np.int64)

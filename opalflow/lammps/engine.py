@@ -119,6 +119,15 @@ class EngineError(RuntimeError):
     """LAMMPS stopped with an error; the message carries the log tail and the run folder."""
 
 
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C during a LAMMPS run: ``step`` is the step reached, ``folder`` the run folder, which keeps its
+    restart files (the newest one is where ``--resume`` goes on from)."""
+
+    def __init__(self, folder: Path, step: int | None):
+        super().__init__(f"interrupted at step {step} in {folder}")
+        self.folder, self.step = Path(folder), step
+
+
 def log_tail(log: Path, lines: int = 20) -> str:
     if not log.exists():
         return "(no log written)"
@@ -201,7 +210,10 @@ def run_in_process(folder: Path, script: str, *, every: int, strain_per_step: fl
                 first = True
                 while step < target:
                     nxt = min(target, (step // chunk + 1) * chunk)
-                    lmp.command(f"run {nxt} upto pre {'yes' if first else 'no'} post no")
+                    try:       # LAMMPS holds Ctrl-C until the chunk ends (at most 1/50 of the run)
+                        lmp.command(f"run {nxt} upto pre {'yes' if first else 'no'} post no")
+                    except KeyboardInterrupt:
+                        raise Interrupted(folder, int(lmp.get_thermo("step"))) from None
                     first = False
                     step = int(lmp.get_thermo("step"))
                     progress.update(step, step * strain_per_step)
@@ -271,15 +283,22 @@ def run_subprocess(folder: Path, *, np: int, total_steps: int, resume: bool, lab
     t = time.perf_counter()
     cmd = ["bash", str(Path(folder) / "run.sh")] + (["resume"] if resume else [])
     progress = Progress(total_steps, 0, label)
+    step = None
     with subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env) as p:
-        for line in p.stdout:
-            words = line.split()
-            if len(words) == 7 and words[0].isdigit():
-                try:
-                    progress.update(int(words[0]), float(words[2]))
-                except ValueError:
-                    pass
-        code = p.wait()
+        try:
+            for line in p.stdout:
+                words = line.split()
+                if len(words) == 7 and words[0].isdigit():
+                    try:
+                        step = int(words[0])
+                        progress.update(step, float(words[2]))
+                    except ValueError:
+                        pass
+            code = p.wait()
+        except KeyboardInterrupt:      # the terminal's Ctrl-C reached mpiexec too; make sure it ends
+            p.terminate()
+            p.wait()
+            raise Interrupted(folder, step) from None
     if code:
         raise EngineError(f"LAMMPS failed in {folder} (exit {code})\n--- log tail ---\n"
                           f"{log_tail(Path(folder) / 'log.lammps')}")

@@ -5,7 +5,7 @@ from dataclasses import dataclass, field
 
 from opalflow.spec import WorkflowSpec, check, check_name
 
-STUDIES = ("calibration", "bulk", "coating", "porosity", "convergence", "aerogel_models", "aerogel_density")
+STUDIES = ("calibration", "bulk", "coating", "porosity", "convergence", "sides", "aerogel_models", "aerogel_density")
 
 
 @dataclass

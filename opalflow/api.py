@@ -1,0 +1,162 @@
+"""The Python API: one function per CLI verb (the CLI parses its arguments and calls these).
+
+>>> import opalflow
+>>> summary = opalflow.run("lattice_sc", "runs/sc", set={"compression.strain_max": 0.002})
+>>> summary["youngs_modulus_GPa"]
+>>> res = opalflow.load_results("runs/sc")
+>>> res["curve/stress_MPa"], res.units("curve/stress_MPa")
+
+A workflow is a file path, the name of a file in ``workflows/`` (``opalflow.workflows()`` lists them), a
+workflow table as a dict (the TOML's content), or a spec already made.  ``set`` overrides fields: a dict
+``{"section.key": value}`` (Python values) or a list of ``"section.key=value"`` strings (TOML values, as
+``--set``).  Bad input raises :class:`opalflow.spec.InputError` (one line: field, value, what is allowed)
+before anything is written; a failed LAMMPS run raises :class:`opalflow.lammps.engine.EngineError` with
+its log tail and keeps the folder; Ctrl-C raises :class:`opalflow.lammps.engine.Interrupted` (a
+KeyboardInterrupt with the step reached) and leaves the folder resumable.
+"""
+from __future__ import annotations
+
+import copy
+import json
+import sys
+import tomllib
+from pathlib import Path
+from typing import Any, Callable
+
+from opalflow import registry
+from opalflow.resources import WORKFLOWS
+from opalflow.spec import SpecError, WorkflowSpec, apply_overrides, read_toml, set_value
+
+Settings = dict[str, Any] | list[str] | None
+
+
+def _stderr(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def _say(quiet: bool) -> Callable[[str], None]:
+    return (lambda msg: None) if quiet else _stderr
+
+
+def workflow_path(name: str | Path) -> Path:
+    """A workflow file: a path, or the name of a file in workflows/ (with or without .toml)."""
+    p = Path(name)
+    if p.exists():
+        return p
+    for cand in (WORKFLOWS / str(name), WORKFLOWS / f"{name}.toml"):
+        if cand.exists():
+            return cand
+    raise SpecError("workflow", str(name), f"no such file, nor a workflow in {WORKFLOWS} "
+                    "(opalflow.workflows() or python -m opalflow list shows them)")
+
+
+def load_workflow(workflow: str | Path | dict | WorkflowSpec, set: Settings = None) -> WorkflowSpec:
+    """The validated spec of ``workflow`` with the ``set`` overrides applied."""
+    if isinstance(workflow, WorkflowSpec):
+        raw = workflow.to_dict()
+    elif isinstance(workflow, dict):
+        raw = copy.deepcopy(workflow)
+    else:
+        raw = read_toml(workflow_path(workflow))
+    if isinstance(set, dict):
+        for path, value in set.items():
+            set_value(raw, str(path), value)
+    elif set:
+        apply_overrides(raw, list(set))
+    return registry.spec_from_dict(raw)
+
+
+def _folder(out: str | Path, field: str = "out") -> Path:
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise SpecError(field, str(out), "exists and is not a folder")
+    return out
+
+
+def run_json(out: str | Path, field: str = "folder") -> dict:
+    """The run.json of a prepared run folder (what it runs: its spec, deck numbers)."""
+    path = Path(out) / "run.json"
+    if not path.exists():
+        raise SpecError(field, str(out), "no run.json: this folder holds no prepared run")
+    try:
+        info = json.loads(path.read_text())
+        info["spec"]["kind"]
+    except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError) as exc:
+        raise SpecError(field, str(out), f"run.json is damaged ({type(exc).__name__}: {exc}); build the "
+                        "folder again") from None
+    return info
+
+
+def run(workflow: str | Path | dict | WorkflowSpec | None, out: str | Path, *, set: Settings = None, np: int = 1,
+        resume: bool = False, suffix: str | None = None, quiet: bool = False) -> dict:
+    """Build, run and analyze ``workflow`` into the folder ``out``; returns its summary (summary.json).
+
+    ``np``: MPI processes (runs ``lmp`` under mpiexec); ``resume``: continue the run in ``out`` from its
+    newest restart file (``workflow`` None: the spec comes from ``out/run.json``); ``suffix``: accelerator
+    styles ('omp', 'kk', 'gpu') where the LAMMPS build has them; ``quiet``: no progress lines on stderr.
+    """
+    out = _folder(out)
+    if resume and workflow is None:
+        spec = registry.spec_from_dict(run_json(out, "--resume")["spec"])
+    elif workflow is None:
+        raise SpecError("workflow", None, "give a workflow file or name (or resume with an out folder)")
+    else:
+        spec = load_workflow(workflow, set)
+    if isinstance(np, bool) or not isinstance(np, int) or np < 1:
+        raise SpecError("--np", np, "must be an integer >= 1")
+    if suffix:
+        from opalflow.lammps.engine import lammps_info
+
+        usable = lammps_info()["accelerators"]
+        if suffix not in usable:
+            raise SpecError("--suffix", suffix, f"this LAMMPS build offers {', '.join(usable) or 'none'}")
+    return registry.get(spec.kind).run_workflow(spec, out, np_=np, resume=resume, say=_say(quiet), suffix=suffix)
+
+
+def build(workflow: str | Path | dict | WorkflowSpec, out: str | Path, *, set: Settings = None,
+          quiet: bool = False) -> dict:
+    """Everything a run writes before it runs (structure, data.lmp, in.lmp, run.sh, summary.json); no run."""
+    spec = load_workflow(workflow, set)
+    return registry.get(spec.kind).build_workflow(spec, _folder(out), say=_say(quiet))
+
+
+def check(workflow: str | Path | dict | WorkflowSpec, out: str | Path, *, set: Settings = None, steps: int = 3000,
+          timestep_factor: float = 1.0, strain: float | None = None, bisect: bool = False,
+          quiet: bool = False) -> dict:
+    """A short run of the scene's real deck judged for numerical stability (``summary["passed"]``)."""
+    if steps < 100:
+        raise SpecError("--steps", steps, "must be >= 100")
+    if not 0 < timestep_factor <= 100:
+        raise SpecError("--timestep-factor", timestep_factor, "must be in (0, 100]")
+    if strain is not None and not 0 < strain <= 0.9:
+        raise SpecError("--strain", strain, "must be in (0, 0.9] (compress the sample this far)")
+    spec = load_workflow(workflow, set)
+    return registry.get(spec.kind).check_workflow(spec, _folder(out), say=_say(quiet), steps=steps,
+                                                  timestep_factor=timestep_factor, bisect=bisect, strain=strain)
+
+
+def analyze(folder: str | Path) -> dict:
+    """The results of a run folder whose deck ran outside opalflow (``bash run.sh``): writes and returns them."""
+    folder = Path(folder)
+    kind = run_json(folder)["spec"].get("kind", registry.DEFAULT_KIND)
+    return registry.get(kind).analyze_folder(folder)
+
+
+def workflows() -> dict[str, dict]:
+    """The workflows in workflows/: {name: {"kind": ..., "description": ..., "path": ...}}."""
+    out = {}
+    for path in sorted(WORKFLOWS.glob("*.toml")):
+        raw = tomllib.loads(path.read_text())
+        out[path.stem] = {"kind": raw.get("kind", registry.DEFAULT_KIND), "description": raw.get("description", ""),
+                          "path": str(path)}
+    return out
+
+
+def info() -> dict:
+    """opalflow's version, the LAMMPS library's version, packages and accelerators, the executables found
+    (lmp, mpiexec, liggghts) and the workflow kinds."""
+    from opalflow.lammps.engine import lammps_info
+    from opalflow.version import __version__
+
+    return {"opalflow_version": __version__, **lammps_info(),
+            "kinds": {k.name: k.summary for k in registry.kinds().values()}}

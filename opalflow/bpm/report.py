@@ -1,0 +1,144 @@
+"""report.md of a compression run: what went in, what came out against its reference and why, what it cost.
+
+A reader should not need the code: the inputs (scene, materials, bond coefficients, contacts, loading, time
+step), each result with its reference and error, a reason where the error is large and known (with the
+figures of the convergence study, ``data/reference/resolution.toml``), the particle stresses in the
+format of Dosta et al. Table 2, the files written and the run's cost.
+"""
+from __future__ import annotations
+
+import tomllib
+
+from opalflow.analysis import compression as mech
+from opalflow.resources import DATA
+
+#: an error beyond this (relative) gets its reason said where one is known
+LARGE_ERROR = 0.10
+
+SECTIONS = ("## Inputs", "## Results", "## Particle stresses", "## Files", "## Cost")
+
+
+def _resolution() -> dict:
+    return tomllib.loads((DATA / "reference" / "resolution.toml").read_text())
+
+
+def _series(table: dict, unit: str) -> str:
+    return ", ".join(f"{v:g} {unit} (d = {d} nm)" for d, v in sorted(table.items(), key=lambda kv: -float(kv[0])))
+
+
+def why(key: str, error: float, diameter_nm: float) -> str:
+    """One line on why a result misses its reference by ``error``, where the reason is known; "" if not."""
+    if abs(error) <= LARGE_ERROR:
+        return ""
+    res = _resolution()
+    paper_d = res["paper"]["particle_diameter_nm"]
+    if diameter_nm > 1.5 * paper_d and key in ("youngs_modulus_GPa", "youngs_modulus_specimen_GPa", "strength_MPa"):
+        head = (f"resolution: d = {diameter_nm:.3g} nm is {diameter_nm / paper_d:.1f} x the paper's {paper_d:g} nm, "
+                "so the struts between the pores are one or two particles thick and carry far less")
+        if key == "strength_MPa":
+            return (f"{head}; the convergence study's strength: {_series(res['dynamic_strength_MPa'], 'MPa')} "
+                    "(data/reference/resolution.toml)")
+        return (f"{head}; E of the convergence study: {_series(res['dynamic_youngs_modulus_GPa'], 'GPa')}; static "
+                f"solve: {_series(res['static_youngs_modulus_GPa'], 'GPa')}, the last the paper's sample "
+                "(data/reference/resolution.toml)")
+    if key == "youngs_modulus_GPa":
+        return ("the plate-strain modulus holds the Hertz settling of the plate on the rough top and the loading "
+                "rate (README, Static solver)")
+    return ""
+
+
+def _inputs(info: dict, summary: dict) -> list[str]:
+    spec = info["spec"]
+    c = spec["compression"]
+    box = info["box_nm"]
+    sides = "periodic" if info["periodic"][0] else "open"
+    structure = info.get("structure", {})
+    rows = [("scene", f"{spec['kind']}: {spec.get('description') or spec['name']}"),
+            ("sample", f"{box[0]:.0f} x {box[1]:.0f} nm (x, y; sides {sides}), {info['height_nm']:.0f} nm high above "
+                       f"the fixed substrate"),
+            ("particles", f"{info['n_particles']}, mean diameter d = {info['mean_diameter_nm']:.3g} nm"),
+            ("bonds", f"{info['n_bonds']} ({info['n_bonds'] / max(1, info['n_particles']):.1f} per particle, the paper's "
+                      f"measure; coordination {2 * info['n_bonds'] / max(1, info['n_particles']):.1f}), "
+                      f"cutoff {spec['bonds']['cutoff_factor']:g} d, model {spec['bonds']['model']}, "
+                      f"{'breakable' if spec['bonds']['breakable'] else 'unbreakable'}"),
+            ("solid fraction", f"{info['solid_fraction']:.4f} of the sample volume")]
+    if "porosity" in structure:
+        rows.append(("porosity", f"{structure['porosity']:.4f} (macro-pores; with the packing's voids "
+                                 f"{structure['total_porosity']:.4f})"))
+    if "density_kg_m3" in structure:
+        rows.append(("density", f"{structure['density_kg_m3']:.0f} kg/m^3"))
+    for name, m in info["materials"].items():
+        rows.append((f"material {name}", f"bond E_b {m['bond_youngs_modulus_GPa']:g} GPa, nu "
+                     f"{m['bond_poisson_ratio']:g}, strength {m['bond_strength_MPa']:g} MPa, density "
+                     f"{m['density_kg_m3']:g} kg/m^3 ({m.get('source', 'workflow')})"))
+    types = info["bond_types"]
+    if types and "kr_pN" in types[0]:
+        rows.append(("bond coefficients", f"{len(types)} types (material x length bin, bpm/rotational normalize yes): "
+                     f"L0 {min(t['length_nm'] for t in types):.3g}-{max(t['length_nm'] for t in types):.3g} nm, "
+                     f"kr {min(t['kr_pN'] for t in types):.4g}-{max(t['kr_pN'] for t in types):.4g} pN, "
+                     f"kb {min(t['kb_pN_nm'] for t in types):.4g}-{max(t['kb_pN_nm'] for t in types):.4g} pN nm, "
+                     f"critical normal force {min(t['fr_c_pN'] for t in types):.4g}-"
+                     f"{max(t['fr_c_pN'] for t in types):.4g} pN (all in run.json)"))
+    contacts = spec["contacts"]
+    rows.append(("contacts", f"{'Hertz-Mindlin (hertz/material, mindlin)' if contacts['model'] == 'hertz' else 'linear'}"
+                 f" between unbonded particles" if contacts["enabled"] else "none (bonds only)"))
+    rows.append(("loading", f"{c['loading']} at {info['plate_speed_m_s']:g} m/s to strain {c['strain_max']:g}; "
+                 f"snapshots at {', '.join(f'{e:g}' for e in c['snapshot_strains']) or 'none'}"))
+    rows.append(("time step", f"{info['timestep_s']:.3g} s ({summary['steps']} of {info['steps']} steps; stability "
+                 f"limit {info['timestep_estimate_s']['limit']:.3g} s, stiffest: {info['timestep_estimate_s']['stiffest_mode']}); "
+                 f"global damping {c['global_damping']:g}"))
+    return ["## Inputs", "", "| input | value |", "|---|---|", *[f"| {k} | {v} |" for k, v in rows], ""]
+
+
+def compression_report(info: dict, summary: dict, fit, fracture: bool) -> str:
+    """The text of report.md (sections :data:`SECTIONS`)."""
+    spec = info["spec"]
+    lines = [f"# {info['workflow']}: uniaxial compression", ""]
+    if not summary["complete"]:
+        c = spec["compression"]
+        lines += [f"**Incomplete run**: the output stops at step {summary['steps']} of {info['steps']} "
+                  f"(strain {summary['steps'] / info['steps'] * c['strain_max']:.4f} of {c['strain_max']:g}); the "
+                  "figures below cover only that part. `python -m opalflow run --out DIR --resume` continues it "
+                  "from its newest restart file.", ""]
+    lines += _inputs(info, summary)
+    lines += ["## Results", "", "| quantity | value | reference | error | why the error |", "|---|---|---|---|---|"]
+    for key, label, fmt in (("youngs_modulus_GPa", "Young's modulus, plate strain (GPa)", "{:.4g}"),
+                            ("youngs_modulus_specimen_GPa", "Young's modulus, top-layer strain (GPa)", "{:.4g}"),
+                            ("strength_MPa", "compressive strength (MPa)", "{:.4g}"),
+                            ("strain_at_peak", "strain at peak", "{:.4f}"),
+                            ("broken_bonds", "broken bonds at the end", "{}")):
+        ref = summary["reference"].get(key)
+        ref_txt = f"{ref['value']:g} ({ref['source']})" if ref else "-"
+        err_txt = f"{100 * ref['error']:+.1f} %" if ref else "-"
+        reason = why(key, ref["error"], info["mean_diameter_nm"]) if ref else ""
+        lines.append(f"| {label} | {fmt.format(summary[key])} | {ref_txt} | {err_txt} | {reason or '-'} |")
+    lines += ["", f"Elastic window: strain {fit.window[0]:.4f} - {fit.window[1]:.4f}, R^2 = {fit.r2:.5f} "
+              f"({fit.points} points). Bond stiffness error from {spec['bonds']['length_bins']} length bins: max "
+              f"{100 * summary['bond_stiffness_error_max']:.2f} %."]
+    if "rate_check" in summary:
+        rc = summary["rate_check"]
+        lines += ["", f"Rate check (half plate speed): E changes by {100 * rc['youngs_modulus_change']:+.2f} %, "
+                  f"strength by {100 * rc['strength_change']:+.2f} % (limits 2 % and 5 %)."]
+    lines += ["", "![stress-strain](stress_strain.png)", ""]
+    lines += ["## Particle stresses", ""]
+    table = mech.stress_table(summary["stress_by_material"])
+    lines += (table + ["", "Histograms at every snapshot (rows), mean +- std per material in the legends:", "",
+                       "![particle stresses](stress_hist.png)", "", "Bond strains (Fig. 7 format; bins from the data):",
+                       "", "![bond strains](bond_strain.png)", ""]) if table else ["No snapshots were asked for.", ""]
+    if fracture:
+        lines += ["Fracture: a slab a third of the box thick (normal y) through where the bonds broke, particles "
+                  "coloured by their broken bonds (top) and sigma_zz (bottom), near the peak and after it:", "",
+                  "![fracture](fracture.png)", ""]
+    lines += ["## Files", "",
+              "- `summary.json`: the numbers above (keys with units); `results.h5`: curves, snapshots and histograms, "
+              "every dataset with `units` (tables with `columns`); `opalflow.load_results(folder)` reads both.",
+              "- `data.lmp` (bonds, image flags), `in.lmp`, `resume.lmp`, `run.sh`: the deck, runnable without opalflow.",
+              "- `snapshots/particles.STEP.dump`: LAMMPS dumps (id, type, x y z, image flags, radius, sigma_xx ... "
+              "sigma_yz in MPa, broken_bonds) that OVITO opens as they are; `snapshots/bonds.STEP.txt`: bond lengths.",
+              ""]
+    cost = (f"wall {summary['wall_s']:.1f} s, of which LAMMPS {summary['lammps_s']:.1f} s"
+            if summary["wall_s"] is not None else "run outside opalflow (analyze only)")
+    lines += ["## Cost", "", f"{cost}; {summary['steps']} steps of {info['timestep_s']:.3g} s for "
+              f"{info['n_particles']} particles and {info['n_bonds']} bonds; structure built in "
+              f"{info['build_s']:.1f} s.", ""]
+    return "\n".join(lines)
