@@ -16,9 +16,9 @@ from opalflow.cli import main
 
 PACKAGE = Path(opalflow.__file__).resolve().parent
 #: track packages: each owns its spec sections, their validation and its runner
-TRACKS = ("bpm", "opal", "lattice", "datafile", "tersoff", "studies")
+TRACKS = ("bpm", "opal", "lattice", "datafile", "tersoff", "studies", "granular")
 #: modules every track may use; they import no track
-SHARED = ("spec", "registry", "structure", "units", "materials", "store", "resources", "neighbors",
+SHARED = ("spec", "registry", "structure", "units", "materials", "store", "resources", "neighbors", "packing", "io", "api",
           "version", "lammps", "analysis")
 
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from opalflow.neighbors import pairs_within
-from opalflow.opal.packing import dense_random_packing, max_pair_overlap, tile_count
+from opalflow.packing import dense_random_packing, max_pair_overlap, tile_count
 
 BOX = np.array([600.0, 520.0, 400.0])
 

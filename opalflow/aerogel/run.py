@@ -7,7 +7,6 @@ with a summary.json is finished), all or none.
 """
 from __future__ import annotations
 
-import io
 import math
 import time
 from pathlib import Path
@@ -19,7 +18,7 @@ from opalflow.aerogel.fractal import FractalFit, mass_radius, plot_fractal, radi
 from opalflow.aerogel.scene import coordination, make_aggregate, periodic_structure
 from opalflow.aerogel.spec import AggregationWorkflow
 from opalflow.lammps.datafile import write_data
-from opalflow.store import json_text, new_figure, save_figure, staged_files
+from opalflow.store import h5_bytes, json_text, new_figure, put, save_figure, staged_files
 from opalflow.version import __version__
 
 #: literature values of D_f (BRIEF section 2, with sources)
@@ -107,21 +106,21 @@ def run_aggregation(spec: AggregationWorkflow, out: Path, say=print) -> dict:
               "correlated points (lower bounds); seeds give the spread.", "",
               "![fractal dimension](fractal.png)", "", "![network](network.png)", "",
               "`aggregate.lmp`: the bonded network as an atom_style bpm/sphere data file (periodic in x, y, z)."]
-    import h5py
-
-    buffer = io.BytesIO()
-    with h5py.File(buffer, "w") as h:
-        h.attrs["workflow"] = spec.name
-        for key, value in (("positions_nm", agg.positions), ("diameters_nm", agg.diameters), ("arrival", agg.arrival),
-                           ("contacts", agg.contacts), ("bonds", s.bonds), ("merger_size", agg.merger_size),
-                           ("merger_rg_nm", agg.merger_rg), ("mass_radius/r_nm", mr_curve["r_nm"]),
-                           ("mass_radius/count", mr_curve["count"]), ("mass_radius/background", mr_curve["background"])):
-            h[key] = value
+    def fill(h):
+        for key, value, unit, cols in (
+                ("positions_nm", agg.positions, "nm", ["x", "y", "z"]), ("diameters_nm", agg.diameters, "nm", None),
+                ("arrival", agg.arrival, "1", None), ("contacts", agg.contacts, "1", ["i", "j"]),
+                ("bonds", s.bonds, "1", ["i", "j"]), ("merger_size", agg.merger_size, "1", None),
+                ("merger_rg_nm", agg.merger_rg, "nm", None), ("mass_radius/r_nm", mr_curve["r_nm"], "nm", None),
+                ("mass_radius/count", mr_curve["count"], "1", None),
+                ("mass_radius/background", mr_curve["background"], "1", None)):
+            put(h, key, value, unit, cols)
+    results = h5_bytes(fill, workflow=spec.name)
     out.mkdir(parents=True, exist_ok=True)
     summary["wall_s"] = time.perf_counter() - start
     with staged_files(out) as stage:
         write_data(stage("aggregate.lmp"), s, title=f"opalflow {__version__} {spec.name}")
-        stage("results.h5").write_bytes(buffer.getvalue())
+        stage("results.h5").write_bytes(results)
         plot_fractal((mr, mr_curve), (rg, rg_curve), stage("fractal.png"))
         plot_network(agg, z, stage("network.png"))
         stage("report.md").write_text("\n".join(report) + "\n")

@@ -14,7 +14,6 @@ moduli, Poisson ratios and bulk modulus it implies.
 """
 from __future__ import annotations
 
-import io
 import time
 from pathlib import Path
 
@@ -28,7 +27,7 @@ from opalflow.bpm.static import (VOIGT, LooseParticlesError, StaticResult, loose
                                   solve_compression, solve_tensor)
 from opalflow.bpm.stiffness import BondNetwork, stiffness_network
 from opalflow.lammps.datafile import write_data
-from opalflow.store import json_text, new_figure, save_figure, staged_files, write_json_atomic
+from opalflow.store import h5_bytes, json_text, new_figure, put, save_figure, staged_files, write_json_atomic
 from opalflow.version import __version__
 
 #: the strain of the solve (any: the answer is linear; small keeps the reported displacements physical)
@@ -122,25 +121,24 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
 
 
 def _write_h5(path: Path, data, res: StaticResult, sigma_unit, strain_unit, snapshots, summary) -> None:
-    import h5py
-
-    buffer = io.BytesIO()
-    with h5py.File(buffer, "w") as h:
+    def fill(h):
         h.attrs["method"] = "static"
         h.attrs["youngs_modulus_GPa"] = summary["youngs_modulus_GPa"]
         g = h.create_group("static")
         g.attrs["strain"] = res.strain
-        g["position_nm"], g["type"] = data.positions, data.types
-        g["displacement_nm"], g["rotation_rad"] = res.u, res.theta
-        g["sigma_per_strain_MPa"] = sigma_unit
-        g["sigma_per_strain_MPa"].attrs["columns"] = "xx yy zz xy xz yz"
-        g["bond_strain_per_strain"] = strain_unit
-        g["residual_history"] = np.asarray(res.history)
+        put(g, "position_nm", data.positions, "nm", ["x", "y", "z"])
+        put(g, "type", data.types, "1", type_names=data.type_names)
+        put(g, "displacement_nm", res.u, "nm", ["x", "y", "z"], description=f"at strain {res.strain:g}")
+        put(g, "rotation_rad", res.theta, "rad", ["x", "y", "z"], description=f"at strain {res.strain:g}")
+        put(g, "sigma_per_strain_MPa", sigma_unit, "MPa", mech.STRESS_COLUMNS,
+            description="particle stress (eq. 21) per unit macroscopic strain")
+        put(g, "bond_strain_per_strain", strain_unit, "1", description="bond strain per unit macroscopic strain")
+        put(g, "residual_history", np.asarray(res.history), "1", description="relative residual per iteration")
         for e, snap in snapshots.items():
             sg = h.create_group(f"snapshots/{e:.4f}")
             sg.attrs["strain"] = e
-            sg["sigma_MPa"] = snap["sigma_MPa"]
-    path.write_bytes(buffer.getvalue())
+            put(sg, "sigma_MPa", snap["sigma_MPa"], "MPa", mech.STRESS_COLUMNS)
+    path.write_bytes(h5_bytes(fill))
 
 
 def _plots(stage, data, res: StaticResult, snapshots, strain_unit, strains) -> None:
@@ -229,15 +227,10 @@ def run_tensor(spec: BpmWorkflow, s, out: Path, t0: float, say=print) -> dict:
         lines.append(f"Reference {k}: {r['value']:.6g} ({r['source']}); error {100 * r['error']:+.4f} %.")
     lines += ["", f"Solver `{res.solver}`: iterations per loading {res.iterations}, worst relative residual "
               f"{res.residual:.1e}; {res.seconds:.1f} s, peak memory {res.peak_memory_MiB:.0f} MiB."]
-    import h5py
-
-    buffer = io.BytesIO()
-    with h5py.File(buffer, "w") as h:
-        h.attrs["method"] = "static"
-        h["stiffness_tensor_GPa"] = C
-        h["stiffness_tensor_GPa"].attrs["voigt_order"] = "xx yy zz yz xz xy"
+    voigt = ["xx", "yy", "zz", "yz", "xz", "xy"]
+    tensor = h5_bytes(lambda h: put(h, "stiffness_tensor_GPa", C, "GPa", voigt, rows=voigt), method="static")
     with staged_files(out) as stage:
-        stage("results.h5").write_bytes(buffer.getvalue())
+        stage("results.h5").write_bytes(tensor)
         stage("report.md").write_text("\n".join(lines) + "\n")
         stage("summary.json").write_text(json_text(summary))
     return summary

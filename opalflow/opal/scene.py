@@ -15,7 +15,7 @@ from opalflow.bpm.bonds import bond_types_by_material, find_bonds
 from opalflow.bpm.scene import Scene
 from opalflow.materials import material
 from opalflow.opal import pores as pore_geometry
-from opalflow.opal.packing import dense_random_packing
+from opalflow.packing import dense_random_packing
 from opalflow.opal.spec import OpalWorkflow, sample_box_nm
 from opalflow.opal.windows import coating_surface_distance, window_openings
 from opalflow.structure import Structure, quantize

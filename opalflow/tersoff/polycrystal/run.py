@@ -7,7 +7,6 @@ Each run folder gets ``results.h5`` (every dataset with ``units``, tables with `
 """
 from __future__ import annotations
 
-import io
 import json
 import math
 import time
@@ -15,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from opalflow.store import json_text, new_figure, save_figure, staged_files, write_json_atomic
+from opalflow.store import h5_bytes, json_text, new_figure, save_figure, staged_files, write_json_atomic
 from opalflow.tersoff.parameters import load_parameters
 from opalflow.tersoff.polycrystal.crystal import check_sample_hessian, longitudinal_speed_nm_ps, single_crystal
 from opalflow.tersoff.polycrystal.dynamics import M_PER_S, Polycrystal, polycrystal_bounds, speeds
@@ -284,15 +283,6 @@ def _plot_curves(stress_path: Path, volume_path: Path, jobs: list[dict]) -> None
         save_figure(fig, path)
 
 
-def _h5_bytes(write) -> bytes:
-    import h5py
-    buffer = io.BytesIO()
-    with h5py.File(buffer, "w") as h:
-        h.attrs["opalflow_version"] = __version__
-        write(h)
-    return buffer.getvalue()
-
-
 def _tension_h5(jobs: list[dict]) -> bytes:
     units = ["1", "GPa", "GPa", "GPa", "GPa", "GPa", "GPa", "1", "1", "1", "1"]
 
@@ -306,7 +296,7 @@ def _tension_h5(jobs: list[dict]) -> bytes:
                               ("wall_s", "s")):
                 s = g.create_dataset(key, data=j[key])
                 s.attrs["units"] = unit
-    return _h5_bytes(write)
+    return h5_bytes(write)
 
 
 def _bounds_rows(bounds: dict) -> list[str]:
@@ -556,7 +546,7 @@ def _waves_h5(jobs: list[dict]) -> bytes:
             d = g.create_dataset("profile", data=np.array(j["profile"]))
             d.attrs["units"] = "1 (section-averaged velocity / piston velocity)"
             d.attrs["columns"] = [f"z = {z:g} nm" for z in j["stations_nm"]]
-    return _h5_bytes(write)
+    return h5_bytes(write)
 
 
 def _waves_report(spec, summary: dict, jobs: list[dict]) -> str:

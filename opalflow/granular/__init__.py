@@ -1,0 +1,1 @@
+"""Contact-only scenes: an unbonded granular packing compressed by a plate, on LAMMPS or LIGGGHTS."""

@@ -1,0 +1,68 @@
+"""Spec of kind "granular": an unbonded packing of spheres (SI units) compressed by a plate."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from opalflow.spec import WorkflowSpec, check
+
+ENGINES = ("lammps", "liggghts", "both")
+
+
+@dataclass
+class GranularPackingSpec:
+    """Dense random packing (opalflow.packing) in a box periodic in x and y; the bottom layer is held."""
+
+    box_diameters: float = 6.0          # box edge in mean diameters (x, y and the height)
+    diameter_m: float = 1e-3
+    diameter_std: float = 0.1           # relative
+    solid_fraction: float = 0.6
+    seed: int = 3
+
+
+@dataclass
+class GranularMaterialSpec:
+    """Hertz-Mindlin contact properties of the particles (the plate has the same)."""
+
+    youngs_modulus_Pa: float = 5e7
+    poisson_ratio: float = 0.25
+    restitution: float = 0.5
+    friction: float = 0.5
+    density_kg_m3: float = 2500.0
+
+
+@dataclass
+class GranularPlateSpec:
+    speed_m_s: float = 0.01
+    steps: int = 20000
+    timestep_s: float = 2e-6
+    output_every: int = 200
+
+
+@dataclass
+class GranularWorkflow(WorkflowSpec):
+    """An unbonded packing compressed by a plate; ``engine``: lammps, liggghts or both (a cross-check)."""
+
+    engine: str = "lammps"
+    packing: GranularPackingSpec = field(default_factory=GranularPackingSpec)
+    material: GranularMaterialSpec = field(default_factory=GranularMaterialSpec)
+    plate: GranularPlateSpec = field(default_factory=GranularPlateSpec)
+
+    def validate(self) -> None:
+        super().validate()
+        check(self.engine in ENGINES, "engine", self.engine, f"must be one of {', '.join(ENGINES)}")
+        k, m, p = self.packing, self.material, self.plate
+        check(3 <= k.box_diameters <= 40, "packing.box_diameters", k.box_diameters, "must be in [3, 40]")
+        check(1e-7 <= k.diameter_m <= 1.0, "packing.diameter_m", k.diameter_m, "must be in [1e-7, 1] m")
+        check(0 <= k.diameter_std <= 0.3, "packing.diameter_std", k.diameter_std, "must be in [0, 0.3] (relative)")
+        check(0.05 <= k.solid_fraction <= 0.64, "packing.solid_fraction", k.solid_fraction, "must be in [0.05, 0.64]")
+        check(k.seed >= 0, "packing.seed", k.seed, "must be >= 0")
+        check(1e3 <= m.youngs_modulus_Pa <= 1e12, "material.youngs_modulus_Pa", m.youngs_modulus_Pa,
+              "must be in [1e3, 1e12] Pa")
+        check(-0.99 < m.poisson_ratio < 0.5, "material.poisson_ratio", m.poisson_ratio, "must be in (-0.99, 0.5)")
+        check(0 < m.restitution <= 1, "material.restitution", m.restitution, "must be in (0, 1]")
+        check(0 <= m.friction <= 1e6, "material.friction", m.friction, "must be in [0, 1e6] (0: frictionless)")
+        check(1 <= m.density_kg_m3 <= 1e5, "material.density_kg_m3", m.density_kg_m3, "must be in [1, 1e5]")
+        check(0 < p.speed_m_s <= 10, "plate.speed_m_s", p.speed_m_s, "must be in (0, 10] m/s")
+        check(100 <= p.steps <= 10**8, "plate.steps", p.steps, "must be in [100, 1e8]")
+        check(0 < p.timestep_s <= 1e-3, "plate.timestep_s", p.timestep_s, "must be in (0, 1e-3] s")
+        check(1 <= p.output_every <= p.steps, "plate.output_every", p.output_every, "must be in [1, plate.steps]")

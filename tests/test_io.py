@@ -1,0 +1,147 @@
+"""What users read and script: the Python API, results.h5 units, image flags, OVITO, ASE and MDAnalysis
+readers, Ctrl-C."""
+import json
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+import opalflow
+from opalflow.cli import main
+from opalflow.structure import Structure
+
+SMALL = {"compression.strain_max": 0.002, "compression.snapshot_strains": [0.001, 0.002]}
+
+
+@pytest.fixture(scope="module")
+def api_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("api") / "sc"
+    return out, opalflow.run("lattice_sc", out, set=SMALL, quiet=True)
+
+
+def test_python_api_gives_the_cli_numbers(api_run, tmp_path, capsys):
+    out, summary = api_run
+    assert main(["run", "lattice_sc", "--out", str(tmp_path / "cli"),
+                 *[a for k, v in SMALL.items() for a in ("--set", f"{k}={json.dumps(v)}")]]) == 0
+    cli = json.loads((tmp_path / "cli" / "summary.json").read_text())
+    for key in ("youngs_modulus_GPa", "strength_MPa", "steps", "n_bonds"):
+        assert summary[key] == cli[key]
+    res = opalflow.load_results(out)
+    assert res.summary["youngs_modulus_GPa"] == summary["youngs_modulus_GPa"]
+    assert res.units("curve/stress_MPa") == "MPa"
+    stress = res["curve/stress_MPa"]
+    assert len(stress) == len(res["curve/strain"]) and np.max(stress) == pytest.approx(summary["strength_MPa"])
+    step = next(k.split("/")[1] for k in res.keys() if k.startswith("snapshots/"))
+    assert res.columns(f"snapshots/{step}/sigma_MPa") == ["xx", "yy", "zz", "xy", "xz", "yz"]
+    assert set(res.table(f"snapshots/{step}/position_nm")) == {"x", "y", "z"}
+
+
+def test_every_dataset_of_results_h5_has_units(api_run, tmp_path):
+    """Walk every dataset of the dynamic, static and aggregation results: each has units, each 2-D one columns."""
+    import h5py
+
+    out, _ = api_run
+    static = opalflow.run("lattice_sc", tmp_path / "static", set={"compression.method": "static"}, quiet=True)
+    agg = opalflow.run("aerogel_dlca", tmp_path / "agg", set={"aggregate.particles": 300}, quiet=True)
+    assert static and agg
+    missing = []
+    for folder in (out, tmp_path / "static", tmp_path / "agg"):
+        with h5py.File(folder / "results.h5", "r") as h:
+            def visit(name, obj):
+                if isinstance(obj, h5py.Dataset):
+                    if "units" not in obj.attrs or (obj.ndim == 2 and "columns" not in obj.attrs):
+                        missing.append(f"{folder.name}:{name}")
+            h.visititems(visit)
+    assert not missing
+
+
+def test_bad_api_input_is_one_line_before_anything_is_written(tmp_path):
+    with pytest.raises(opalflow.spec.InputError, match=r"^compression.strain_max = -1.0: "):
+        opalflow.run("lattice_sc", tmp_path / "x", set={"compression.strain_max": -1.0})
+    with pytest.raises(opalflow.spec.InputError, match=r"^--np = 0: "):
+        opalflow.run("lattice_sc", tmp_path / "x", np=0)
+    assert not (tmp_path / "x").exists()
+
+
+def test_image_flags_make_a_cluster_whole_and_leave_a_wrapping_chain_on_the_face():
+    """A ring of particles across the x face is made whole; a chain around the box keeps one long bond."""
+    box = np.array([10.0, 10.0, 10.0])
+    ring = np.array([[9.0, 5.0, 5.0], [0.5, 5.0, 5.0], [0.5, 6.0, 5.0], [9.0, 6.0, 5.0]])
+    chain = np.array([[x, 2.0, 2.0] for x in np.arange(0.5, 10.0, 1.0)])
+    s = Structure(positions=np.vstack([ring, chain]), diameters=np.ones(14), types=np.ones(14), densities=np.ones(14),
+                  box_lo=np.zeros(3), box_hi=box, periodic=np.array([True, True, False]),
+                  bonds=[[0, 1], [1, 2], [2, 3], [0, 3]] + [[4 + k, 4 + (k + 1) % 10] for k in range(10)])
+    flags = s.image_flags()
+    assert abs(flags[0, 0] - flags[1, 0]) == 1 and flags[0, 0] == flags[3, 0]
+    assert np.all(flags[4:] == 0)
+    assert list(s.wrapping_bonds(flags)) == [1, 0, 0]                  # the chain's bond over the face
+    assert list(s.wrapping_bonds(np.zeros_like(flags))) == [3, 0, 0]   # without flags, the ring's two too
+
+
+def test_ovito_reads_data_file_with_bonds_and_a_dump(api_run):
+    ovito_io = pytest.importorskip("ovito.io", reason="the ovito package (PyPI) is not installed")
+    out, _ = api_run
+    from opalflow.lammps.datafile import read_data
+
+    s = read_data(out / "data.lmp")
+    data = ovito_io.import_file(str(out / "data.lmp"), atom_style="bpm/sphere").compute()
+    assert data.particles.count == s.n_particles and data.particles.bonds.count == s.n_bonds
+    order = np.argsort(data.particles["Particle Identifier"])
+    assert np.allclose(np.asarray(data.particles["Position"])[order], s.positions, atol=1e-6)
+    assert np.allclose(np.asarray(data.particles["Radius"])[order], s.diameters / 2)
+    dump = sorted((out / "snapshots").glob("particles.*.dump"))[-1]
+    frame = ovito_io.import_file(str(dump)).compute()
+    atoms = opalflow.io.read_ase(out, step=int(dump.name.split(".")[1]))
+    order = np.argsort(frame.particles["Particle Identifier"])
+    assert frame.particles.count == len(atoms)
+    assert np.allclose(np.asarray(frame.particles["Position"])[order], atoms.positions / 10 + atoms.info["origin_nm"],
+                       atol=1e-4)
+    assert {"sigma_zz", "broken_bonds", "Radius"} <= set(frame.particles.keys())
+
+
+def test_lammps_reads_the_image_flags_without_warning_where_nothing_wraps(tmp_path):
+    """Open sides: no bond crosses a face, LAMMPS prints no image-flag warning; periodic sides: the
+    infinite network's face bonds are counted in the data file's header."""
+    out = tmp_path / "open"
+    opalflow.run("lattice_sc", out, set={**SMALL, "boundary.sides": "open"}, quiet=True)
+    assert "Inconsistent image flags" not in (out / "log.lammps").read_text()
+
+
+def test_ase_and_mdanalysis_readers_give_radii_and_bonds(api_run):
+    out, summary = api_run
+    atoms = opalflow.io.read_ase(out)
+    assert len(atoms) == summary["n_particles"] and len(atoms.info["bonds"]) == summary["n_bonds"]
+    assert np.allclose(atoms.arrays["radius"], 100.0)                  # d = 20 nm = 200 A
+    i, j = atoms.info["bonds"].T
+    from ase.geometry import find_mic
+    lengths = np.linalg.norm(find_mic(atoms.positions[j] - atoms.positions[i], atoms.cell, atoms.pbc)[0], axis=1)
+    assert np.allclose(lengths, 200.0, atol=1e-3)                      # sc spacing 20 nm
+    assert sum(len(b.split(",")) for b in atoms.arrays["bonds"] if b) == summary["n_bonds"]
+    snap = opalflow.io.read_ase(out, step=-1)
+    assert snap.arrays["sigma_MPa"].shape == (len(atoms), 6) and "broken_bonds" in snap.arrays
+    u = opalflow.io.read_mdanalysis(out)
+    assert len(u.atoms) == len(atoms) and len(u.bonds) == summary["n_bonds"]
+    assert np.allclose(u.atoms.radii, 100.0) and len(u.trajectory) == 2
+    assert np.allclose(u.bonds.values(pbc=True), 200.0, rtol=2e-3)
+
+
+def test_ctrl_c_prints_one_line_exits_130_and_resumes(tmp_path):
+    out = tmp_path / "qs"
+    p = subprocess.Popen([sys.executable, "-m", "opalflow", "run", "lattice_sc", "--out", str(out),
+                          "--set", "compression.strain_max=0.02", "--set", "compression.restart_every_strain=0.001"],
+                         stderr=subprocess.PIPE, text=True,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    deadline = time.time() + 120
+    while time.time() < deadline and not list(out.glob("restart.*.bin")):
+        time.sleep(0.2)
+    p.send_signal(signal.SIGINT)
+    err = p.stderr.read()
+    assert p.wait() == 130
+    last = err.strip().splitlines()[-1]
+    assert last.startswith("interrupted at step ") and f"--out {out} --resume" in last
+    assert "Traceback" not in err
+    assert main(["run", "--out", str(out), "--resume"]) == 0
+    assert json.loads((out / "summary.json").read_text())["complete"]
