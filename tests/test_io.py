@@ -145,3 +145,18 @@ def test_ctrl_c_prints_one_line_exits_130_and_resumes(tmp_path):
     assert "Traceback" not in err
     assert main(["run", "--out", str(out), "--resume"]) == 0
     assert json.loads((out / "summary.json").read_text())["complete"]
+
+
+def test_report_names_inputs_and_explains_large_errors(api_run):
+    from opalflow.bpm.report import SECTIONS, why
+
+    out, _ = api_run
+    text = (out / "report.md").read_text()
+    for section in SECTIONS:
+        assert f"\n{section}\n" in text
+    for row in ("| particles |", "| bonds |", "| material silica |", "| bond coefficients |", "| time step |"):
+        assert row in text
+    reason = why("youngs_modulus_GPa", -0.88, 60.0)                  # the quickstart's E against the experiment
+    assert reason.startswith("resolution: d = 60 nm is 4.0 x the paper's 15 nm") and "2.074 GPa (d = 15 nm)" in reason
+    assert "9.37 MPa (d = 45 nm)" in why("strength_MPa", -0.97, 60.0)
+    assert why("youngs_modulus_GPa", 0.05, 60.0) == ""
