@@ -101,11 +101,10 @@ def _structure(folder: Path) -> tuple[Structure, dict]:
     return read_data(data, periodic=tuple(periodic)), info
 
 
-def _snapshot(folder: Path, step: int | None, s: Structure) -> tuple[dict | None, int | None]:
-    """The particle dump at ``step`` (None: the structure as built) sorted by id, and its step."""
+def _snapshot(folder: Path, step: int | None, s: Structure, files: dict[int, Path]) -> tuple[dict | None, int | None]:
+    """The particle dump at ``step`` (None: the structure as built) of ``files`` (by step) sorted by id, and its step."""
     if step is None:
         return None, None
-    files = mech.snapshot_files(folder, "particles", "dump")
     if step == -1 and files:
         step = max(files)
     if step not in files:
@@ -133,7 +132,7 @@ def read_ase(folder: str | Path, step: int | None = None):
 
     folder = Path(folder)
     s, info = _structure(folder)
-    dump, step = _snapshot(folder, step, s)
+    dump, step = _snapshot(folder, step, s, mech.snapshot_files(folder, "particles", "dump"))
     positions = s.positions if dump is None else np.column_stack([dump["x"], dump["y"], dump["z"]])
     atoms = Atoms(positions=(positions - s.box_lo) * ANGSTROM_PER_NM, cell=np.diag(s.box_lengths * ANGSTROM_PER_NM),
                   pbc=s.periodic, masses=s.densities * s.particle_volumes() * AMU_PER_AG)
@@ -163,7 +162,7 @@ def read_mdanalysis(folder: str | Path):
     files = mech.snapshot_files(folder, "particles", "dump")
     frames, steps = [], []
     for step in files:
-        dump, _ = _snapshot(folder, step, s)
+        dump, _ = _snapshot(folder, step, s, files)
         frames.append(np.column_stack([dump["x"], dump["y"], dump["z"]]))
         steps.append(step)
     if not frames:

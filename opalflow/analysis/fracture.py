@@ -106,13 +106,14 @@ def plot_sides(path: Path, runs: dict[str, tuple[list[tuple[str, dict]], list, f
                            layout="constrained")
     artist = None
     for row, (name, (frames, box, d)) in enumerate(runs.items()):
+        centre = slab_centre(frames, box)
         for col in range(cols):
             ax = axes[row, col]
             if col >= len(frames):
                 ax.set_axis_off()
                 continue
             label, snap = frames[col]
-            artist = _draw(ax, snap, box, d, "broken_bonds", broken_max, slab_centre(frames, box))
+            artist = _draw(ax, snap, box, d, "broken_bonds", broken_max, centre)
             ax.set_title(f"{name}: {label}", fontsize=9)
     if artist is not None:
         fig.colorbar(artist, ax=axes.ravel().tolist(), label="broken bonds per particle")

@@ -8,6 +8,7 @@ format of Dosta et al. Table 2, the files written and the run's cost.
 from __future__ import annotations
 
 import tomllib
+from functools import lru_cache
 
 from opalflow.analysis import compression as mech
 from opalflow.resources import DATA
@@ -18,6 +19,7 @@ LARGE_ERROR = 0.10
 SECTIONS = ("## Inputs", "## Results", "## Particle stresses", "## Files", "## Cost")
 
 
+@lru_cache(maxsize=1)
 def _resolution() -> dict:
     return tomllib.loads((DATA / "reference" / "resolution.toml").read_text())
 
