@@ -130,10 +130,13 @@ def test_ase_and_mdanalysis_readers_give_radii_and_bonds(api_run):
 
 def test_ctrl_c_prints_one_line_exits_130_and_resumes(tmp_path):
     out = tmp_path / "qs"
-    p = subprocess.Popen([sys.executable, "-m", "opalflow", "run", "lattice_sc", "--out", str(out),
-                          "--set", "compression.strain_max=0.02", "--set", "compression.restart_every_strain=0.001"],
-                         stderr=subprocess.PIPE, text=True,
-                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    args = ["run", "lattice_sc", "--out", str(out),
+            "--set", "compression.strain_max=0.02", "--set", "compression.restart_every_strain=0.001"]
+    # Python keeps SIGINT ignored where its parent ignored it (background shells): the child restores
+    # Ctrl-C itself (a preexec_fn would fork this JAX-threaded process)
+    child = ("import runpy, signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+             f"sys.argv = ['opalflow'] + {args!r}; runpy.run_module('opalflow', run_name='__main__')")
+    p = subprocess.Popen([sys.executable, "-c", child], stderr=subprocess.PIPE, text=True)
     deadline = time.time() + 120
     while time.time() < deadline and not list(out.glob("restart.*.bin")):
         time.sleep(0.2)
