@@ -65,3 +65,10 @@ def test_undamped_sliding_agrees(tmp_path):
     d = {r["case"]: r for r in s["cases"]}
     assert d["oblique_sliding"]["max_relative_difference"] < 1e-12
     assert d["second_contact"]["verdict"] == "part"
+
+
+def test_impacts_are_refused_in_one_line_without_liggghts(tmp_path, monkeypatch):
+    monkeypatch.setattr(shutil, "which", lambda name: None)
+    with pytest.raises(opalflow.spec.InputError, match=r"^kind = 'granular_impacts': needs the 'liggghts' executable"):
+        opalflow.run("granular_impacts", tmp_path / "i")
+    assert not (tmp_path / "i").exists()
