@@ -81,8 +81,12 @@ class Contact:
                 "damping coeff_restitution")
 
 
-def liggghts_executable() -> str | None:
-    return shutil.which("liggghts")
+def liggghts_executable(where: str, value) -> str:
+    """The path of ``liggghts``; refuses ``where = value`` in one line where it is not on PATH."""
+    exe = shutil.which("liggghts")
+    if exe is None:
+        raise SpecError(where, value, "needs the 'liggghts' executable (Debian package liggghts), which is not on PATH")
+    return exe
 
 
 def x_gamma_t(nu: float) -> float:
@@ -201,9 +205,7 @@ def run_lammps(out: Path) -> float:
 
 def run_liggghts(out: Path) -> float:
     """LIGGGHTS unbuffered (piped, it drops the processor-local error lines), output kept in liggghts.out."""
-    exe = liggghts_executable()
-    if exe is None:
-        raise SpecError("engine", "liggghts", "no 'liggghts' executable (Debian: apt-get install liggghts)")
+    exe = liggghts_executable("engine", "liggghts")
     t = time.perf_counter()
     cmd = ([shutil.which("stdbuf"), "-o0", "-e0"] if shutil.which("stdbuf") else []) + \
         [exe, "-in", "in.liggghts", "-log", "log.liggghts", "-echo", "none"]
