@@ -17,7 +17,6 @@ KeyboardInterrupt with the step reached) and leaves the folder resumable.
 from __future__ import annotations
 
 import copy
-import json
 import sys
 import tomllib
 from pathlib import Path
@@ -74,26 +73,23 @@ def _folder(out: str | Path, field: str = "out") -> Path:
 
 
 def run_json(out: str | Path, field: str = "folder") -> dict:
-    """The run.json of a prepared run folder (what it runs: its spec, deck numbers)."""
-    path = Path(out) / "run.json"
-    if not path.exists():
-        raise SpecError(field, str(out), "no run.json: this folder holds no prepared run")
-    try:
-        info = json.loads(path.read_text())
-        info["spec"]["kind"]
-    except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError) as exc:
-        raise SpecError(field, str(out), f"run.json is damaged ({type(exc).__name__}: {exc}); build the "
-                        "folder again") from None
-    return info
+    """The run record of a prepared run folder as a dict (kind, spec, state, deck facts, sessions)."""
+    import dataclasses
+
+    from opalflow.runs.record import RunRecord
+
+    return dataclasses.asdict(RunRecord.read(out, field))
 
 
 def run(workflow: str | Path | dict | WorkflowSpec | None, out: str | Path, *, set: Settings = None, np: int = 1,
-        resume: bool = False, suffix: str | None = None, quiet: bool = False) -> dict:
+        resume: bool = False, suffix: str | None = None, executor: str | None = None, quiet: bool = False) -> dict:
     """Build, run and analyze ``workflow`` into the folder ``out``; returns its summary (summary.json).
 
     ``np``: MPI processes (runs ``lmp`` under mpiexec); ``resume``: continue the run in ``out`` from its
     newest restart file (``workflow`` None: the spec comes from ``out/run.json``); ``suffix``: accelerator
-    styles ('omp', 'kk', 'gpu') where the LAMMPS build has them; ``quiet``: no progress lines on stderr.
+    styles ('omp', 'kk', 'gpu') where the LAMMPS build has them; ``executor``: 'local', 'dask' or 'slurm'
+    (else the workflow's ``[executor]``): a study sends its jobs there, any other workflow goes there as one
+    job; ``quiet``: no progress lines on stderr.
     """
     out = _folder(out)
     if resume and workflow is None:
@@ -110,7 +106,55 @@ def run(workflow: str | Path | dict | WorkflowSpec | None, out: str | Path, *, s
         usable = lammps_info()["accelerators"]
         if suffix not in usable:
             raise SpecError("--suffix", suffix, f"this LAMMPS build offers {', '.join(usable) or 'none'}")
+    ex = executor_of(workflow, set, executor)
+    if ex.type != "local" and spec.kind != "study":
+        if suffix:
+            raise SpecError("--suffix", suffix, "is for runs on this machine (a submitted run uses the launcher)")
+        return submit(spec, out, ex, np_=np, say=_say(quiet))
+    if spec.kind == "study" and executor is not None:
+        spec.executor = ex
     return registry.get(spec.kind).run_workflow(spec, out, np_=np, resume=resume, say=_say(quiet), suffix=suffix)
+
+
+def executor_of(workflow, set: Settings = None, override: str | None = None):
+    """The ``[executor]`` of a workflow (with the ``set`` overrides; ``override``: its type, as
+    ``--executor``)."""
+    from opalflow.runs.spec import ExecutorSpec, executor_from_raw
+
+    if isinstance(workflow, WorkflowSpec):
+        raw = workflow.to_dict()
+    elif isinstance(workflow, dict):
+        raw = copy.deepcopy(workflow)
+    elif workflow is None:
+        return executor_from_raw({}, override) if override else ExecutorSpec()
+    else:
+        raw = read_toml(workflow_path(workflow))
+    if isinstance(set, dict):
+        for path, value in set.items():
+            set_value(raw, str(path), value)
+    elif set:
+        apply_overrides(raw, list(set))
+    return executor_from_raw(raw, override)
+
+
+def submit(spec: WorkflowSpec, out: str | Path, ex, *, np_: int = 1, say=_stderr) -> dict:
+    """One run as a job of the executor ``ex`` (Dask, SLURM): the folder ``out`` is its job folder
+    (resumed from its restart file where it has one); returns its summary, or raises EngineError with
+    its log tail when it failed."""
+    from opalflow.lammps.engine import EngineError
+    from opalflow.runs.executors import executor
+    from opalflow.runs.jobs import JOB_FILE, read_job, spec_hash
+    from opalflow.store import write_json_atomic
+
+    out = Path(out).resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    if read_job(out).get("hash") != spec_hash(spec) or read_job(out).get("state") == "finished":
+        write_json_atomic(out / JOB_FILE, {"label": spec.name, "hash": spec_hash(spec), "spec": spec.to_dict(),
+                                           "state": "pending"})
+    (_, got), = list(executor(ex, np_).run([str(out)], say))
+    if "failed" in got:
+        raise EngineError(f"{got['failed']}\n--- log tail ---\n{got.get('log_tail', '')}")
+    return got
 
 
 def build(workflow: str | Path | dict | WorkflowSpec, out: str | Path, *, set: Settings = None,

@@ -1,4 +1,4 @@
-"""Command line: ``python -m opalflow info | list | build | run | check | analyze``: each verb parses its
+"""Command line: ``python -m opalflow info | list | build | run | check | analyze | status | job``: each verb parses its
 arguments and calls the Python API of the same name (:mod:`opalflow.api`); what each kind does comes from
 :mod:`opalflow.registry`.  Bad input: one line, exit 2; a failed LAMMPS run: its log tail, exit 1; Ctrl-C:
 one line saying where it stopped and how to resume, exit 130."""
@@ -49,7 +49,8 @@ def cmd_run(args) -> int:
     from opalflow.lammps.engine import EngineError
 
     try:
-        summary = api.run(args.workflow, args.out, set=args.set, np=args.np, resume=args.resume, suffix=args.suffix)
+        summary = api.run(args.workflow, args.out, set=args.set, np=args.np, resume=args.resume, suffix=args.suffix,
+                          executor=args.executor)
     except EngineError as exc:
         print(f"error: {exc}", file=sys.stderr)
         print(f"run folder kept: {args.out}", file=sys.stderr)
@@ -64,6 +65,27 @@ def cmd_check(args) -> int:
                         strain=args.strain, bisect=args.bisect)
     print(f"{summary['headline']} -> {args.out}/stability.md")
     return 0 if summary["passed"] else 1
+
+
+def cmd_job(args) -> int:
+    """One job folder (job.json), as a SLURM array task runs it: exit 0 finished or requeued, 1 failed."""
+    from opalflow.runs.jobs import run_job
+
+    got = run_job(args.folder, args.np)
+    if "failed" in got:
+        print(f"error: {got['failed']}\n{got.get('log_tail', '')}", file=sys.stderr)
+        return 1
+    print(got.get("headline", "requeued" if got.get("requeued") else "done"))
+    return 0
+
+
+def cmd_status(args) -> int:
+    """Jobs of a study folder (or one run folder): pending / running / finished / failed, progress, time left."""
+    from opalflow.runs.status import status_lines
+
+    for line in status_lines(args.folder, tail=args.tail):
+        print(line)
+    return 0
 
 
 def cmd_analyze(args) -> int:
@@ -107,8 +129,18 @@ def parser() -> argparse.ArgumentParser:
     r.add_argument("--resume", action="store_true", help="continue from the newest restart file in --out")
     r.add_argument("--suffix", choices=["omp", "kk", "gpu"], default=None,
                    help="accelerator styles (-sf) where the LAMMPS build has them; bpm bonds have none")
+    r.add_argument("--executor", choices=["local", "dask", "slurm"], default=None,
+                   help="where the runs go (else the workflow's [executor]): a study's jobs, or this run as one job")
     r.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
     r.set_defaults(func=cmd_run)
+    st = sub.add_parser("status", help="a study's jobs (or a run): pending, running, finished, failed, time left")
+    st.add_argument("folder")
+    st.add_argument("--tail", type=int, default=8, help="log lines shown per failed job (default 8)")
+    st.set_defaults(func=cmd_status)
+    j = sub.add_parser("job", help="run one prepared job folder (what a SLURM array task runs)")
+    j.add_argument("folder")
+    j.add_argument("--np", type=int, default=1, help="MPI ranks")
+    j.set_defaults(func=cmd_job)
     c = sub.add_parser("check", help="numerical stability of a bonded-particle scene: a short run of its deck")
     c.add_argument("workflow", help="workflow file or name in workflows/")
     c.add_argument("--out", required=True, help="folder for the check's runs, stability.json and stability.md")

@@ -20,6 +20,7 @@ import numpy as np
 
 from opalflow.analysis import compression as mech
 from opalflow.lammps.datafile import read_data
+from opalflow.runs.record import RunRecord
 from opalflow.spec import SpecError
 from opalflow.structure import Structure
 
@@ -93,7 +94,7 @@ def load_results(folder: str | Path) -> Results:
 
 
 def _structure(folder: Path) -> tuple[Structure, dict]:
-    info = json.loads((folder / "run.json").read_text()) if (folder / "run.json").exists() else {}
+    info = RunRecord.read(folder).facts() if RunRecord.exists(folder) else {}
     data = next((p for p in (folder / "data.lmp", folder / "aggregate.lmp") if p.exists()), None)
     if data is None:
         raise SpecError("folder", str(folder), "has no data.lmp: not a bonded-particle run folder")

@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from opalflow.spec import SpecError, WorkflowSpec, apply_overrides, convert, read_toml
+from opalflow.runs.record import tracked
 from opalflow.store import folder_lock
 
 #: CLI options a kind may take, besides --out and --set, and the runner's keyword for each
@@ -89,7 +90,7 @@ class Kind:
             raise SpecError("/".join(f"--{o}" for o in OPTIONS), self.name,
                             self.refusal or f"it takes only {', '.join(self.options) or 'none of them'}")
         values = {"np": np_, "resume": resume, "suffix": suffix}
-        with folder_lock(out):
+        with folder_lock(out), tracked(spec, out):
             return resolve(self.run)(spec, out, say=say, **{OPTIONS[o]: values[o] for o in self.options})
 
     def build_workflow(self, spec: WorkflowSpec, out: Path, *, say=print) -> dict:
@@ -158,7 +159,8 @@ BUILTIN = {k.name: k for k in (
          refusal="each row is a short in-process run; matrix.steps sets its length",
          summary="the stability check with bisection over corner cases of bonded-particle scenes"),
     Kind("study", "opalflow.studies.spec:StudyWorkflow", "opalflow.studies.run:run",
-         refusal="a study sets study.np and study.workers; rerunning it resumes it (finished jobs are kept)",
+         refusal="a study sets study.np and [executor] (where its jobs run); rerunning it resumes it (finished "
+                 "jobs are kept)",
          summary="many compression jobs from one base workflow: the paper's studies"),
 )}
 

@@ -18,7 +18,8 @@ from opalflow.aerogel.fractal import FractalFit, mass_radius, plot_fractal, radi
 from opalflow.aerogel.scene import coordination, make_aggregate, periodic_structure
 from opalflow.aerogel.spec import AggregationWorkflow
 from opalflow.lammps.datafile import write_data
-from opalflow.store import h5_bytes, json_text, new_figure, put, save_figure, staged_files
+from opalflow.runs.record import finish
+from opalflow.store import h5_bytes, new_figure, put, save_figure
 from opalflow.version import __version__
 
 #: literature values of D_f (BRIEF section 2, with sources)
@@ -118,11 +119,10 @@ def run_aggregation(spec: AggregationWorkflow, out: Path, say=print) -> dict:
     results = h5_bytes(fill, workflow=spec.name)
     out.mkdir(parents=True, exist_ok=True)
     summary["wall_s"] = time.perf_counter() - start
-    with staged_files(out) as stage:
+    def files(stage):
         write_data(stage("aggregate.lmp"), s, title=f"opalflow {__version__} {spec.name}")
         stage("results.h5").write_bytes(results)
         plot_fractal((mr, mr_curve), (rg, rg_curve), stage("fractal.png"))
         plot_network(agg, z, stage("network.png"))
-        stage("report.md").write_text("\n".join(report) + "\n")
-        stage("summary.json").write_text(json_text(summary))
-    return summary
+
+    return finish(out, summary, "\n".join(report) + "\n", files=files)

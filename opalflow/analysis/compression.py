@@ -45,6 +45,18 @@ def trim_curve(path: Path, last_step: int) -> None:
     write_text_atomic(path, "".join(keep))
 
 
+def tidy_curve(path: Path) -> None:
+    """Drop the header lines that a resumed run's ``fix ave/time ... append`` wrote again mid-file:
+    one header, then the rows."""
+    if not path.exists():
+        return
+    lines = path.read_text().splitlines(keepends=True)
+    first_row = next((k for k, line in enumerate(lines) if line.strip() and not line.startswith("#")), len(lines))
+    keep = lines[:first_row] + [line for line in lines[first_row:] if not line.startswith("#")]
+    if len(keep) != len(lines):
+        write_text_atomic(path, "".join(keep))
+
+
 @dataclass
 class ElasticFit:
     """Linear fit of stress on strain over the elastic window."""

@@ -127,8 +127,10 @@ def load_frames(folder: Path) -> tuple[list[tuple[str, dict]], list, float]:
 
     import h5py
 
+    from opalflow.runs.record import RunRecord
+
     folder = Path(folder)
-    info = json.loads((folder / "run.json").read_text())
+    info = RunRecord.read(folder).facts()
     summary = json.loads((folder / "summary.json").read_text())
     snapshots = []
     with h5py.File(folder / "results.h5", "r") as h:

@@ -16,7 +16,7 @@ from opalflow.bpm.stability import check_workflow
 from opalflow.registry import load_spec
 from opalflow.resources import WORKFLOWS
 from opalflow.spec import InputError
-from opalflow.store import write_json_atomic, write_text_atomic
+from opalflow.runs.record import finish
 from opalflow.version import __version__
 
 
@@ -68,6 +68,4 @@ def run_matrix(spec: StabilityMatrixWorkflow, out: Path, say=print) -> dict:
                      f"{r['timestep_stable_max_s']:.3g} | {r['ratio']:.2f} | {r['stiffest_mode']} | "
                      f"{'pass' if r['passed'] else 'FAIL: ' + r['failed']} | {r['seconds']:.0f} |")
     lines += ["", summary["headline"] + f". Wall time {summary['wall_s']:.0f} s."]
-    write_text_atomic(out / "report.md", "\n".join(lines) + "\n")
-    write_json_atomic(out / "summary.json", summary)
-    return summary
+    return finish(out, summary, "\n".join(lines))

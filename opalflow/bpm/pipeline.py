@@ -28,9 +28,10 @@ from opalflow.lammps.datafile import write_data
 from opalflow.lammps.engine import EngineError, lammps_info, run_in_process, run_script_sh, run_subprocess, session
 from opalflow.materials import material
 from opalflow.resources import ROOT
+from opalflow.runs import launch
+from opalflow.runs.record import RunRecord, finish, refuse_finished, write_build_summary
 from opalflow.spec import SpecError
-from opalflow.store import (h5_bytes, json_text, new_figure, put, save_figure, staged_files, write_json_atomic,
-                            write_text_atomic)
+from opalflow.store import h5_bytes, new_figure, put, save_figure, write_text_atomic
 from opalflow.structure import Structure
 from opalflow.version import __version__
 
@@ -56,9 +57,8 @@ def prepare(spec: BpmWorkflow, out: Path, progress=None) -> CompressionDeck:
     write_text_atomic(out / "resume.lmp", deck.resume_lmp)
     write_text_atomic(out / "run.sh", run_script_sh())
     (out / "run.sh").chmod(0o755)
-    info = {"workflow": spec.name, "spec": spec.to_dict(), "opalflow_version": __version__,
-            "type_names": deck.structure.type_names, "n_particles": s.n_particles, "n_bonds": s.n_bonds,
-            "solid_fraction": solid_fraction(s), "build_s": build_s, "references": spec.references(),
+    info = {"type_names": deck.structure.type_names, "n_particles": s.n_particles, "n_bonds": s.n_bonds,
+            "solid_fraction": solid_fraction(s), "build_s": build_s,
             "mean_diameter_nm": float(np.mean(s.diameters)), "box_nm": s.box_lengths.tolist(),
             "periodic": s.periodic.tolist(),
             "materials": {n: material(particle_material(n, spec.material), spec.materials)
@@ -67,13 +67,14 @@ def prepare(spec: BpmWorkflow, out: Path, progress=None) -> CompressionDeck:
     if scene.run_keys:
         stats = scene.statistics(deck.source)
         info["structure"] = {k: stats[k] for k in scene.run_keys}
-    write_json_atomic(out / "run.json", info)
+    RunRecord.new(spec, deck=info).write(out)
     return deck
 
 
 def build(spec: BpmWorkflow, out: Path, say=print) -> dict:
     """Structure + full deck (data.lmp, in.lmp, resume.lmp, run.sh) + summary.json; no run."""
     start = time.perf_counter()
+    refuse_finished(out)
     say(f"building {spec.name} ({spec.kind})")
     deck = prepare(spec, out, progress=say)
     scene = scene_of(spec)
@@ -88,22 +89,30 @@ def build(spec: BpmWorkflow, out: Path, say=print) -> dict:
     summary["timings_s"] = {**deck.structure.meta.get("timings_s", {}),
                             "total": round(time.perf_counter() - start, 3)}
     summary["spec"] = spec.to_dict()
-    write_json_atomic(out / "summary.json", summary)
+    write_build_summary(out, summary)
     say(f"wrote {out}/data.lmp, in.lmp, run.sh ({time.perf_counter() - start:.1f} s); "
         f"'bash {out}/run.sh' runs it with LAMMPS alone")
     return summary
 
 
 def execute(out: Path, *, np_: int = 1, resume: bool = False, label: str = "", suffix: str | None = None) -> float:
-    """Run the deck of a prepared folder; returns LAMMPS wall seconds."""
-    info = json.loads((out / "run.json").read_text())
+    """Run the deck of a prepared folder with the launcher for ``np_`` ranks (:mod:`opalflow.runs.launch`);
+    returns LAMMPS wall seconds.  The run record's current session says where it started (restart file,
+    step) and how it was launched."""
+    record = RunRecord.read(out)
+    info = record.deck
+    launcher = launch.choose(np_)
+    first, restart = 0, ""
     if resume:
         step = newest_readable_restart(out)
         if step is None:
             raise SpecError("--resume", str(out), "no readable restart file in the folder; run without --resume")
         mech.trim_curve(out / "curve.txt", step)     # LAMMPS reads the newest restart file
-    if np_ > 1:
-        return run_subprocess(out, np=np_, total_steps=info["steps"], resume=resume, label=label, suffix=suffix)
+        first, restart = step, f"restart.{step}.bin"
+    record.begin(out, launcher=launcher.describe(), restart=restart, first_step=first)
+    if not launcher.in_process:
+        return run_subprocess(out, np=np_, total_steps=info["steps"], resume=resume, label=label, suffix=suffix,
+                              env=launcher.env())
     script = (out / ("resume.lmp" if resume else "in.lmp")).read_text()
     return run_in_process(out, script, every=info["output_every_steps"],
                           strain_per_step=info["plate_speed_m_s"] * info["timestep_s"] * 1e9 / info["height_nm"],
@@ -150,7 +159,9 @@ def git_commit() -> str:
 def analyze(out: Path, wall_s: float | None = None, lammps_s: float | None = None,
             extra: dict | None = None) -> dict:
     """Curves, modulus, strength, particle stresses -> results.h5, summary.json, report.md, plots."""
-    info = json.loads((out / "run.json").read_text())
+    record = RunRecord.read(out)
+    info = record.facts()
+    mech.tidy_curve(out / "curve.txt")
     try:
         curve = mech.read_curve(out / "curve.txt")
     except ValueError as exc:
@@ -216,10 +227,13 @@ def analyze(out: Path, wall_s: float | None = None, lammps_s: float | None = Non
         summary["headline"] = (f"INCOMPLETE run (stopped at step {summary['steps']} of {info['steps']}): "
                                + summary["headline"])
     frames = fracture.frames_at_peak_and_after(list(snapshots.values()), summary["strain_at_peak"])
+    if record.sessions:          # run by opalflow (not 'bash run.sh' + analyze): what each session did
+        record.sessions[-1].last_step = summary["steps"]
+        record.sessions[-1].wall_s = wall_s
+        summary["sessions"] = [dataclasses.asdict(x) for x in record.sessions]
+        summary["requeues"] = record.requeues
 
-    # all results or none (a full disk leaves the earlier set whole); summary.json, the mark of a
-    # finished run, is renamed last
-    with staged_files(out) as stage:
+    def files(stage):
         stage("results.h5").write_bytes(h5_bytes(lambda h: _fill_h5(
             h, info, curve, strain, stress, stress_plate, stress_substrate, broken, snapshots, histograms, summary)))
         _plots(stage, strain, stress, stress_plate, stress_substrate, fit, snapshots, histograms,
@@ -228,9 +242,10 @@ def analyze(out: Path, wall_s: float | None = None, lammps_s: float | None = Non
             fracture.plot_fracture(stage("fracture.png"), frames, info["box_nm"], info["mean_diameter_nm"],
                                    title=f"{info['workflow']} ({'open' if not info['periodic'][0] else 'periodic'} "
                                          "sides)")
-        stage("report.md").write_text(report.compression_report(info, summary, fit, bool(frames)))
-        stage("summary.json").write_text(json_text(summary))
-    return summary
+
+    # all results or none (a full disk leaves the earlier set whole); summary.json is renamed last
+    return finish(out, summary, report.compression_report(info, summary, fit, bool(frames)), files=files,
+                  record=record if record.sessions else None)
 
 
 def _fill_h5(h, info, curve, strain, stress, stress_plate, stress_substrate, broken, snapshots, histograms,
@@ -323,7 +338,7 @@ def run_workflow(spec: BpmWorkflow, out: Path, *, np_: int = 1, resume: bool = F
         lammps_s += execute(sub, np_=np_, label=f"{spec.name} (half speed): ", suffix=suffix)
         slow = analyze(sub)
         fast_curve = mech.read_curve(out / "curve.txt")
-        info = json.loads((out / "run.json").read_text())
+        info = RunRecord.read(out).deck
         fast_stress = np.mean(boundary_stresses(fast_curve, info["area_nm2"]), axis=0)
         fast_fit = mech.fit_elastic(-fast_curve["plate_dz_nm"] / info["height_nm"], fast_stress)
         fast_strength = float(np.max(fast_stress))

@@ -92,6 +92,13 @@ def _inputs(info: dict, summary: dict) -> list[str]:
     return ["## Inputs", "", "| input | value |", "|---|---|", *[f"| {k} | {v} |" for k, v in rows], ""]
 
 
+def _session_row(k: int, x: dict) -> str:
+    last = "?" if x["last_step"] is None else x["last_step"]
+    wall = "-" if x["wall_s"] is None else f"{x['wall_s']:.1f}"
+    return (f"| {k} | {x['started']} | {x['launcher']} | {x['restart'] or 'start'} | {x['first_step']}-{last} | "
+            f"{wall} | {x['ended'] or 'running'} |")
+
+
 def compression_report(info: dict, summary: dict, fit, fracture: bool) -> str:
     """The text of report.md (sections :data:`SECTIONS`)."""
     spec = info["spec"]
@@ -138,9 +145,19 @@ def compression_report(info: dict, summary: dict, fit, fracture: bool) -> str:
               "- `snapshots/particles.STEP.dump`: LAMMPS dumps (id, type, x y z, image flags, radius, sigma_xx ... "
               "sigma_yz in MPa, broken_bonds) that OVITO opens as they are; `snapshots/bonds.STEP.txt`: bond lengths.",
               ""]
-    cost = (f"wall {summary['wall_s']:.1f} s, of which LAMMPS {summary['lammps_s']:.1f} s"
-            if summary["wall_s"] is not None else "run outside opalflow (analyze only)")
-    lines += ["## Cost", "", f"{cost}; {summary['steps']} steps of {info['timestep_s']:.3g} s for "
+    sessions = summary.get("sessions", [])
+    if summary["wall_s"] is None:
+        cost = "run outside opalflow (analyze only)"
+    else:
+        done = summary["steps"] - (sessions[-1]["first_step"] if sessions else 0)
+        cost = (f"this session: wall {summary['wall_s']:.1f} s, of which LAMMPS {summary['lammps_s']:.1f} s, steps "
+                f"{sessions[-1]['first_step'] if sessions else 0}-{summary['steps']} ({done} steps)")
+    lines += ["## Cost", "", f"{cost}; {summary['steps']} steps in all of {info['timestep_s']:.3g} s for "
               f"{info['n_particles']} particles and {info['n_bonds']} bonds; structure built in "
               f"{info['build_s']:.1f} s.", ""]
+    if len(sessions) > 1 or summary.get("requeues"):
+        lines += [f"Sessions ({len(sessions)}; SLURM requeues: {summary.get('requeues', 0)}):", "",
+                  "| # | started | launcher | continued from | steps | wall (s) | ended |", "|---|---|---|---|---|---|---|"]
+        lines += [_session_row(k, x) for k, x in enumerate(sessions, 1)]
+        lines.append("")
     return "\n".join(lines)

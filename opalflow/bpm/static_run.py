@@ -27,7 +27,8 @@ from opalflow.bpm.static import (VOIGT, LooseParticlesError, StaticResult, loose
                                   solve_compression, solve_tensor)
 from opalflow.bpm.stiffness import BondNetwork, stiffness_network
 from opalflow.lammps.datafile import write_data
-from opalflow.store import h5_bytes, json_text, new_figure, put, save_figure, staged_files, write_json_atomic
+from opalflow.runs.record import RunRecord, finish
+from opalflow.store import h5_bytes, new_figure, put, save_figure
 from opalflow.version import __version__
 
 #: the strain of the solve (any: the answer is linear; small keeps the reported displacements physical)
@@ -77,7 +78,7 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
     if scene.run_keys:
         stats = scene.statistics(deck.source)
         info["structure"] = {k: stats[k] for k in scene.run_keys}
-    write_json_atomic(out / "run.json", info)
+    _record(spec, info).begin(out, launcher="in-process (static solve)")
 
     say(f"static solve ({c.solver}): {s.n_particles} particles, {s.n_bonds} bonds, {6 * s.n_particles} dofs")
     res = solve_compression(net, data.positions, substrate, deck.top_layer, deck.height_nm, deck.area_nm2,
@@ -112,12 +113,19 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
     summary["reference"] = {k: {"value": v, "source": src, "error": (summary[k] - v) / v}
                             for k, (v, src) in info["references"].items() if k in summary}
     summary["wall_s"] = time.perf_counter() - t0
-    with staged_files(out) as stage:
+
+    def files(stage):
         _write_h5(stage("results.h5"), data, res, sigma_unit, strain_unit, snapshots, summary)
         _plots(stage, data, res, snapshots, strain_unit, c.snapshot_strains)
-        stage("report.md").write_text(_report(spec, info, summary, res))
-        stage("summary.json").write_text(json_text(summary))
-    return summary
+
+    sides = "periodic" if s.periodic[0] else "open"       # the structure's, whatever section set it
+    return finish(out, summary, _report(spec, info, summary, res, sides), files=files)
+
+
+def _record(spec: BpmWorkflow, info: dict) -> RunRecord:
+    """The run record of a static solve: its facts without what the record holds itself."""
+    return RunRecord.new(spec, deck={k: v for k, v in info.items()
+                                     if k not in ("workflow", "spec", "references", "opalflow_version")})
 
 
 def _write_h5(path: Path, data, res: StaticResult, sigma_unit, strain_unit, snapshots, summary) -> None:
@@ -157,7 +165,7 @@ def _plots(stage, data, res: StaticResult, snapshots, strain_unit, strains) -> N
             f"strain {100 * e:.2f} %": mech.histogram_fraction(strain_unit * e, edges) for e in strains})
 
 
-def _report(spec: BpmWorkflow, info: dict, summary: dict, res: StaticResult) -> str:
+def _report(spec: BpmWorkflow, info: dict, summary: dict, res: StaticResult, sides: str) -> str:
     lines = [f"# {spec.name}: static compression", "",
              f"{info['n_particles']} particles, {info['n_bonds']} bonds; the bond network linearised from LAMMPS's "
              "bpm/rotational (opalflow/bpm/stiffness.py); substrate fixed, top layer "
@@ -165,7 +173,7 @@ def _report(spec: BpmWorkflow, info: dict, summary: dict, res: StaticResult) -> 
              f"(H = {info['height_nm']:.1f} nm), "
              + ("glued to the wall (x, y and rotations held)" if spec.compression.loading == "glued"
                 else "its x, y and rotations free") + "; sides "
-             f"{spec.boundary.sides}. Contacts carry no load at the reference state and bonds do not break: "
+             f"{sides}. Contacts carry no load at the reference state and bonds do not break: "
              "no strength.", "",
              "| quantity | value | reference | error |", "|---|---|---|---|"]
     ref = summary["reference"].get("youngs_modulus_specimen_GPa") or summary["reference"].get("youngs_modulus_GPa")
@@ -199,7 +207,7 @@ def run_tensor(spec: BpmWorkflow, s, out: Path, t0: float, say=print) -> dict:
             "references": spec.references(), "volume_nm3": volume}
     out.mkdir(parents=True, exist_ok=True)
     write_data(out / "data.lmp", data, title=f"opalflow {__version__} {spec.name} (static, periodic)")
-    write_json_atomic(out / "run.json", info)
+    _record(spec, info).begin(out, launcher="in-process (static solve)")
     summary = {
         "workflow": spec.name, "method": "static", "loading": "periodic",
         "stiffness_tensor_GPa": C.tolist(), "voigt_order": "xx yy zz yz xz xy",
@@ -229,8 +237,4 @@ def run_tensor(spec: BpmWorkflow, s, out: Path, t0: float, say=print) -> dict:
               f"{res.residual:.1e}; {res.seconds:.1f} s, peak memory {res.peak_memory_MiB:.0f} MiB."]
     voigt = ["xx", "yy", "zz", "yz", "xz", "xy"]
     tensor = h5_bytes(lambda h: put(h, "stiffness_tensor_GPa", C, "GPa", voigt, rows=voigt), method="static")
-    with staged_files(out) as stage:
-        stage("results.h5").write_bytes(tensor)
-        stage("report.md").write_text("\n".join(lines) + "\n")
-        stage("summary.json").write_text(json_text(summary))
-    return summary
+    return finish(out, summary, "\n".join(lines), files=lambda stage: stage("results.h5").write_bytes(tensor))

@@ -28,7 +28,8 @@ import numpy as np
 
 from opalflow.granular.decks import Contact, Wall, liggghts_executable, run_engine, write_decks, write_spheres
 from opalflow.granular.spec import ImpactsWorkflow
-from opalflow.store import json_text, new_figure, save_figure, staged_files, write_text_atomic
+from opalflow.runs.record import RunRecord, finish
+from opalflow.store import new_figure, save_figure
 
 #: a friction coefficient no impact here reaches: the contact sticks throughout
 STICKING_FRICTION = 1e3
@@ -109,7 +110,7 @@ def run_impacts(spec: ImpactsWorkflow, out: Path, say=print) -> dict:
     liggghts_executable("kind", "granular_impacts")
     t0 = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
-    write_text_atomic(out / "run.json", json_text({"workflow": spec.name, "spec": spec.to_dict()}))
+    RunRecord.new(spec).begin(out)
     i, m = spec.impact, spec.material
     rows, diffs = [], {}
     for case in CASES:
@@ -137,7 +138,7 @@ def run_impacts(spec: ImpactsWorkflow, out: Path, say=print) -> dict:
                "restitution_error": head / m.restitution - 1,
                "headline": ", ".join(f"{r['case']} {r['verdict']} ({r['max_relative_difference']:.1e})" for r in rows)}
     summary["wall_s"] = time.perf_counter() - t0
-    with staged_files(out) as stage:
+    def files(stage):
         fig, ax = new_figure(figsize=(6, 3.8))
         for name, (steps, diff) in diffs.items():   # second_contact dashed: it starts as oblique_sticking
             dashed = name == "second_contact"
@@ -147,9 +148,8 @@ def run_impacts(spec: ImpactsWorkflow, out: Path, say=print) -> dict:
         ax.set_ylabel("|LAMMPS - LIGGGHTS| / impact speed")
         ax.legend(fontsize=7)
         save_figure(fig, stage("impacts.png"))
-        stage("report.md").write_text(_report(spec, summary))
-        stage("summary.json").write_text(json_text(summary))
-    return summary
+
+    return finish(out, summary, _report(spec, summary), files=files)
 
 
 def _report(spec: ImpactsWorkflow, s: dict) -> str:

@@ -16,7 +16,8 @@ import numpy as np
 from opalflow.granular.decks import Contact, Wall, liggghts_executable, run_engine, write_decks, write_spheres, x_gamma_t
 from opalflow.granular.spec import GranularWorkflow
 from opalflow.packing import dense_random_packing
-from opalflow.store import json_text, new_figure, save_figure, staged_files, write_text_atomic
+from opalflow.runs.record import RunRecord, finish
+from opalflow.store import new_figure, save_figure
 
 #: a plate-force row counts in the comparison when its force is above this fraction of the largest
 FORCE_FLOOR = 1e-6
@@ -65,7 +66,7 @@ def run_granular(spec: GranularWorkflow, out: Path, say=print) -> dict:
         liggghts_executable("engine", spec.engine)
     out.mkdir(parents=True, exist_ok=True)
     scene = build_scene(spec, out)
-    write_text_atomic(out / "run.json", json_text({"workflow": spec.name, "spec": spec.to_dict(), **scene}))
+    RunRecord.new(spec, deck=scene).begin(out)
     curves, walls = {}, {}
     for engine in engines:
         say(f"{spec.name}: {scene['n_particles']} spheres, {spec.plate.steps} steps on {engine}")
@@ -81,7 +82,7 @@ def run_granular(spec: GranularWorkflow, out: Path, say=print) -> dict:
     summary["headline"] = ", ".join(f"{e}: plate force {f:.6g} N" for e, f in summary["plate_force_N"].items()) + (
         f"; largest relative difference {cc['max_relative_difference']:.2e}" if cc else "")
     summary["wall_s"] = time.perf_counter() - t0
-    with staged_files(out) as stage:
+    def files(stage):
         fig, ax = new_figure(figsize=(5, 3.6))
         for e, c in curves.items():
             ax.plot(100 * strain[e], c[:, 1] / scene["area_m2"], label=e, lw=1.2 if e == "lammps" else 0.8,
@@ -90,9 +91,8 @@ def run_granular(spec: GranularWorkflow, out: Path, say=print) -> dict:
         ax.set_ylabel("plate stress (Pa)")
         ax.legend()
         save_figure(fig, stage("plate_force.png"))
-        stage("report.md").write_text(_report(spec, summary))
-        stage("summary.json").write_text(json_text(summary))
-    return summary
+
+    return finish(out, summary, _report(spec, summary), files=files)
 
 
 def _report(spec: GranularWorkflow, s: dict) -> str:

@@ -149,14 +149,31 @@ def script_commands(text: str) -> list[str]:
     return out
 
 
+class Preempted(Interrupted):
+    """The scheduler asked the run to stop (SIGUSR1 before a SLURM time limit, SIGTERM): a restart file
+    was written at ``step`` where the run could, so a requeued job continues from it."""
+
+
+#: set by a signal handler (:func:`request_stop`): the in-process run writes a restart and stops at the
+#: end of its current chunk
+_STOP: list[str] = []
+
+
+def request_stop(signum=None, frame=None) -> None:
+    """Ask the running LAMMPS loop to write a restart file and stop (a signal handler)."""
+    _STOP.append(str(signum))
+
+
 class Progress:
-    """Prints step, strain, rate and time left (to stderr) at most every ``interval`` seconds."""
+    """Prints step, strain, rate and time left (to stderr) at most every ``interval`` seconds; with a
+    ``folder``, the same in ``folder/progress.json`` for ``python -m opalflow status``."""
 
     def __init__(self, total_steps: int, start_step: int = 0, label: str = "", interval: float = 5.0,
-                 out=None):
+                 out=None, folder: Path | None = None):
         self.total, self.start, self.label, self.interval = total_steps, start_step, label, interval
         self.t0 = self.last = time.perf_counter()
         self.out = out or sys.stderr
+        self.folder = folder
 
     def update(self, step: int, strain: float | None = None, force: bool = False) -> None:
         now = time.perf_counter()
@@ -169,6 +186,12 @@ class Progress:
         strain_txt = f", strain {strain:.4f}" if strain is not None else ""
         print(f"{self.label}step {step}/{self.total} ({100 * step / max(self.total, 1):.0f} %)"
               f"{strain_txt}, {rate:.0f} steps/s, {left:.0f} s left", file=self.out, flush=True)
+        if self.folder is not None:
+            from opalflow.store import write_json_atomic
+
+            write_json_atomic(Path(self.folder) / "progress.json", {
+                "step": step, "total": self.total, "rate_steps_s": rate, "left_s": left if rate > 0 else None,
+                "strain": strain, "time": time.time()})
 
 
 @contextmanager
@@ -197,6 +220,8 @@ def run_in_process(folder: Path, script: str, *, every: int, strain_per_step: fl
 
     The final ``run N upto`` is split into chunks (multiples of ``every`` steps) so
     that progress can be printed; the result is the same run.  Returns LAMMPS seconds.
+    A stop asked for by :func:`request_stop` (a scheduler's signal) writes ``restart.STEP.bin`` at the end
+    of the chunk and raises :class:`Preempted`.
     """
     t = time.perf_counter()
     with session(folder, suffix=suffix) as lmp:
@@ -206,7 +231,7 @@ def run_in_process(folder: Path, script: str, *, every: int, strain_per_step: fl
                 target = int(words[1])
                 step = int(lmp.get_thermo("step"))
                 chunk = every * max(1, (target // 50) // every)
-                progress = Progress(target, step, label)
+                progress = Progress(target, step, label, folder=folder)
                 first = True
                 while step < target:
                     nxt = min(target, (step // chunk + 1) * chunk)
@@ -217,6 +242,10 @@ def run_in_process(folder: Path, script: str, *, every: int, strain_per_step: fl
                     first = False
                     step = int(lmp.get_thermo("step"))
                     progress.update(step, step * strain_per_step)
+                    if _STOP and step < target:
+                        _STOP.clear()
+                        lmp.command(f"write_restart restart.{step}.bin")
+                        raise Preempted(folder, step)
                 progress.update(step, step * strain_per_step, force=True)
             else:
                 lmp.command(cmd)
@@ -230,8 +259,8 @@ def run_script_sh(lmp_args: str = "-in in.lmp") -> str:
     mpiexec = executable("mpiexec") or "mpiexec"
     return f"""#!/usr/bin/env bash
 # Runs this deck with LAMMPS alone (no opalflow needed): bash run.sh [resume]
-# NP=4 bash run.sh runs it under MPI; SUFFIX=omp (kk, gpu) uses accelerated styles where
-# the LAMMPS build has them.  Written by opalflow {_version()}.
+# NP=4 bash run.sh runs it under MPI (OPALFLOW_LAUNCH="srun --mpi=pmi2 -n {{np}}" to launch it another
+# way); SUFFIX=omp (kk, gpu) uses accelerated styles where the LAMMPS build has them.  Written by opalflow {_version()}.
 set -euo pipefail
 cd "$(dirname "$0")"
 export LD_LIBRARY_PATH="{folder or ''}${{LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}}"
@@ -260,7 +289,10 @@ if [ "${{1:-}}" = resume ]; then
 fi
 args=(-nocite -in "$input" -log log.lammps)
 [ -n "${{SUFFIX:-}}" ] && args+=(-sf "$SUFFIX")
-if [ "${{NP:-1}}" -gt 1 ]; then
+if [ -n "${{OPALFLOW_LAUNCH:-}}" ]; then
+  # the launch command of your cluster, {{np}} for the ranks, e.g. OPALFLOW_LAUNCH="srun --mpi=pmi2 -n {{np}}"
+  exec ${{OPALFLOW_LAUNCH//\{{np\}}/${{NP:-1}}}} "{lmp}" "${{args[@]}}"
+elif [ "${{NP:-1}}" -gt 1 ]; then
   exec "{mpiexec}" -n "$NP" "{lmp}" "${{args[@]}}"
 else
   exec "{lmp}" "${{args[@]}}"
@@ -275,14 +307,15 @@ def _version() -> str:
 
 
 def run_subprocess(folder: Path, *, np: int, total_steps: int, resume: bool, label: str = "",
-                   suffix: str | None = None) -> float:
-    """Run ``bash run.sh`` (``NP`` processes); progress from the thermo lines on its output."""
+                   suffix: str | None = None, env: dict | None = None) -> float:
+    """Run ``bash run.sh`` (``NP`` processes; ``env`` adds to the environment, e.g. the launch command of
+    :mod:`opalflow.runs.launch`); progress from the thermo lines on its output."""
     import subprocess
 
-    env = dict(os.environ, NP=str(np), SUFFIX=suffix or "")
+    env = dict(os.environ, NP=str(np), SUFFIX=suffix or "", **(env or {}))
     t = time.perf_counter()
     cmd = ["bash", str(Path(folder) / "run.sh")] + (["resume"] if resume else [])
-    progress = Progress(total_steps, 0, label)
+    progress = Progress(total_steps, 0, label, folder=folder)
     step = None
     with subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env) as p:
         try:

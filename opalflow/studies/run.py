@@ -20,10 +20,11 @@ from opalflow.analysis.fits import fit_exponential, fit_power, fit_power_law
 from opalflow.materials import material
 from opalflow.resources import DATA, resource
 from opalflow.spec import SpecError
-from opalflow.store import new_figure, save_figure, write_json_atomic, write_text_atomic
+from opalflow.runs.record import finish
+from opalflow.store import new_figure, save_figure
 from opalflow.studies.aerogel import aerogel_density, aerogel_models
 from opalflow.studies.spec import StudyWorkflow
-from opalflow.studies.sweep import FAILED, Job, fmt_value, job_spec, label_number, sweep
+from opalflow.studies.sweep import Job, failed_jobs, fmt_value, job_spec, label_number, sweep
 from opalflow.version import __version__
 
 
@@ -69,7 +70,8 @@ def calibration(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
         jobs = [job(p) for p in points]
         summaries = sweep(spec, out, jobs, say)
         if len(summaries) < len(jobs):
-            raise SpecError("study", spec.name, f"calibration run failed: {FAILED}; see {out}/jobs")
+            bad = {k: v["error"] for k, v in failed_jobs(out, 0).items() if k in {j.label for j in jobs}}
+            raise SpecError("study", spec.name, f"calibration run failed: {bad}; see {out}/jobs")
         runs += len(points)
         values = [result(s) for s in summaries.values()]
         y = values[0]
@@ -503,21 +505,22 @@ RUNNERS = {"calibration": calibration, "bulk": bulk, "coating": coating, "porosi
 
 def run(spec: StudyWorkflow, out: Path, say=print) -> dict:
     """Run the study's jobs (cached) and write summary.json and report.md."""
-    t0 = time.perf_counter()
+    t0, started = time.perf_counter(), time.time()
     out.mkdir(parents=True, exist_ok=True)
-    FAILED.clear()
     summary, body = RUNNERS[spec.study.type](spec, out, say)
-    summary["failed_jobs"] = dict(FAILED)
-    if FAILED:
-        body += ["", "## Failed jobs (left out above; a rerun tries them again)", "",
-                 *[f"- `{k}`: {v}" for k, v in FAILED.items()]]
+    failed = failed_jobs(out, started)
+    summary["failed_jobs"] = {k: v["error"] for k, v in failed.items()}
+    if failed:
+        body += ["", "## Failed jobs (left out above; a rerun tries them again)", ""]
+        for k, v in failed.items():
+            body += [f"- `{k}`: {v['error']} (folder `{v['folder']}`)"]
+            if v["log_tail"]:
+                body += ["", "  ```", *[f"  {line}" for line in v["log_tail"].splitlines()[-8:]], "  ```", ""]
     summary.update({"study": spec.study.type, "wall_s": time.perf_counter() - t0, "opalflow_version": __version__,
-                    "spec": spec.to_dict()})
+                    "executor": spec.executor.type, "spec": spec.to_dict()})
     report = [f"# Study: {spec.study.type} ({spec.name})", "",
               f"Base workflow `{spec.study.paper_base if spec.study.paper_scale else spec.study.base}`"
               + (f" with {', '.join(spec.study.set)}" if spec.study.set else "") + "; jobs in `jobs/` (cached by "
               "spec hash: a rerun does only what is missing).", "", *body, "",
               f"Wall time of this command: {summary['wall_s']:.0f} s (jobs already finished cost nothing)."]
-    write_text_atomic(out / "report.md", "\n".join(report) + "\n")
-    write_json_atomic(out / "summary.json", summary)
-    return summary
+    return finish(out, summary, "\n".join(report))

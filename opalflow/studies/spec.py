@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from opalflow.runs.spec import ExecutorSpec
 from opalflow.spec import WorkflowSpec, check, check_name
 
 STUDIES = ("calibration", "bulk", "coating", "porosity", "convergence", "sides", "aerogel_models", "aerogel_density")
@@ -17,8 +18,7 @@ class StudySpec:
     paper_base: str = "opal_fcc"
     paper_scale: bool = False
     set: list[str] = field(default_factory=list)
-    workers: int = 0
-    np: int = 1
+    np: int = 1                  # MPI ranks per job (the [executor] section says where the jobs run)
     method: str = "dynamic"      # static: moduli by one linear solve per job (no strength; not calibration)
     # calibration (eqs. 18-19)
     target_E_GPa: float = 1.7
@@ -44,6 +44,7 @@ class StudyWorkflow(WorkflowSpec):
     """A study: many compression jobs made from one base workflow (Dosta et al.)."""
 
     study: StudySpec = field(default_factory=StudySpec)
+    executor: ExecutorSpec = field(default_factory=ExecutorSpec)
 
     def validate(self) -> None:
         """The [study] section; the jobs' own specs are validated when the study builds them."""
@@ -52,8 +53,8 @@ class StudyWorkflow(WorkflowSpec):
         check(st.type in STUDIES, "study.type", st.type, f"must be one of {', '.join(STUDIES)}")
         for where, name in (("study.base", st.base), ("study.paper_base", st.paper_base)):
             check_name(where, name)
-        check(st.workers >= 0, "study.workers", st.workers, "must be >= 0 (jobs at once; 0: cores / np)")
         check(st.np >= 1, "study.np", st.np, "must be >= 1 (MPI processes per job)")
+        self.executor.validate()
         check(st.method in ("dynamic", "static"), "study.method", st.method, "must be 'dynamic' or 'static'")
         check(not (st.method == "static" and st.type == "calibration"), "study.method", st.method,
               "must be 'dynamic' for a calibration (it fits the strength, which a static solve has not)")

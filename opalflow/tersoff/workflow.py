@@ -13,7 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from opalflow.store import new_figure, save_figure, write_json_atomic, write_text_atomic
+from opalflow.runs.record import finish
+from opalflow.store import new_figure, save_figure
 from opalflow.tersoff import fit as fitting
 from opalflow.tersoff import stability as stab
 from opalflow.tersoff.model import DiamondModel, neighbor_radius
@@ -135,9 +136,7 @@ def _finish(out: Path, spec: TersoffWorkflow, summary: dict, report: list[str], 
     summary["spec"] = spec.to_dict()
     report.append("")
     report.append(f"Wall time {summary['wall_s']:.1f} s on this machine. opalflow {__version__}.")
-    write_text_atomic(out / "report.md", "\n".join(report) + "\n")
-    write_json_atomic(out / "summary.json", summary)
-    return summary
+    return finish(out, summary, "\n".join(report))
 
 
 def _base_summary(values: dict, loss: float, reference_loss: float) -> dict:

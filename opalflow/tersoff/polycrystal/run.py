@@ -14,7 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from opalflow.store import h5_bytes, json_text, new_figure, save_figure, staged_files, write_json_atomic
+from opalflow.runs.record import RunRecord, finish
+from opalflow.store import h5_bytes, new_figure, save_figure, write_json_atomic
 from opalflow.tersoff.parameters import load_parameters
 from opalflow.tersoff.polycrystal.crystal import check_sample_hessian, longitudinal_speed_nm_ps, single_crystal
 from opalflow.tersoff.polycrystal.dynamics import M_PER_S, Polycrystal, polycrystal_bounds, speeds
@@ -63,7 +64,7 @@ def setup(spec: PolycrystalWorkflow, out: Path) -> tuple:
 def start_folder(out: Path, spec: PolycrystalWorkflow) -> None:
     """The run folder with ``run.json`` (the spec, for ``--resume``) and ``jobs/`` (one JSON per finished run)."""
     (out / "jobs").mkdir(parents=True, exist_ok=True)
-    write_json_atomic(out / "run.json", {"kind": spec.kind, "spec": spec.to_dict(), "opalflow_version": __version__})
+    RunRecord.new(spec).begin(out)
 
 
 def finished(path: Path, job: dict) -> dict:
@@ -208,7 +209,7 @@ def run_tension(spec: TensionWorkflow, out: Path, say=print, resume: bool = Fals
             say(f"{label}: E = {job['youngs_modulus_GPa']:.2f} GPa, nu = {job['poisson_ratio']:.4f} "
                 f"({job['macro_steps']} macro steps, {job['evaluations']} sample evaluations, {job['wall_s']:.1f} s)")
     summary = _tension_summary(spec, jobs, bounds, check, relax_cmp, crystal, samples)
-    with staged_files(out) as stage:
+    def files(stage):
         _plot_curves(stage("stress_strain.png"), stage("volume_strain.png"), jobs)
         for i, pc in last.items():
             n, h = t.cubes[i], t.cube_nm[i]
@@ -219,9 +220,8 @@ def run_tension(spec: TensionWorkflow, out: Path, say=print, resume: bool = Fals
                       f"(seed {spec.samples.seeds[-1]})")
         stage("results.h5").write_bytes(_tension_h5(jobs))
         summary["wall_s"] = time.perf_counter() - t0
-        stage("report.md").write_text(_tension_report(spec, summary, jobs))
-        stage("summary.json").write_text(json_text(summary))
-    return summary
+
+    return finish(out, summary, _tension_report(spec, summary, jobs), files=files)
 
 
 def _lammps_check(spec: PolycrystalWorkflow, params, samples: Samples, out: Path) -> dict | None:
@@ -469,7 +469,7 @@ def run_waves(spec: WavesWorkflow, out: Path, say=print, resume: bool = False) -
         say(f"{name} wave: {job['speed_m_s']:.0f} +- {job['speed_stderr_m_s']:.0f} m/s ({job['macro_steps']} macro steps, "
             f"{job['wall_s']:.1f} s)")
     summary = _waves_summary(spec, jobs, bounds, measured, check, crystal, samples)
-    with staged_files(out) as stage:
+    def files(stage):
         _plot_fronts(stage("wavefront.png"), jobs)
         _plot_profiles(stage("profiles.png"), jobs)
         for name, pc in states.items():
@@ -479,9 +479,8 @@ def run_waves(spec: WavesWorkflow, out: Path, say=print, resume: bool = False) -
             plot_mesh(stage("mesh.png"), pc, f"{name} wave: {pc.mesh.elements} elements at the end of the run")
         stage("results.h5").write_bytes(_waves_h5(jobs))
         summary["wall_s"] = time.perf_counter() - t0
-        stage("report.md").write_text(_waves_report(spec, summary, jobs))
-        stage("summary.json").write_text(json_text(summary))
-    return summary
+
+    return finish(out, summary, _waves_report(spec, summary, jobs), files=files)
 
 
 def _waves_summary(spec, jobs, bounds, measured, check, crystal, samples) -> dict:

