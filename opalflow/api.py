@@ -106,14 +106,16 @@ def run(workflow: str | Path | dict | WorkflowSpec | None, out: str | Path, *, s
         usable = lammps_info()["accelerators"]
         if suffix not in usable:
             raise SpecError("--suffix", suffix, f"this LAMMPS build offers {', '.join(usable) or 'none'}")
-    ex = executor_of(workflow, set, executor)
-    if ex.type != "local" and spec.kind != "study":
+    kind = registry.get(spec.kind)
+    ex = executor_of(None if resume and workflow is None else workflow, set, executor)
+    if "executor" in kind.options:              # a kind of many jobs sends them there
+        return kind.run_workflow(spec, out, np_=np, resume=resume, say=_say(quiet), suffix=suffix,
+                                 executor=ex if executor is not None else None)
+    if ex.type != "local":                      # any other run goes there as one job
         if suffix:
             raise SpecError("--suffix", suffix, "is for runs on this machine (a submitted run uses the launcher)")
         return submit(spec, out, ex, np_=np, say=_say(quiet))
-    if spec.kind == "study" and executor is not None:
-        spec.executor = ex
-    return registry.get(spec.kind).run_workflow(spec, out, np_=np, resume=resume, say=_say(quiet), suffix=suffix)
+    return kind.run_workflow(spec, out, np_=np, resume=resume, say=_say(quiet), suffix=suffix)
 
 
 def executor_of(workflow, set: Settings = None, override: str | None = None):

@@ -1,4 +1,4 @@
-"""Command line: ``python -m opalflow info | list | build | run | check | analyze | status | job``: each verb parses its
+"""Command line: ``python -m opalflow info | list | build | run | check | analyze | status | plan | job``: each verb parses its
 arguments and calls the Python API of the same name (:mod:`opalflow.api`); what each kind does comes from
 :mod:`opalflow.registry`.  Bad input: one line, exit 2; a failed LAMMPS run: its log tail, exit 1; Ctrl-C:
 one line saying where it stopped and how to resume, exit 130."""
@@ -71,7 +71,7 @@ def cmd_job(args) -> int:
     """One job folder (job.json), as a SLURM array task runs it: exit 0 finished or requeued, 1 failed."""
     from opalflow.runs.jobs import run_job
 
-    got = run_job(args.folder, args.np)
+    got = run_job(args.folder, args.np, args.threads)
     if "failed" in got:
         print(f"error: {got['failed']}\n{got.get('log_tail', '')}", file=sys.stderr)
         return 1
@@ -84,6 +84,18 @@ def cmd_status(args) -> int:
     from opalflow.runs.status import status_lines
 
     for line in status_lines(args.folder, tail=args.tail):
+        print(line)
+    return 0
+
+
+def cmd_plan(args) -> int:
+    """Predicted core-hours, memory and time per job, and the SLURM resources to ask for."""
+    from opalflow.runs.plan import plan, plan_lines
+
+    spec = api.load_workflow(args.workflow, args.set)
+    p = plan(spec, ranks=args.np, sample=args.sample, against=args.measured,
+             say=lambda m: print(m, file=sys.stderr, flush=True))
+    for line in plan_lines(p):
         print(line)
     return 0
 
@@ -137,9 +149,17 @@ def parser() -> argparse.ArgumentParser:
     st.add_argument("folder")
     st.add_argument("--tail", type=int, default=8, help="log lines shown per failed job (default 8)")
     st.set_defaults(func=cmd_status)
+    pl = sub.add_parser("plan", help="core-hours, memory and time per job of a run or study, and its SLURM request")
+    pl.add_argument("workflow", help="workflow file or name in workflows/")
+    pl.add_argument("--np", type=int, default=1, help="MPI ranks per job")
+    pl.add_argument("--sample", type=int, default=3, help="jobs whose structure is built (0: all; default 3)")
+    pl.add_argument("--measured", default=None, help="a finished run or study folder: measured figures beside")
+    pl.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
+    pl.set_defaults(func=cmd_plan)
     j = sub.add_parser("job", help="run one prepared job folder (what a SLURM array task runs)")
     j.add_argument("folder")
     j.add_argument("--np", type=int, default=1, help="MPI ranks")
+    j.add_argument("--threads", type=int, default=1, help="BLAS/OpenMP threads of the job (default 1)")
     j.set_defaults(func=cmd_job)
     c = sub.add_parser("check", help="numerical stability of a bonded-particle scene: a short run of its deck")
     c.add_argument("workflow", help="workflow file or name in workflows/")

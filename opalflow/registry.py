@@ -28,7 +28,7 @@ from opalflow.runs.record import tracked
 from opalflow.store import folder_lock
 
 #: CLI options a kind may take, besides --out and --set, and the runner's keyword for each
-OPTIONS = {"np": "np_", "suffix": "suffix", "resume": "resume"}
+OPTIONS = {"np": "np_", "suffix": "suffix", "resume": "resume", "executor": "executor"}
 
 #: a workflow file without ``kind`` is an opal
 DEFAULT_KIND = "opal"
@@ -63,6 +63,8 @@ class Kind:
         (``python -m opalflow check``); "" if none.
     scene : ``"module:attribute"`` of the :class:`opalflow.bpm.scene.Scene` that the compression
         pipeline builds the structure with; "" for kinds that are not bonded-particle scenes.
+    cost : ``"module:function"`` called as ``cost(spec)`` -> {method, n_particles, n_bonds, steps, ...}: what
+        ``python -m opalflow plan`` prices a run by (:mod:`opalflow.runs.plan`); "" if it has none.
     options : the names in :data:`OPTIONS` it takes.
     refusal : why it does not take the others (said when one is given).
     summary : one line for ``list`` and ``info``.
@@ -75,6 +77,7 @@ class Kind:
     analyze: str = ""
     check: str = ""
     scene: str = ""
+    cost: str = ""
     options: tuple[str, ...] = ()
     refusal: str = ""
     summary: str = ""
@@ -83,13 +86,14 @@ class Kind:
         return resolve(self.spec)
 
     def run_workflow(self, spec: WorkflowSpec, out: Path, *, say=print, np_: int = 1, resume: bool = False,
-                     suffix: str | None = None) -> dict:
-        """Run ``spec`` into ``out``; options the kind does not take must be at their defaults."""
-        given = {"np": np_ != 1, "resume": resume, "suffix": suffix is not None}
+                     suffix: str | None = None, executor=None) -> dict:
+        """Run ``spec`` into ``out``; options the kind does not take must be at their defaults (``executor``:
+        an :class:`opalflow.runs.spec.ExecutorSpec` for kinds that run many jobs)."""
+        given = {"np": np_ != 1, "resume": resume, "suffix": suffix is not None, "executor": executor is not None}
         if any(on and o not in self.options for o, on in given.items()):
-            raise SpecError("/".join(f"--{o}" for o in OPTIONS), self.name,
+            raise SpecError("/".join(f"--{o}" for o in OPTIONS if o != "executor"), self.name,
                             self.refusal or f"it takes only {', '.join(self.options) or 'none of them'}")
-        values = {"np": np_, "resume": resume, "suffix": suffix}
+        values = {"np": np_, "resume": resume, "suffix": suffix, "executor": executor}
         with folder_lock(out), tracked(spec, out):
             return resolve(self.run)(spec, out, say=say, **{OPTIONS[o]: values[o] for o in self.options})
 
@@ -116,7 +120,8 @@ def _compression(name: str, spec: str, scene: str, summary: str) -> Kind:
     """A bonded-particle scene compressed by a plate: the pipeline of :mod:`opalflow.bpm`."""
     return Kind(name, spec, run="opalflow.bpm.pipeline:run_workflow", build="opalflow.bpm.pipeline:build",
                 analyze="opalflow.bpm.pipeline:analyze_folder",
-                check="opalflow.bpm.stability:check_workflow", scene=scene, options=("np", "resume", "suffix"),
+                check="opalflow.bpm.stability:check_workflow", scene=scene, cost="opalflow.bpm.pipeline:cost_facts",
+                options=("np", "resume", "suffix"),
                 summary=summary)
 
 
@@ -158,7 +163,7 @@ BUILTIN = {k.name: k for k in (
     Kind("stability_matrix", "opalflow.bpm.spec:StabilityMatrixWorkflow", "opalflow.bpm.matrix:run_matrix",
          refusal="each row is a short in-process run; matrix.steps sets its length",
          summary="the stability check with bisection over corner cases of bonded-particle scenes"),
-    Kind("study", "opalflow.studies.spec:StudyWorkflow", "opalflow.studies.run:run",
+    Kind("study", "opalflow.studies.spec:StudyWorkflow", "opalflow.studies.run:run", options=("executor",),
          refusal="a study sets study.np and [executor] (where its jobs run); rerunning it resumes it (finished "
                  "jobs are kept)",
          summary="many compression jobs from one base workflow: the paper's studies"),

@@ -1,5 +1,6 @@
 """Compression runs with real LAMMPS: analytic lattice, deck contents, run.sh, resume, failure."""
 import json
+
 import math
 import os
 import signal
@@ -10,6 +11,8 @@ import time
 import h5py
 import numpy as np
 import pytest
+
+from opalflow.runs.record import RunRecord
 
 from opalflow.cli import main
 from opalflow.bpm.deck import compression_deck
@@ -137,7 +140,7 @@ def test_killed_run_resumes(tmp_path, lattice_run):
     os.killpg(proc.pid, signal.SIGKILL)
     proc.wait()
     steps_done = max(int(p.name.split(".")[1]) for p in out.glob("restart.*.bin"))
-    info = json.loads((out / "run.json").read_text())
+    info = RunRecord.read(out).facts()
     assert 0 < steps_done < info["steps"]
     assert main(["run", "--out", str(out), "--resume"]) == 0
     resumed = json.loads((out / "summary.json").read_text())
@@ -211,7 +214,7 @@ def test_opal_run_carries_its_structure_statistics(tmp_path, quick_spec, quick_s
     from opalflow.opal.scene import STRUCTURE_KEYS
 
     prepare(quick_spec, tmp_path)
-    info = json.loads((tmp_path / "run.json").read_text())
+    info = RunRecord.read(tmp_path).facts()
     stats = structure_statistics(quick_structure)
     assert info["structure"] == pytest.approx({k: stats[k] for k in STRUCTURE_KEYS})
     assert 0.3 < info["structure"]["porosity"] < 0.9
@@ -245,7 +248,7 @@ def interrupted(whole, dest, rows_past_restart: int = 7):
     for step in steps:
         if step <= restart:
             (dest / f"restart.{step}.bin").write_bytes((whole / f"restart.{step}.bin").read_bytes())
-    every = json.loads((whole / "run.json").read_text())["output_every_steps"]
+    every = RunRecord.read(whole).facts()["output_every_steps"]
     lines = (whole / "curve.txt").read_text().splitlines(keepends=True)
     (dest / "curve.txt").write_text("".join(
         line for line in lines if line.startswith("#") or int(line.split()[0]) <= restart + rows_past_restart * every))
@@ -271,7 +274,7 @@ def test_breaking_run_resumes_to_the_same_curve(breaking_run, tmp_path):
     out = tmp_path / "resumed"
     restart = interrupted(whole, out)
     curve = np.loadtxt(whole / "curve.txt", comments="#")
-    bonds = json.loads((whole / "run.json").read_text())["n_bonds"]
+    bonds = RunRecord.read(whole).facts()["n_bonds"]
     broken_at_restart = bonds - np.interp(restart, curve[:, 0], curve[:, 4])
     assert broken_at_restart >= 10 and bonds - curve[-1, 4] >= broken_at_restart + 50
     assert main(["run", "--out", str(out), "--resume"]) == 0
@@ -402,7 +405,7 @@ def kill_at_random_step(argv, out, info, seed, env=None) -> int:
 @pytest.mark.parametrize("seed", [1, 2])
 def test_run_killed_at_a_random_step_resumes_to_the_same_curve(breaking_run, tmp_path, seed):
     """SIGKILL of 'python -m opalflow run' at a seeded random point while bonds break, then --resume."""
-    info = json.loads((breaking_run / "run.json").read_text())
+    info = RunRecord.read(breaking_run).facts()
     out = tmp_path / "killed"
     argv = [sys.executable, "-m", "opalflow", "run", "opal_quick", "--out", str(out)]
     for s in BREAKING:
@@ -421,7 +424,7 @@ def test_run_sh_killed_at_a_random_step_resumes_with_run_sh(breaking_run, tmp_pa
     'bash run.sh resume' and analyze: the same curve."""
     import shutil
 
-    info = json.loads((breaking_run / "run.json").read_text())
+    info = RunRecord.read(breaking_run).facts()
     out = tmp_path / "alone"
     out.mkdir()
     (out / "snapshots").mkdir()

@@ -13,6 +13,12 @@ from opalflow.resources import WORKFLOWS
 from opalflow.registry import load_spec
 from opalflow.studies import run as studies
 from opalflow.studies import sweep
+from opalflow.runs import executors
+from opalflow.runs import jobs as jobs_mod
+from opalflow.runs.executors import run_jobs
+from opalflow.runs.spec import ExecutorSpec
+
+LOCAL1 = ExecutorSpec(workers=1)
 from opalflow.analysis.fits import fit_exponential, fit_power, fit_power_law
 
 LATTICE = ["compression.strain_max=0.002", "compression.snapshot_strains=[0.001]", "lattice.cells_z=6"]
@@ -25,15 +31,15 @@ def lattice_jobs(spacings=(20.0, 22.0, 24.0)):
 
 def test_rerun_of_a_finished_sweep_does_no_lammps_work(tmp_path, monkeypatch):
     jobs = lattice_jobs()
-    first = sweep.run_jobs(jobs, tmp_path, workers=1, say=lambda m: None)
+    first = run_jobs(jobs, tmp_path, LOCAL1, say=lambda m: None)
     assert list(first) == ["a20", "a22", "a24"]
     assert all((tmp_path / "jobs" / f"{j.label}-{j.key[:12]}" / "log.lammps").exists() for j in jobs)
 
     def no_lammps(*args):
         raise AssertionError("a finished job was run again")
 
-    monkeypatch.setattr(sweep, "_run_job", no_lammps)
-    again = sweep.run_jobs(jobs, tmp_path, workers=1, say=lambda m: None)
+    monkeypatch.setattr(executors, "run_job", no_lammps)
+    again = run_jobs(jobs, tmp_path, LOCAL1, say=lambda m: None)
     assert again == first
 
 
@@ -41,7 +47,7 @@ def test_a_changed_spec_is_a_new_job(tmp_path):
     a, b = lattice_jobs((20.0, 20.0))
     b.spec.compression.plate_speed_m_s *= 0.5
     assert a.key != b.key and a.folder(tmp_path) != b.folder(tmp_path)
-    assert sweep.spec_hash(a.spec) == sweep.spec_hash(lattice_jobs((20.0,))[0].spec)
+    assert jobs_mod.spec_hash(a.spec) == jobs_mod.spec_hash(lattice_jobs((20.0,))[0].spec)
 
 
 DRIVER = """
@@ -49,11 +55,13 @@ import sys
 from opalflow.resources import WORKFLOWS
 from opalflow.registry import load_spec
 from opalflow.studies import sweep
+from opalflow.runs.executors import run_jobs
+from opalflow.runs.spec import ExecutorSpec
 LATTICE = {lattice!r}
 jobs = [sweep.Job(f"a{{a:g}}", load_spec(WORKFLOWS / "lattice_sc.toml", [*LATTICE, f"lattice.spacing_nm={{a}}"]))
         for a in (20.0, 22.0, 24.0)]
 if __name__ == "__main__":
-    sweep.run_jobs(jobs, sys.argv[1], workers=1, say=lambda m: print(m, flush=True))
+    run_jobs(jobs, sys.argv[1], ExecutorSpec(workers=1), say=lambda m: print(m, flush=True))
 """
 
 
@@ -142,11 +150,11 @@ def test_summary_json_of_a_study_is_written_last(tmp_path):
     folder = job.folder(tmp_path)
     folder.mkdir(parents=True)
     (folder / "job.json").write_text(json.dumps({"hash": job.key}))
-    assert sweep.finished(job, tmp_path) is None
+    assert jobs_mod.finished(job, tmp_path) is None
     (folder / "summary.json").write_text("{}")
-    assert sweep.finished(job, tmp_path) == {}
+    assert jobs_mod.finished(job, tmp_path) == {}
     (folder / "job.json").write_text(json.dumps({"hash": "other"}))
-    assert sweep.finished(job, tmp_path) is None
+    assert jobs_mod.finished(job, tmp_path) is None
 
 
 @pytest.mark.parametrize("damage", [b'{"youngs_modulus_GPa": 0.', b"\x89HDF\r\n\x1a\n\xff\xfe", b"[1, 2]", b""])
@@ -154,13 +162,13 @@ def test_a_damaged_job_summary_is_run_again(tmp_path, damage):
     """A job whose summary.json is cut short, binary, of the wrong shape or empty is not finished: the
     rerun runs it again (no traceback) and gets the numbers of the first run."""
     job = lattice_jobs((20.0,))[0]
-    first = sweep.run_jobs([job], tmp_path, workers=1, say=lambda m: None)["a20"]
+    first = run_jobs([job], tmp_path, LOCAL1, say=lambda m: None)["a20"]
     (job.folder(tmp_path) / "summary.json").write_bytes(damage)
     (job.folder(tmp_path) / "job.json").write_bytes(damage[:3])
-    assert sweep.finished(job, tmp_path) is None
-    again = sweep.run_jobs([job], tmp_path, workers=1, say=lambda m: None)["a20"]
+    assert jobs_mod.finished(job, tmp_path) is None
+    again = run_jobs([job], tmp_path, LOCAL1, say=lambda m: None)["a20"]
     assert again["youngs_modulus_GPa"] == pytest.approx(first["youngs_modulus_GPa"], rel=1e-9)
-    assert sweep.finished(job, tmp_path)["strength_MPa"] == pytest.approx(first["strength_MPa"], rel=1e-9)
+    assert jobs_mod.finished(job, tmp_path)["strength_MPa"] == pytest.approx(first["strength_MPa"], rel=1e-9)
 
 
 def test_a_failed_job_does_not_end_the_sweep(tmp_path):
@@ -176,10 +184,10 @@ def test_a_failed_job_does_not_end_the_sweep(tmp_path):
     bad = sweep.Job("bad", load_spec(WORKFLOWS / "lattice_sc.toml", [
         *LATTICE, "kind=datafile", f'datafile.path="{tmp_path / "bad.lmp"}"',
         'datafile.materials=["silica","substrate"]']))
-    res = sweep.run_jobs([bad, good], tmp_path / "study", workers=1, say=lambda m: None)
+    res = run_jobs([bad, good], tmp_path / "study", LOCAL1, say=lambda m: None)
     assert "LAMMPS failed" in res["bad"]["failed"]
     assert "youngs_modulus_GPa" in res["a20"]
-    assert sweep.finished(bad, tmp_path / "study") is None and (bad.folder(tmp_path / "study") / "log.lammps").exists()
+    assert jobs_mod.finished(bad, tmp_path / "study") is None and (bad.folder(tmp_path / "study") / "log.lammps").exists()
 
 
 def test_sweep_killed_at_random_times_completes_to_the_same_results(tmp_path):

@@ -71,6 +71,18 @@ def prepare(spec: BpmWorkflow, out: Path, progress=None) -> CompressionDeck:
     return deck
 
 
+def cost_facts(spec: BpmWorkflow) -> dict:
+    """What :mod:`opalflow.runs.plan` prices a run by: its method, particles, bonds and (dynamic) steps.
+    Builds the structure (and, for a dynamic run, the deck's time step); writes nothing."""
+    s = scene_of(spec).build(spec, None)
+    facts = {"method": spec.compression.method, "n_particles": s.n_particles, "n_bonds": s.n_bonds,
+             "bond_model": spec.bonds.model, "contacts": spec.contacts.enabled}
+    if spec.compression.method != "static":
+        deck = compression_deck(spec, s)
+        facts["steps"] = deck.steps * (2 if spec.compression.check_rate else 1)   # the half-speed twin
+    return facts
+
+
 def build(spec: BpmWorkflow, out: Path, say=print) -> dict:
     """Structure + full deck (data.lmp, in.lmp, resume.lmp, run.sh) + summary.json; no run."""
     start = time.perf_counter()

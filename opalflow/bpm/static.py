@@ -268,16 +268,30 @@ def solve_tensor(net: BondNetwork, positions: np.ndarray, volume: float, *, solv
                         peak_memory_MiB=peak, solver=solver, loose=int(loose.sum()))
 
 
+def amg_hierarchy(K, B):
+    """Smoothed-aggregation AMG of ``K`` with near-null space ``B`` (pyamg; Jacobi-smoothed prolongation,
+    omega 4/3).  pyamg starts its spectral-radius estimates from numpy's global random generator: it is
+    seeded here (and restored after), so the same matrix gives the same hierarchy, and the same solve to
+    the last digit, in any process (a local pool, a Dask worker, a SLURM task)."""
+    import pyamg
+
+    state = np.random.get_state()
+    np.random.seed(20240901)
+    try:
+        return pyamg.smoothed_aggregation_solver(K, B=B, strength=("symmetric", {"theta": 0.0}), max_coarse=500,
+                                                 smooth=("jacobi", {"omega": 4.0 / 3.0}))
+    finally:
+        np.random.set_state(state)
+
+
 def _solve_amg(net, free, rhs, positions, rtol, maxiter, progress):
     """K assembled on the free dofs; smoothed-aggregation AMG (rigid-body modes as near-null space), one
     V-cycle per CG iteration."""
-    import pyamg
 
     t = time.perf_counter()
     K = assemble(net)[free][:, free].tocsr()
     B = rigid_body_modes(positions)[free]
-    ml = pyamg.smoothed_aggregation_solver(K, B=B, strength=("symmetric", {"theta": 0.0}), max_coarse=500,
-                                           smooth=("jacobi", {"omega": 4.0 / 3.0}))
+    ml = amg_hierarchy(K, B)
     vcycle = ml.aspreconditioner(cycle="V")
     setup = time.perf_counter() - t
     x, iterations = pcg(lambda v: K @ v, vcycle.matvec, rhs, rtol, maxiter, progress)
@@ -487,7 +501,6 @@ def _solve_block_amg(net, free, rhs, positions, rtol, maxiter, progress):
     translations (assembled as 3 x 3 blocks, translations and rigid rotations as near-null space, one
     V-cycle), and 3 x 3 block Jacobi on the rotations: the long waves that make K ill-conditioned are
     translational, and K_uu is a quarter of K (the paper's sample fits in memory)."""
-    import pyamg
 
     t = time.perf_counter()
     n = net.n_particles
@@ -495,8 +508,7 @@ def _solve_block_amg(net, free, rhs, positions, rtol, maxiter, progress):
     mask = free.reshape(n, 6)
     Kuu = translational_matrix(net, mask[:, :3])
     B = rigid_body_modes(positions).reshape(n, 6, 6)[:, :3, :].reshape(3 * n, 6).astype(Kuu.dtype)
-    ml = pyamg.smoothed_aggregation_solver(Kuu, B=B, strength=("symmetric", {"theta": 0.0}), max_coarse=500,
-                                           smooth=("jacobi", {"omega": 4.0 / 3.0}))
+    ml = amg_hierarchy(Kuu, B)
     vcycle = ml.aspreconditioner(cycle="V")
     inv_rot = _jacobi_inverse(diagonal_blocks(net)[:, 3:, 3:], mask[:, 3:].ravel())
     maskf = free.astype(float)

@@ -291,7 +291,7 @@ args=(-nocite -in "$input" -log log.lammps)
 [ -n "${{SUFFIX:-}}" ] && args+=(-sf "$SUFFIX")
 if [ -n "${{OPALFLOW_LAUNCH:-}}" ]; then
   # the launch command of your cluster, {{np}} for the ranks, e.g. OPALFLOW_LAUNCH="srun --mpi=pmi2 -n {{np}}"
-  exec ${{OPALFLOW_LAUNCH//\{{np\}}/${{NP:-1}}}} "{lmp}" "${{args[@]}}"
+  exec ${{OPALFLOW_LAUNCH//\\{{np\\}}/${{NP:-1}}}} "{lmp}" "${{args[@]}}"
 elif [ "${{NP:-1}}" -gt 1 ]; then
   exec "{mpiexec}" -n "$NP" "{lmp}" "${{args[@]}}"
 else
@@ -312,7 +312,7 @@ def run_subprocess(folder: Path, *, np: int, total_steps: int, resume: bool, lab
     :mod:`opalflow.runs.launch`); progress from the thermo lines on its output."""
     import subprocess
 
-    env = dict(os.environ, NP=str(np), SUFFIX=suffix or "", **(env or {}))
+    env = {**os.environ, "NP": str(np), "SUFFIX": suffix or "", **(env or {})}
     t = time.perf_counter()
     cmd = ["bash", str(Path(folder) / "run.sh")] + (["resume"] if resume else [])
     progress = Progress(total_steps, 0, label, folder=folder)

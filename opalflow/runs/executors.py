@@ -31,23 +31,34 @@ from opalflow.spec import InputError
 Outcome = tuple[str, dict]          # (job folder, summary or {"failed": ...})
 
 
+class Planned(Exception):
+    """Raised by :func:`run_jobs` under the planning executor (``python -m opalflow plan``): the jobs a
+    study asked for, none of them run and nothing written."""
+
+    def __init__(self, jobs):
+        super().__init__(f"{len(jobs)} jobs planned")
+        self.jobs = jobs
+
+
 class LocalExecutor:
     """``workers`` spawned processes on this machine (0: cores / ranks per job)."""
 
     name = "local"
 
     def __init__(self, spec: ExecutorSpec, np_: int = 1):
-        self.np = np_
-        self.workers = spec.workers or max(1, (os.cpu_count() or 1) // np_)
+        self.np, self.threads = np_, spec.cpus_per_rank
+        self.workers = spec.workers or max(1, (os.cpu_count() or 1) // (np_ * spec.cpus_per_rank))
 
     def run(self, folders: list[str], say: Callable[[str], None]) -> Iterator[Outcome]:
         workers = max(1, min(self.workers, len(folders)))
         if workers == 1:
             for f in folders:
-                yield f, run_job(f, self.np)
+                yield f, run_job(f, self.np, self.threads)
             return
-        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
-            futures = {pool.submit(run_job, f, self.np): f for f in folders}
+        # a fresh process per job: its peak memory is its own (job.json), nothing leaks to the next job
+        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
+                                 max_tasks_per_child=1) as pool:
+            futures = {pool.submit(run_job, f, self.np, self.threads): f for f in folders}
             for fut in as_completed(futures):
                 yield futures[fut], fut.result()
 
@@ -78,8 +89,8 @@ class DaskExecutor:
         say(f"dask: {client.scheduler.address if client.scheduler else self.spec.address}, "
             f"{len(client.scheduler_info().get('workers', {}))} workers")
         try:
-            futures = {client.submit(run_job, f, self.np, pure=False, key=f"opalflow-{Path(f).name}-{time.time_ns()}"): f
-                       for f in folders}
+            futures = {client.submit(run_job, f, self.np, self.spec.cpus_per_rank, pure=False,
+                                     key=f"opalflow-{Path(f).name}-{time.time_ns()}"): f for f in folders}
             for fut in dask_completed(futures):
                 yield futures[fut], fut.result()
         finally:
@@ -117,7 +128,8 @@ class SlurmExecutor:
                   "# before its time limit writes a restart file and requeues itself (scontrol requeue)",
                   "set -euo pipefail",
                   f'folder=$(sed -n "$((SLURM_ARRAY_TASK_ID + 1))p" {shlex.quote(str(listing))})',
-                  f'exec {shlex.quote(sys.executable)} -m opalflow job "$folder" --np {self.np}', ""]
+                  f'exec {shlex.quote(sys.executable)} -m opalflow job "$folder" --np {self.np} '
+                  f'--threads {s.cpus_per_rank}', ""]
         return "\n".join(lines)
 
     def run(self, folders: list[str], say: Callable[[str], None]) -> Iterator[Outcome]:
@@ -133,6 +145,8 @@ class SlurmExecutor:
         if res.returncode:
             raise InputError(f"executor.type = 'slurm': sbatch refused the array: {res.stderr.strip()}")
         array = res.stdout.strip().split(";")[0]
+        with open(root / "slurm" / "arrays.txt", "a") as f:      # for status and for scancel by hand
+            f.write(f"{array} {len(folders)} {script.name}\n")
         say(f"slurm: submitted array {array} ({len(folders)} tasks) with {script}")
         yield from self._wait(array, folders, say)
 
@@ -206,6 +220,8 @@ def run_jobs(jobs, root: Path, ex: ExecutorSpec | None = None, *, np_: int = 1,
     from opalflow.runs.jobs import prepare
 
     ex = ex or ExecutorSpec()
+    if ex.type == "plan":
+        raise Planned(jobs)
     root = Path(root)
     done, todo = prepare(jobs, root)
     say(f"{len(jobs)} jobs: {len(done)} finished before, {len(todo)} to run ({ex.type} executor)")

@@ -99,15 +99,25 @@ def _stop_on_signals() -> None:
             signal.signal(sig, request_stop)
 
 
-def run_job(folder: str, np_: int = 1) -> dict:
+def run_job(folder: str, np_: int = 1, threads: int = 1) -> dict:
     """Run the job in ``folder`` (its job.json says what) and return its outcome: the summary, or
     ``{"failed": first line, "log_tail": ..., "folder": ...}``; a job stopped by its scheduler's signal
     writes a restart file, is requeued (SLURM) and returns ``{"requeued": True}``.  It never raises:
-    one failed job must not end a study."""
+    one failed job must not end a study.
+
+    BLAS and OpenMP run ``threads`` threads in the job (threadpoolctl), whatever the executor's process
+    inherited: the same sums in the same order, so a job gives the same numbers to the last digit on a
+    local pool, a Dask worker or a SLURM node, and jobs side by side do not oversubscribe the cores."""
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=threads):
+        return _run_job(Path(folder), np_)
+
+
+def _run_job(folder: Path, np_: int) -> dict:
     from opalflow import registry
     from opalflow.lammps.engine import Preempted
 
-    folder = Path(folder)
     meta = read_job(folder)
     label = meta.get("label", folder.name)
     if is_finished(folder):
@@ -134,8 +144,15 @@ def run_job(folder: str, np_: int = 1) -> dict:
         tail = log_tail(folder)
         update_job(folder, state="failed", error=first, log_tail=tail, ended=time.time())
         return {"failed": first, "log_tail": tail, "folder": str(folder), "state": "failed"}
-    update_job(folder, state="finished", ended=time.time())
+    update_job(folder, state="finished", ended=time.time(), peak_rss_MiB=peak_rss_MiB())
     return summary
+
+
+def peak_rss_MiB() -> float:
+    """Peak resident memory of this process and the LAMMPS processes it waited for (MiB)."""
+    import resource
+
+    return max(resource.getrusage(who).ru_maxrss for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)) / 1024
 
 
 def requeue_self(say) -> None:

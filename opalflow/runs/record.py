@@ -207,25 +207,27 @@ def refuse_finished(folder: str | os.PathLike) -> None:
                         "folder or remove it first")
 
 
-def finish(folder: str | os.PathLike, summary: dict, report: str, *,
+def finish(folder: str | os.PathLike, summary: dict, report: str | Callable[[], str], *,
            files: Callable[[Callable[[str], Path]], None] | None = None, record: RunRecord | None = None) -> dict:
     """Write a run's results all or none and mark it finished; returns the summary as written.
 
-    ``files(stage)`` writes the other result files (results.h5, plots) to ``stage(name)``; report.md and
-    then summary.json (the mark of a finished run) are staged last.  Keys that ``build`` wrote into
+    ``files(stage)`` writes the other result files (results.h5, plots) to ``stage(name)``; report.md (``report``
+    or, when it is a function, what it returns after ``files``) and then summary.json (the mark of a
+    finished run) are staged last.  Keys that ``build`` wrote into
     summary.json (structure statistics) and the new summary lacks are kept.
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     before = read_summary(folder)
-    if before is not None and before.get("state") == "built":
-        summary = {**{k: v for k, v in before.items() if k not in ("state", "headline", "timings_s")},
-                   **summary, **({"build_timings_s": before["timings_s"]} if "timings_s" in before else {})}
-    summary = {**summary, "state": "finished"}
     with staged_files(folder) as stage:
         if files is not None:
             files(stage)
-        stage(REPORT).write_text(report if report.endswith("\n") else report + "\n")
+        if before is not None and before.get("state") == "built":
+            summary = {**{k: v for k, v in before.items() if k not in ("state", "headline", "timings_s")},
+                       **summary, **({"build_timings_s": before["timings_s"]} if "timings_s" in before else {})}
+        summary = {**summary, "state": "finished"}
+        text = report() if callable(report) else report
+        stage(REPORT).write_text(text if text.endswith("\n") else text + "\n")
         stage(SUMMARY).write_text(json_text(summary))
     if record is None and RunRecord.exists(folder):
         try:

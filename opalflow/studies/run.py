@@ -8,6 +8,7 @@ study folder, with every result beside the paper's number and the wall time it c
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 import tomllib
@@ -503,11 +504,20 @@ RUNNERS = {"calibration": calibration, "bulk": bulk, "coating": coating, "porosi
            "convergence": convergence, "sides": sides, "aerogel_models": aerogel_models, "aerogel_density": aerogel_density}
 
 
-def run(spec: StudyWorkflow, out: Path, say=print) -> dict:
-    """Run the study's jobs (cached) and write summary.json and report.md."""
+def run(spec: StudyWorkflow, out: Path, say=print, executor=None) -> dict:
+    """Run the study's jobs (cached) through its executor (``executor`` in place of the spec's
+    ``[executor]``, as ``--executor``) and write summary.json and report.md."""
+    if executor is not None:
+        spec = dataclasses.replace(spec, executor=executor)
     t0, started = time.perf_counter(), time.time()
     out.mkdir(parents=True, exist_ok=True)
-    summary, body = RUNNERS[spec.study.type](spec, out, say)
+    try:
+        summary, body = RUNNERS[spec.study.type](spec, out, say)
+    except (ValueError, IndexError, KeyError, ZeroDivisionError, np.linalg.LinAlgError) as exc:
+        if not failed_jobs(out, started):
+            raise
+        # too few jobs finished for the study's analysis: the failures are the result
+        summary, body = {"headline": f"no results: too few jobs finished ({type(exc).__name__}: {exc})"}, []
     failed = failed_jobs(out, started)
     summary["failed_jobs"] = {k: v["error"] for k, v in failed.items()}
     if failed:

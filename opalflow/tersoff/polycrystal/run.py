@@ -209,6 +209,7 @@ def run_tension(spec: TensionWorkflow, out: Path, say=print, resume: bool = Fals
             say(f"{label}: E = {job['youngs_modulus_GPa']:.2f} GPa, nu = {job['poisson_ratio']:.4f} "
                 f"({job['macro_steps']} macro steps, {job['evaluations']} sample evaluations, {job['wall_s']:.1f} s)")
     summary = _tension_summary(spec, jobs, bounds, check, relax_cmp, crystal, samples)
+
     def files(stage):
         _plot_curves(stage("stress_strain.png"), stage("volume_strain.png"), jobs)
         for i, pc in last.items():
@@ -221,7 +222,7 @@ def run_tension(spec: TensionWorkflow, out: Path, say=print, resume: bool = Fals
         stage("results.h5").write_bytes(_tension_h5(jobs))
         summary["wall_s"] = time.perf_counter() - t0
 
-    return finish(out, summary, _tension_report(spec, summary, jobs), files=files)
+    return finish(out, summary, lambda: _tension_report(spec, summary, jobs), files=files)
 
 
 def _lammps_check(spec: PolycrystalWorkflow, params, samples: Samples, out: Path) -> dict | None:
@@ -469,6 +470,7 @@ def run_waves(spec: WavesWorkflow, out: Path, say=print, resume: bool = False) -
         say(f"{name} wave: {job['speed_m_s']:.0f} +- {job['speed_stderr_m_s']:.0f} m/s ({job['macro_steps']} macro steps, "
             f"{job['wall_s']:.1f} s)")
     summary = _waves_summary(spec, jobs, bounds, measured, check, crystal, samples)
+
     def files(stage):
         _plot_fronts(stage("wavefront.png"), jobs)
         _plot_profiles(stage("profiles.png"), jobs)
@@ -480,7 +482,7 @@ def run_waves(spec: WavesWorkflow, out: Path, say=print, resume: bool = False) -
         stage("results.h5").write_bytes(_waves_h5(jobs))
         summary["wall_s"] = time.perf_counter() - t0
 
-    return finish(out, summary, _waves_report(spec, summary, jobs), files=files)
+    return finish(out, summary, lambda: _waves_report(spec, summary, jobs), files=files)
 
 
 def _waves_summary(spec, jobs, bounds, measured, check, crystal, samples) -> dict:

@@ -1,0 +1,148 @@
+"""``python -m opalflow plan WORKFLOW``: what a run or a study will cost before it is submitted.
+
+The jobs are the ones the workflow would run (a study is asked for its jobs by a planning executor that
+runs none, :class:`opalflow.runs.executors.Planned`); each is priced by its kind's ``cost`` facts
+(particles, bonds, time steps: the structure is built, nothing is written) and by the cost laws measured on
+this kind of machine (``bench/bench_cost.py`` -> ``bench/results/cost_laws.json``):
+
+- static solve: wall = a + b * bonds^p (structure build, assembly, AMG set-up and iterations, outputs);
+- dynamic run: wall = static-like set-up + steps * bonds * t_bond (bpm/rotational; bpm/spring is
+  ``spring_factor`` times cheaper per bond), divided by the MPI ranks at the measured efficiency;
+- peak memory: m0 + m1 * bonds per job (resident set of the job's process and its LAMMPS).
+
+It prints a line per job, the totals (core-hours, the longest job) and the SLURM resources the array
+would ask for (memory and time with a margin), and with ``--measured DIR`` the measured figures of a
+finished run or study beside the predicted ones.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import tempfile
+from pathlib import Path
+
+from opalflow import registry
+from opalflow.resources import ROOT
+from opalflow.runs.executors import Planned
+from opalflow.runs.jobs import Job, read_job
+from opalflow.runs.record import read_summary
+from opalflow.runs.spec import ExecutorSpec
+from opalflow.spec import SpecError
+
+LAWS = ROOT / "bench" / "results" / "cost_laws.json"
+#: SLURM asks for this much more than predicted (memory and time)
+MARGIN = 1.5
+
+
+def laws() -> dict:
+    if not LAWS.exists():
+        raise SpecError("plan", str(LAWS), "no cost laws measured yet: run python bench/bench_cost.py")
+    return json.loads(LAWS.read_text())
+
+
+def jobs_of(spec) -> list[Job]:
+    """The jobs ``spec`` would run: a study's (asked for, none run), else the run itself."""
+    kind = registry.get(spec.kind)
+    if "executor" not in kind.options:
+        return [Job(spec.name, spec)]
+    planning = dataclasses.replace(spec, executor=dataclasses.replace(ExecutorSpec(), type="plan"))
+    with tempfile.TemporaryDirectory() as tmp:
+        try:
+            registry.resolve(kind.run)(planning, Path(tmp), say=lambda msg: None)
+        except Planned as planned:
+            return planned.jobs
+    return []
+
+
+def predict(facts: dict, law: dict, ranks: int = 1) -> dict:
+    """Wall seconds, core-seconds and peak memory (MiB) of one job with these facts."""
+    bonds = max(facts["n_bonds"], 1)
+    st = law["static"]
+    setup = st["a_s"] + st["b_s"] * bonds ** st["p"]
+    if facts["method"] == "static":
+        wall, mem = setup, law["static_memory"]["m0_MiB"] + law["static_memory"]["m1_MiB"] * bonds
+    else:
+        dyn = law["dynamic"]
+        per_bond = dyn["s_per_bond_step"] / (dyn["spring_factor"] if facts.get("bond_model") == "spring" else 1.0)
+        lammps = facts["steps"] * bonds * per_bond / (ranks * dyn["mpi_efficiency"] if ranks > 1 else 1.0)
+        wall = setup + lammps
+        mem = law["dynamic_memory"]["m0_MiB"] + law["dynamic_memory"]["m1_MiB"] * bonds
+    return {"wall_s": wall, "core_s": wall * ranks, "peak_MiB": mem}
+
+
+def _sample(n: int, k: int) -> list[int]:
+    if k <= 0 or k >= n:
+        return list(range(n))
+    return sorted({round(i * (n - 1) / (k - 1)) for i in range(k)}) if k > 1 else [0]
+
+
+def measured(folder: Path, label: str, single: bool) -> dict | None:
+    job = folder if single else next(iter(sorted(folder.glob(f"jobs/{label}-*"))), None)
+    if job is None:
+        return None
+    s = read_summary(job)
+    if not s or s.get("state") == "built":
+        return None
+    return {"wall_s": s.get("wall_s"), "peak_MiB": read_job(job).get("peak_rss_MiB")}
+
+
+def plan(spec, *, ranks: int = 1, sample: int = 3, against: Path | None = None, say=print) -> dict:
+    """Price the jobs of ``spec`` (the first, middle and last ``sample`` of a study are built; the others
+    take the nearest sampled job's facts) and return rows and totals."""
+    law = laws()
+    kind = registry.get(spec.kind)
+    jobs = jobs_of(spec)
+    if not jobs:
+        raise SpecError("workflow", spec.name, "has no jobs to plan")
+    costs = {}
+    for j in jobs:
+        k = registry.get(j.spec.kind)
+        if not k.cost:
+            raise SpecError("kind", j.spec.kind, "has no cost model yet (plan prices bonded-particle runs)")
+    picked = _sample(len(jobs), sample)
+    for i in picked:
+        say(f"plan: building {jobs[i].label} ({i + 1}/{len(jobs)}) for its size")
+        costs[i] = registry.resolve(registry.get(jobs[i].spec.kind).cost)(jobs[i].spec)
+    rows = []
+    for i, j in enumerate(jobs):
+        near = min(picked, key=lambda p: abs(p - i))
+        facts = costs[near]
+        row = {"label": j.label, "built": i in costs, **facts, **predict(facts, law, ranks)}
+        if against is not None:
+            row["measured"] = measured(Path(against), j.label, single="executor" not in kind.options)
+        rows.append(row)
+    total_core_h = sum(r["core_s"] for r in rows) / 3600
+    longest = max(r["wall_s"] for r in rows)
+    peak = max(r["peak_MiB"] for r in rows)
+    slurm = {"ntasks": ranks, "mem": f"{math.ceil(MARGIN * peak / 1024)}G",
+             "time_min": max(1, math.ceil(MARGIN * longest / 60)), "array": f"0-{len(rows) - 1}"}
+    return {"workflow": spec.name, "kind": spec.kind, "jobs": rows, "core_hours": total_core_h,
+            "longest_job_s": longest, "peak_MiB": peak, "slurm": slurm, "machine": law.get("machine", {}),
+            "laws_measured": law.get("date", "")}
+
+
+def plan_lines(p: dict) -> list[str]:
+    lines = [f"plan {p['workflow']} ({p['kind']}, {len(p['jobs'])} job(s); cost laws of {LAWS.name}, measured "
+             f"{p['laws_measured']} on {p['machine'].get('cpus', '?')} cores)",
+             f"  {'job':<22} {'method':<8} {'particles':>10} {'bonds':>11} {'steps':>8} {'wall (s)':>10} "
+             f"{'core-s':>10} {'memory':>10}" + ("   measured wall / memory" if any("measured" in r for r in p["jobs"])
+                                                 else "")]
+    for r in p["jobs"]:
+        m = r.get("measured")
+        meas = ""
+        if m:
+            err = f" ({100 * (r['wall_s'] / m['wall_s'] - 1):+.0f} %)" if m.get("wall_s") else ""
+            mem = (f"{m['peak_MiB']:.0f} MiB ({100 * (r['peak_MiB'] / m['peak_MiB'] - 1):+.0f} %)"
+                   if m.get("peak_MiB") else "-")
+            meas = f"   {m['wall_s']:.1f} s{err} / {mem}" if m.get("wall_s") else "   -"
+        lines.append(f"  {r['label']:<22} {r['method']:<8} {r['n_particles']:>10} {r['n_bonds']:>11} "
+                     f"{r.get('steps', '-'):>8} {r['wall_s']:>10.1f} {r['core_s']:>10.1f} "
+                     f"{r['peak_MiB'] / 1024:>8.2f} GiB{'' if r['built'] else ' ~'}{meas}")
+    s = p["slurm"]
+    lines += [f"total: {p['core_hours']:.3g} core-hours; longest job {p['longest_job_s']:.0f} s "
+              f"({p['longest_job_s'] / 3600:.2f} h); peak memory {p['peak_MiB'] / 1024:.2f} GiB per job "
+              "(~: job priced by the nearest built one)",
+              f"SLURM (x{MARGIN} margin): --array={s['array']} --ntasks={s['ntasks']} --mem={s['mem']} "
+              f"--time={s['time_min']}  ([executor] type = \"slurm\", mem_gb, time_min)"]
+    return lines

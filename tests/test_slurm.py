@@ -1,0 +1,131 @@
+"""The SLURM executor against a real one-node SLURM started by the project's own script
+(scripts/local-slurm.sh; .ci/run starts it): same numbers as the local pool, scancel and rerun, a
+controller restart during a study, a time limit reached and requeued from the restart file, MPI ranks
+inside a job.  Skipped, with the reason, only where that SLURM cannot start (not root, no apt-get)."""
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+import opalflow
+from opalflow.resources import ROOT
+from opalflow.runs.record import RunRecord
+
+SCRIPT = ROOT / "scripts" / "local-slurm.sh"
+LATTICE_DYNAMIC = ["compression.strain_max=0.004", "compression.snapshot_strains=[]", "lattice.cells_z=8"]
+
+
+@pytest.fixture(scope="module")
+def slurm():
+    """A SLURM that answers: the one running, or the one the script starts."""
+    if shutil.which("sinfo") and subprocess.run(["sinfo"], capture_output=True).returncode == 0:
+        return
+    if os.geteuid() != 0:
+        pytest.skip("no SLURM running and not root: scripts/local-slurm.sh needs root to start munged and SLURM")
+    proc = subprocess.run(["bash", str(SCRIPT), "start"], capture_output=True, text=True, timeout=600)
+    if proc.returncode:
+        pytest.skip(f"scripts/local-slurm.sh could not start SLURM here: {proc.stderr.strip()[-300:]}")
+
+
+def energies(root: Path) -> dict[str, float]:
+    return {p.parent.name: json.loads(p.read_text())["youngs_modulus_GPa"] for p in root.glob("jobs/*/summary.json")
+            if json.loads(p.read_text()).get("state") == "finished"}
+
+
+def study_cmd(out: Path, executor: str, *sets: str) -> list[str]:
+    """The porosity study on opal_quick with four porosities (one seed): four small jobs."""
+    args = [sys.executable, "-m", "opalflow", "run", "porosity", "--out", str(out), "--executor", executor,
+            "--set", "study.base=opal_quick", "--set", "study.porosities=[0.3, 0.4, 0.5, 0.6]",
+            "--set", "study.seeds=[1]", "--set", "executor.poll_s=0.5"]
+    for s in sets:
+        args += ["--set", s]
+    return args
+
+
+STATIC4 = ["study.method=static", 'study.set=["pores.porosity_tolerance=0.1"]']
+DYNAMIC4 = ['study.set=["pores.porosity_tolerance=0.1","compression.strain_max=0.003","compression.snapshot_strains=[]"]']
+
+
+def test_slurm_array_gives_the_local_numbers(slurm, tmp_path):
+    for executor in ("local", "slurm"):
+        proc = subprocess.run(study_cmd(tmp_path / executor, executor, *STATIC4), capture_output=True, text=True)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+    local, on_slurm = energies(tmp_path / "local"), energies(tmp_path / "slurm")
+    assert len(local) == 4 and local == on_slurm
+    script = next((tmp_path / "slurm" / "slurm").glob("array-*.sh")).read_text()
+    assert "#SBATCH --array=0-3" in script and "#SBATCH --signal=B:USR1@" in script and "#SBATCH --requeue" in script
+    meta = json.loads(next((tmp_path / "slurm").glob("jobs/*/job.json")).read_text())
+    assert meta["slurm_job"] and meta["state"] == "finished"
+
+
+def _wait_for(cond, timeout=120.0):
+    t0 = time.time()
+    while time.time() - t0 < timeout:
+        if cond():
+            return True
+        time.sleep(0.5)
+    return False
+
+
+def test_scancel_half_the_array_then_rerun_runs_only_the_missing_jobs(slurm, tmp_path):
+    ref = tmp_path / "local"
+    subprocess.run(study_cmd(ref, "local", *DYNAMIC4), capture_output=True, check=True)
+    out = tmp_path / "slurm"
+    study = subprocess.Popen(study_cmd(out, "slurm", *DYNAMIC4, "executor.workers=2"), stdout=subprocess.PIPE,
+                             stderr=subprocess.STDOUT, text=True)
+    assert _wait_for(lambda: (out / "slurm" / "arrays.txt").exists())
+    time.sleep(1.0)
+    array = (out / "slurm" / "arrays.txt").read_text().split()[0]
+    subprocess.run(["scancel", f"{array}_[2-3]"], check=True)
+    log, _ = study.communicate(timeout=300)
+    assert "ended without a result" in log, log[-2000:]
+    done_first = energies(out)
+    assert 1 <= len(done_first) <= 3
+    rerun = subprocess.run(study_cmd(out, "slurm", *DYNAMIC4), capture_output=True, text=True)
+    assert rerun.returncode == 0, rerun.stderr[-2000:]
+    assert f"{len(done_first)} finished before, {4 - len(done_first)} to run" in rerun.stderr
+    assert energies(out) == energies(ref)
+
+
+def test_a_study_survives_a_controller_restart(slurm, tmp_path):
+    out = tmp_path / "slurm"
+    study = subprocess.Popen(study_cmd(out, "slurm", *DYNAMIC4), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                             text=True)
+    assert _wait_for(lambda: (out / "slurm" / "arrays.txt").exists())
+    subprocess.run(["bash", str(SCRIPT), "restart-controller", "5"], check=True, timeout=120)
+    log, _ = study.communicate(timeout=600)
+    assert study.returncode == 0, log[-2000:]
+    assert len(energies(out)) == 4
+
+
+def test_time_limit_requeues_from_the_restart_to_the_same_numbers(slurm, tmp_path):
+    """A 1-minute limit on a run that needs more: SLURM signals it (USR1, 45 s before the limit), it writes a
+    restart file and requeues itself; the requeued job continues; E and strength equal the run's on this
+    machine without a limit.  The lattice is made long enough (strain 0.03) to outlast one limit."""
+    sets = ["compression.strain_max=0.03", "compression.snapshot_strains=[]", "lattice.cells_z=12",
+            "lattice.cells_x=6", "lattice.cells_y=6", "bonds.breakable=true"]
+    whole = opalflow.run("lattice_sc", tmp_path / "whole", set=sets, quiet=True)
+    if whole["wall_s"] < 70:
+        pytest.skip(f"the run takes {whole['wall_s']:.0f} s here, not longer than one 60 s limit")
+    s = opalflow.run("lattice_sc", tmp_path / "limited", set=[*sets, "executor.time_min=1", "executor.signal_s=45"],
+                     executor="slurm", quiet=True)
+    record = RunRecord.read(tmp_path / "limited")
+    assert record.requeues >= 1 and len(record.sessions) >= 2
+    assert s["youngs_modulus_GPa"] == pytest.approx(whole["youngs_modulus_GPa"], rel=1e-4)
+    assert s["strength_MPa"] == pytest.approx(whole["strength_MPa"], rel=1e-4)
+    assert "SLURM requeues" in (tmp_path / "limited" / "report.md").read_text()
+
+
+def test_mpi_ranks_inside_a_slurm_job(slurm, tmp_path):
+    one = opalflow.run("lattice_sc", tmp_path / "one", set=LATTICE_DYNAMIC, quiet=True)
+    two = opalflow.run("lattice_sc", tmp_path / "two", set=[*LATTICE_DYNAMIC, "executor.mem_gb=1"], np=2,
+                       executor="slurm", quiet=True)
+    log = (tmp_path / "two" / "log.lammps").read_text()
+    assert "2 by 1 by 1 MPI processor grid" in log or "1 by 2 by 1 MPI processor grid" in log
+    assert "srun" in RunRecord.read(tmp_path / "two").sessions[-1].launcher
+    assert two["youngs_modulus_GPa"] == pytest.approx(one["youngs_modulus_GPa"], rel=1e-4)
