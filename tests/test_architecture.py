@@ -19,7 +19,7 @@ PACKAGE = Path(opalflow.__file__).resolve().parent
 TRACKS = ("bpm", "opal", "lattice", "datafile", "tersoff", "studies", "granular")
 #: modules every track may use; they import no track
 SHARED = ("spec", "registry", "structure", "units", "materials", "store", "resources", "neighbors", "packing", "io", "api",
-          "version", "lammps", "analysis")
+          "version", "lammps", "analysis", "runs")
 
 
 def module_name(path: Path) -> str:
@@ -141,6 +141,7 @@ import time
 from dataclasses import dataclass, field
 
 from opalflow.registry import Kind
+from opalflow.runs.record import finish
 from opalflow.spec import WorkflowSpec, check
 
 
@@ -164,9 +165,7 @@ def run(spec, out, say=print):
     total = sum(range(1, spec.toy.n + 1))
     say(f"toy: summed 1..{spec.toy.n}")
     summary = {"sum": total, "headline": f"sum = {total}", "wall_s": time.perf_counter() - t0}
-    (out / "summary.json").write_text(json.dumps(summary))
-    (out / "report.md").write_text(summary["headline"] + "\\n")
-    return summary
+    return finish(out, summary, summary["headline"])
 
 
 KIND = Kind("toy", spec="toytrack:ToyWorkflow", run="toytrack:run", summary="sum of 1..n (a test track)")

@@ -16,6 +16,7 @@ from opalflow.lammps import engine
 from opalflow.resources import WORKFLOWS
 from opalflow.runs.record import SCHEMA, RunRecord
 from opalflow.spec import InputError
+from tests.test_architecture import toytrack  # noqa: F401,F811 - the plugin track fixture
 
 PACKAGE = Path(opalflow.__file__).parent
 LATTICE = ["compression.strain_max=0.002", "compression.snapshot_strains=[0.001]", "lattice.cells_z=6"]
@@ -116,6 +117,19 @@ def test_every_kind_runs_through_the_run_layer(kind, tmp_path):
         assert "Sessions (2" in report and f"steps {record.sessions[1].first_step}-" in report
         curve = (stopped / "curve.txt").read_text().splitlines()
         assert sum(line.startswith("#") for line in curve) == 2      # one header, not one per session
+
+
+def test_the_plugin_toy_track_keeps_the_contract(toytrack, monkeypatch):
+    """A kind from outside opalflow (the toy track of tests/test_architecture.py) gets the same folder."""
+    monkeypatch.setattr(registry, "_REGISTERED", {})
+    from toytrack import KIND
+
+    registry.register(KIND)
+    out = toytrack / "contract"
+    summary = opalflow.run(toytrack / "toy.toml", out, quiet=True)
+    check_run_folder(out, "toy", summary)
+    with pytest.raises(InputError, match="--resume"):
+        opalflow.run(toytrack / "toy.toml", out, resume=True, quiet=True)
 
 
 def test_one_module_writes_summary_and_report():

@@ -242,6 +242,7 @@ def analyze(out: Path, wall_s: float | None = None, lammps_s: float | None = Non
     if record.sessions:          # run by opalflow (not 'bash run.sh' + analyze): what each session did
         record.sessions[-1].last_step = summary["steps"]
         record.sessions[-1].wall_s = wall_s
+        record.sessions[-1].ended = "finished"
         summary["sessions"] = [dataclasses.asdict(x) for x in record.sessions]
         summary["requeues"] = record.requeues
 

@@ -152,13 +152,18 @@ class SlurmExecutor:
 
     def _wait(self, array: str, folders: list[str], say) -> Iterator[Outcome]:
         left = {str(Path(f).resolve()): k for k, f in enumerate(folders)}
+        missing: dict[str, int] = {}
+        released: dict[str, float] = {}         # the session each requeued task was released after
         quiet_since = None
         while left:
             for f in list(left):
-                state = read_job(f).get("state")
-                if state in ("finished", "failed"):
+                meta = read_job(f)
+                if meta.get("state") in ("finished", "failed"):
                     del left[f]
                     yield f, outcome(f)
+                elif meta.get("state") == "requeued" and released.get(f) != meta.get("attempted"):
+                    _release(meta, say)
+                    released[f] = meta.get("attempted")
             if not left:
                 return
             queued = _queued(array)
@@ -170,16 +175,33 @@ class SlurmExecutor:
             else:
                 quiet_since = None
                 for f, k in list(left.items()):
-                    if k not in queued and read_job(f).get("state") not in ("finished", "failed"):
-                        time.sleep(1)                # a task that just ended: its folder settles first
-                        if read_job(f).get("state") in ("finished", "failed"):
-                            continue
+                    gone = k not in queued and read_job(f).get("state") not in ("finished", "failed")
+                    missing[f] = missing.get(f, 0) + 1 if gone else 0
+                    # absent from the queue for three polls and 5 s: cancelled, killed or out of time (a task
+                    # that just ended or is being requeued shows up again or settles its folder first)
+                    if missing[f] >= 3 and missing[f] * self.spec.poll_s >= 5:
                         del left[f]
                         got = outcome(f)
                         got["failed"] = (f"SLURM task {array}_{k} ended without a result (cancelled, killed or "
                                          f"out of time; {got['failed']}); a rerun continues it")
                         yield f, got
             time.sleep(self.spec.poll_s)
+
+
+def _release(meta: dict, say) -> None:
+    """SLURM holds a requeued batch job for about two minutes (its BeginTime); a task that requeued itself
+    from a restart file may start again at once.  The update is refused until the job is pending again."""
+    job = meta.get("slurm_job", "")
+    if not job:
+        return
+    for _ in range(10):
+        res = _slurm(["scontrol", "update", f"JobId={job}", "StartTime=now"])
+        if res.returncode == 0:
+            say(f"slurm: task {job} requeued from its restart file, released")
+            return
+        time.sleep(1.0)
+    say(f"slurm: task {job} requeued from its restart file; SLURM holds it before it starts again "
+        f"({(res.stdout + res.stderr).strip() or 'no reason given'})")
 
 
 def _slurm(cmd: list[str]) -> subprocess.CompletedProcess:

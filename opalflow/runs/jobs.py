@@ -108,6 +108,8 @@ def run_job(folder: str, np_: int = 1, threads: int = 1) -> dict:
     BLAS and OpenMP run ``threads`` threads in the job (threadpoolctl), whatever the executor's process
     inherited: the same sums in the same order, so a job gives the same numbers to the last digit on a
     local pool, a Dask worker or a SLURM node, and jobs side by side do not oversubscribe the cores."""
+    import scipy.linalg  # noqa: F401 - load every BLAS/OpenMP library first: threadpoolctl limits the loaded ones
+    import scipy.sparse.linalg  # noqa: F401
     from threadpoolctl import threadpool_limits
 
     with threadpool_limits(limits=threads):
