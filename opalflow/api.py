@@ -49,8 +49,8 @@ def workflow_path(name: str | Path) -> Path:
                     "(opalflow.workflows() or python -m opalflow list shows them)")
 
 
-def load_workflow(workflow: str | Path | dict | WorkflowSpec, set: Settings = None) -> WorkflowSpec:
-    """The validated spec of ``workflow`` with the ``set`` overrides applied."""
+def raw_workflow(workflow: str | Path | dict | WorkflowSpec, set: Settings = None) -> dict:
+    """The raw table of ``workflow`` (a copy) with the ``set`` overrides applied, not yet validated."""
     if isinstance(workflow, WorkflowSpec):
         raw = workflow.to_dict()
     elif isinstance(workflow, dict):
@@ -62,7 +62,12 @@ def load_workflow(workflow: str | Path | dict | WorkflowSpec, set: Settings = No
             set_value(raw, str(path), value)
     elif set:
         apply_overrides(raw, list(set))
-    return registry.spec_from_dict(raw)
+    return raw
+
+
+def load_workflow(workflow: str | Path | dict | WorkflowSpec, set: Settings = None) -> WorkflowSpec:
+    """The validated spec of ``workflow`` with the ``set`` overrides applied."""
+    return registry.spec_from_dict(raw_workflow(workflow, set))
 
 
 def _folder(out: str | Path, field: str = "out") -> Path:
@@ -106,37 +111,26 @@ def run(workflow: str | Path | dict | WorkflowSpec | None, out: str | Path, *, s
         usable = lammps_info()["accelerators"]
         if suffix not in usable:
             raise SpecError("--suffix", suffix, f"this LAMMPS build offers {', '.join(usable) or 'none'}")
+    from opalflow.runs.record import run_kind
+
     kind = registry.get(spec.kind)
     ex = executor_of(None if resume and workflow is None else workflow, set, executor)
     if "executor" in kind.options:              # a kind of many jobs sends them there
-        return kind.run_workflow(spec, out, np_=np, resume=resume, say=_say(quiet), suffix=suffix,
-                                 executor=ex if executor is not None else None)
+        return run_kind(kind, spec, out, np_=np, resume=resume, say=_say(quiet), suffix=suffix,
+                        executor=ex if executor is not None else None)
     if ex.type != "local":                      # any other run goes there as one job
         if suffix:
             raise SpecError("--suffix", suffix, "is for runs on this machine (a submitted run uses the launcher)")
         return submit(spec, out, ex, np_=np, say=_say(quiet))
-    return kind.run_workflow(spec, out, np_=np, resume=resume, say=_say(quiet), suffix=suffix)
+    return run_kind(kind, spec, out, np_=np, resume=resume, say=_say(quiet), suffix=suffix)
 
 
 def executor_of(workflow, set: Settings = None, override: str | None = None):
     """The ``[executor]`` of a workflow (with the ``set`` overrides; ``override``: its type, as
-    ``--executor``)."""
-    from opalflow.runs.spec import ExecutorSpec, executor_from_raw
+    ``--executor``); a resumed run without a workflow has only the override."""
+    from opalflow.runs.spec import executor_from_raw
 
-    if isinstance(workflow, WorkflowSpec):
-        raw = workflow.to_dict()
-    elif isinstance(workflow, dict):
-        raw = copy.deepcopy(workflow)
-    elif workflow is None:
-        return executor_from_raw({}, override) if override else ExecutorSpec()
-    else:
-        raw = read_toml(workflow_path(workflow))
-    if isinstance(set, dict):
-        for path, value in set.items():
-            set_value(raw, str(path), value)
-    elif set:
-        apply_overrides(raw, list(set))
-    return executor_from_raw(raw, override)
+    return executor_from_raw({} if workflow is None else raw_workflow(workflow, set), override)
 
 
 def submit(spec: WorkflowSpec, out: str | Path, ex, *, np_: int = 1, say=_stderr) -> dict:

@@ -24,7 +24,6 @@ from pathlib import Path
 from typing import Any
 
 from opalflow.spec import SpecError, WorkflowSpec, apply_overrides, convert, read_toml
-from opalflow.runs.record import tracked
 from opalflow.store import folder_lock
 
 #: CLI options a kind may take, besides --out and --set, and the runner's keyword for each
@@ -94,7 +93,7 @@ class Kind:
             raise SpecError("/".join(f"--{o}" for o in OPTIONS if o != "executor"), self.name,
                             self.refusal or f"it takes only {', '.join(self.options) or 'none of them'}")
         values = {"np": np_, "resume": resume, "suffix": suffix, "executor": executor}
-        with folder_lock(out), tracked(spec, out):
+        with folder_lock(out):
             return resolve(self.run)(spec, out, say=say, **{OPTIONS[o]: values[o] for o in self.options})
 
     def build_workflow(self, spec: WorkflowSpec, out: Path, *, say=print) -> dict:

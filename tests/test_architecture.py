@@ -5,10 +5,8 @@ import json
 import os
 import subprocess
 import sys
-import textwrap
 from pathlib import Path
 
-import pytest
 
 import opalflow
 from opalflow import registry
@@ -133,60 +131,7 @@ def test_every_shipped_workflow_names_a_registered_kind():
         assert isinstance(spec, registry.get(spec.kind).spec_class())
 
 
-# ----------------------------------------------------------------------------- a new track
-TOY = '''
-"""A throwaway track: counts to ``toy.n`` and reports the sum."""
-import json
-import time
-from dataclasses import dataclass, field
-
-from opalflow.registry import Kind
-from opalflow.runs.record import finish
-from opalflow.spec import WorkflowSpec, check
-
-
-@dataclass
-class ToySpec:
-    n: int = 3
-
-
-@dataclass
-class ToyWorkflow(WorkflowSpec):
-    toy: ToySpec = field(default_factory=ToySpec)
-
-    def validate(self):
-        super().validate()
-        check(1 <= self.toy.n <= 100, "toy.n", self.toy.n, "must be in [1, 100]")
-
-
-def run(spec, out, say=print):
-    t0 = time.perf_counter()
-    out.mkdir(parents=True, exist_ok=True)
-    total = sum(range(1, spec.toy.n + 1))
-    say(f"toy: summed 1..{spec.toy.n}")
-    summary = {"sum": total, "headline": f"sum = {total}", "wall_s": time.perf_counter() - t0}
-    return finish(out, summary, summary["headline"])
-
-
-KIND = Kind("toy", spec="toytrack:ToyWorkflow", run="toytrack:run", summary="sum of 1..n (a test track)")
-'''
-
-
-@pytest.fixture
-def toytrack(tmp_path, monkeypatch):
-    """A package ``toytrack`` outside opalflow, on the path, with an entry point in opalflow.kinds."""
-    site = tmp_path / "site"
-    (site / "toytrack").mkdir(parents=True)
-    (site / "toytrack" / "__init__.py").write_text(textwrap.dedent(TOY))
-    dist = site / "toytrack-0.1.dist-info"
-    dist.mkdir()
-    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: toytrack\nVersion: 0.1\n")
-    (dist / "entry_points.txt").write_text(f"[{registry.ENTRY_POINT_GROUP}]\ntoy = toytrack:KIND\n")
-    (tmp_path / "toy.toml").write_text('name = "toy_sum"\nkind = "toy"\n[toy]\nn = 10\n')
-    monkeypatch.syspath_prepend(str(site))
-    return tmp_path
-
-
+# ----------------------------------------------------------------------------- a new track (conftest: toytrack)
 def test_a_new_track_registered_at_run_time_runs_through_the_cli(toytrack, capsys, monkeypatch):
     monkeypatch.setattr(registry, "_REGISTERED", {})
     from toytrack import KIND

@@ -16,7 +16,6 @@ from opalflow.lammps import engine
 from opalflow.resources import WORKFLOWS
 from opalflow.runs.record import SCHEMA, RunRecord
 from opalflow.spec import InputError
-from tests.test_architecture import toytrack  # noqa: F401,F811 - the plugin track fixture
 
 PACKAGE = Path(opalflow.__file__).parent
 LATTICE = ["compression.strain_max=0.002", "compression.snapshot_strains=[0.001]", "lattice.cells_z=6"]

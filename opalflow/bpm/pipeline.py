@@ -72,13 +72,19 @@ def prepare(spec: BpmWorkflow, out: Path, progress=None) -> CompressionDeck:
 
 
 def cost_facts(spec: BpmWorkflow) -> dict:
-    """What :mod:`opalflow.runs.plan` prices a run by: its method, particles, bonds and (dynamic) steps.
-    Builds the structure (and, for a dynamic run, the deck's time step); writes nothing."""
+    """What :mod:`opalflow.runs.plan` prices a run by: its method and solver, particles, bonds, (dynamic)
+    steps, and the seconds the structure and deck took to build here.  Writes nothing."""
+    from opalflow.bpm.static import AMG_MAX_BONDS
+
+    t = time.perf_counter()
     s = scene_of(spec).build(spec, None)
+    deck = compression_deck(spec, s)
     facts = {"method": spec.compression.method, "n_particles": s.n_particles, "n_bonds": s.n_bonds,
-             "bond_model": spec.bonds.model, "contacts": spec.contacts.enabled}
-    if spec.compression.method != "static":
-        deck = compression_deck(spec, s)
+             "bond_model": spec.bonds.model, "build_s": time.perf_counter() - t}
+    if spec.compression.method == "static":
+        solver = spec.compression.solver
+        facts["solver"] = ("amg" if s.n_bonds <= AMG_MAX_BONDS else "block-amg") if solver == "auto" else solver
+    else:
         facts["steps"] = deck.steps * (2 if spec.compression.check_rate else 1)   # the half-speed twin
     return facts
 

@@ -19,7 +19,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from opalflow.runs.record import is_finished, read_summary, slurm_job
+from opalflow.runs.record import is_finished, read_summary, run_kind, slurm_job
 from opalflow.spec import WorkflowSpec
 from opalflow.store import write_json_atomic
 
@@ -136,7 +136,7 @@ def _run_job(folder: Path, np_: int) -> dict:
         spec = registry.spec_from_dict(meta["spec"])
         kind = registry.get(spec.kind)
         resume = resume and "resume" in kind.options
-        summary = kind.run_workflow(spec, folder, np_=np_, resume=resume, say=say)
+        summary = run_kind(kind, spec, folder, np_=np_, resume=resume, say=say)
     except Preempted as exc:
         update_job(folder, state="requeued", stopped_step=exc.step)
         requeue_self(say)

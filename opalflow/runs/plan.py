@@ -5,10 +5,13 @@ runs none, :class:`opalflow.runs.executors.Planned`); each is priced by its kind
 (particles, bonds, time steps: the structure is built, nothing is written) and by the cost laws measured on
 this kind of machine (``bench/bench_cost.py`` -> ``bench/results/cost_laws.json``):
 
-- static solve: wall = a + b * bonds^p (structure build, assembly, AMG set-up and iterations, outputs);
-- dynamic run: wall = static-like set-up + steps * bonds * t_bond (bpm/rotational; bpm/spring is
-  ``spring_factor`` times cheaper per bond), divided by the MPI ranks at the measured efficiency;
-- peak memory: m0 + m1 * bonds per job (resident set of the job's process and its LAMMPS).
+- every job: the structure and deck build, timed here while the plan builds the job's structure;
+- static solve: c * bonds^p of its solver (``amg`` up to 500 000 bonds, ``block-amg`` above), fitted to
+  ``bench/results/static_quickstart.json`` (d = 60-20 nm), plus the outputs (a + b * bonds);
+- dynamic run: steps * bonds * t_bond (bpm/rotational; bpm/spring ``spring_factor`` times cheaper per
+  bond), divided by the MPI ranks at the measured efficiency, plus the analysis;
+- peak memory: m0 + m1 * bonds per job (resident set of the job's process and its LAMMPS; for
+  ``block-amg`` the solver's own law).
 
 It prints a line per job, the totals (core-hours, the longest job) and the SLURM resources the array
 would ask for (memory and time with a margin), and with ``--measured DIR`` the measured figures of a
@@ -31,14 +34,29 @@ from opalflow.runs.spec import ExecutorSpec
 from opalflow.spec import SpecError
 
 LAWS = ROOT / "bench" / "results" / "cost_laws.json"
+SOLVERS = ROOT / "bench" / "results" / "static_quickstart.json"
 #: SLURM asks for this much more than predicted (memory and time)
 MARGIN = 1.5
 
 
 def laws() -> dict:
-    if not LAWS.exists():
-        raise SpecError("plan", str(LAWS), "no cost laws measured yet: run python bench/bench_cost.py")
-    return json.loads(LAWS.read_text())
+    """The cost laws (bench/bench_cost.py) with the static solvers' laws (bench/bench_static.py): per solver,
+    solve seconds = c * bonds^p and solver memory = m0 + m1 * bonds, fitted to the measured rows."""
+    import numpy as np
+
+    for path, bench in ((LAWS, "bench_cost.py"), (SOLVERS, "bench_static.py")):
+        if not path.exists():
+            raise SpecError("plan", str(path), f"no cost laws measured yet: run python bench/{bench}")
+    law = json.loads(LAWS.read_text())
+    rows = json.loads(SOLVERS.read_text())["rows"]
+    law["solvers"] = {}
+    for solver in sorted({r["solver"] for r in rows}):
+        mine = [r for r in rows if r["solver"] == solver]
+        b = np.array([r["n_bonds"] for r in mine], float)
+        p, logc = np.polyfit(np.log(b), np.log([r["total_s"] for r in mine]), 1)
+        m1, m0 = np.polyfit(b, [1024 * r["peak_memory_GiB"] for r in mine], 1)
+        law["solvers"][solver] = {"c": float(np.exp(logc)), "p": float(p), "m0_MiB": float(m0), "m1_MiB": float(m1)}
+    return law
 
 
 def jobs_of(spec) -> list[Job]:
@@ -56,17 +74,19 @@ def jobs_of(spec) -> list[Job]:
 
 
 def predict(facts: dict, law: dict, ranks: int = 1) -> dict:
-    """Wall seconds, core-seconds and peak memory (MiB) of one job with these facts."""
+    """Wall seconds, core-seconds and peak memory (MiB) of one job with these facts: the build as timed by
+    the plan, plus the solve (static: the solver's law) or the time steps (dynamic), plus the outputs."""
     bonds = max(facts["n_bonds"], 1)
-    st = law["static"]
-    setup = st["a_s"] + st["b_s"] * bonds ** st["p"]
     if facts["method"] == "static":
-        wall, mem = setup, law["static_memory"]["m0_MiB"] + law["static_memory"]["m1_MiB"] * bonds
+        sv, st = law["solvers"][facts["solver"]], law["static"]
+        wall = facts["build_s"] + sv["c"] * bonds ** sv["p"] + st["rest_s0"] + st["rest_s_per_bond"] * bonds
+        mem = law["static_memory"]["m0_MiB"] + (law["static_memory"]["m1_MiB"] * bonds if facts["solver"] == "amg"
+                                                 else sv["m0_MiB"] + sv["m1_MiB"] * bonds)
     else:
         dyn = law["dynamic"]
         per_bond = dyn["s_per_bond_step"] / (dyn["spring_factor"] if facts.get("bond_model") == "spring" else 1.0)
         lammps = facts["steps"] * bonds * per_bond / (ranks * dyn["mpi_efficiency"] if ranks > 1 else 1.0)
-        wall = setup + lammps
+        wall = facts["build_s"] + dyn["lammps_start_s"] + lammps + dyn["rest_s"]
         mem = law["dynamic_memory"]["m0_MiB"] + law["dynamic_memory"]["m1_MiB"] * bonds
     return {"wall_s": wall, "core_s": wall * ranks, "peak_MiB": mem}
 

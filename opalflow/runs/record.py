@@ -277,3 +277,10 @@ def tracked(spec, folder: str | os.PathLike):
         settle("failed", error=str(exc))
         raise
     settle("finished")
+
+
+def run_kind(kind, spec, folder: str | os.PathLike, **options) -> dict:
+    """``kind.run_workflow(spec, folder, **options)`` (an :class:`opalflow.registry.Kind`) inside
+    :func:`tracked`: how the API and every executor's job start a run."""
+    with tracked(spec, folder):
+        return kind.run_workflow(spec, Path(folder), **options)
