@@ -163,18 +163,20 @@ def test_build_into_a_finished_run_is_refused(tmp_path, capsys):
     assert (out / "summary.json").read_bytes() == before
 
 
-def test_run_keeps_the_structure_keys_that_build_wrote(tmp_path):
-    """Was: summary.json after run lacked box_nm, packing_fraction, ... that build had written."""
-    out = tmp_path / "q"
-    built = opalflow.build("opal_quick", out, quiet=True)
-    for key in ("box_nm", "packing_fraction", "particles_per_um3", "bonds_per_um3", "bonds_per_particle",
-                "max_overlap_fraction", "n_by_material", "n_bonds_by_type", "windows"):
-        assert key in built
-    opalflow.run("opal_quick", out, set=["compression.strain_max=0.002", "compression.snapshot_strains=[]"],
-                 quiet=True)
-    after = json.loads((out / "summary.json").read_text())
-    for key in ("box_nm", "packing_fraction", "n_by_material", "n_bonds_by_type", "windows", "build_timings_s"):
-        assert key in after, key
+def test_run_summary_has_the_structure_keys_that_build_writes(tmp_path):
+    """Was: summary.json after run lacked box_nm, packing_fraction, ... that build writes (run replaced the
+    file); now run gives them, with or without a build before."""
+    keys = ("box_nm", "packing_fraction", "particles_per_um3", "bonds_per_um3", "bonds_per_particle",
+            "max_overlap_fraction", "n_by_material", "n_bonds_by_type", "windows")
+    built = opalflow.build("opal_quick", tmp_path / "b", quiet=True)
+    assert set(keys) <= set(built)
+    sets = ["compression.strain_max=0.002", "compression.snapshot_strains=[]"]
+    for out in (tmp_path / "b", tmp_path / "fresh"):           # after a build, and alone
+        opalflow.run("opal_quick", out, set=sets, quiet=True)
+        after = json.loads((out / "summary.json").read_text())
+        for key in (*keys, "build_timings_s"):
+            assert key in after, (out.name, key)
+        assert after["box_nm"] == built["box_nm"] and after["n_by_material"] == built["n_by_material"]
 
 
 # ----------------------------------------------------------------------------- executors
@@ -272,3 +274,23 @@ def test_job_command_runs_a_prepared_job_folder(tmp_path):
                           capture_output=True, text=True)
     assert proc.returncode == 0 and proc.stdout.startswith("E = "), proc.stderr
     assert json.loads((job.folder(tmp_path) / "job.json").read_text())["state"] == "finished"
+
+
+def test_plan_prices_a_study_without_running_it(tmp_path, capsys, monkeypatch):
+    """plan asks the study for its jobs (none runs, nothing is written), builds the sampled structures and
+    prices each job; a dynamic run is priced by its time steps."""
+    monkeypatch.chdir(tmp_path)
+    sets = ["study.base=opal_quick", "study.method=static", 'study.set=["pores.porosity_tolerance=0.1"]',
+            "study.porosities=[0.3, 0.5]", "study.seeds=[1, 2]"]
+    assert main(["plan", "porosity", "--sample", "2", *[x for s in sets for x in ("--set", s)]]) == 0
+    out = capsys.readouterr().out.splitlines()
+    rows = [line for line in out if line.strip().startswith("p0.")]
+    assert len(rows) == 4 and all(" static " in r for r in rows) and sum(r.endswith("~") for r in rows) == 2
+    assert out[-2].startswith("total: ") and out[-1].startswith("SLURM (x1.5 margin): --array=0-3 --ntasks=1 ")
+    assert list(tmp_path.iterdir()) == []
+    from opalflow.runs.plan import plan
+    from opalflow.registry import load_spec
+
+    p = plan(load_spec(WORKFLOWS / "opal_quick.toml"), say=lambda m: None)
+    (job,) = p["jobs"]
+    assert job["method"] == "dynamic" and job["steps"] > 100 and job["wall_s"] > job["build_s"]

@@ -64,9 +64,11 @@ def prepare(spec: BpmWorkflow, out: Path, progress=None) -> CompressionDeck:
             "materials": {n: material(particle_material(n, spec.material), spec.materials)
                           for n in dict.fromkeys(particle_material(t, spec.material) for t in s.type_names)},
             **deck.info()}
-    if scene.run_keys:
+    if scene.statistics:        # what build's summary.json says of the structure, for the run's summary too
         stats = scene.statistics(deck.source)
+        info["statistics"] = stats
         info["structure"] = {k: stats[k] for k in scene.run_keys}
+    info["build_timings_s"] = dict(deck.structure.meta.get("timings_s", {}))
     RunRecord.new(spec, deck=info).write(out)
     return deck
 
@@ -236,6 +238,9 @@ def analyze(out: Path, wall_s: float | None = None, lammps_s: float | None = Non
         "headline": f"E = {E_GPa:.4g} GPa, strength = {float(stress[peak]):.4g} MPa "
                     f"(strain at peak {float(strain[peak]):.4f})",
     }
+    summary.update({k: v for k, v in info.get("statistics", {}).items() if k not in summary})
+    if "build_timings_s" in info:
+        summary["build_timings_s"] = info["build_timings_s"]
     refs = info.get("references", {})
     summary["reference"] = {k: {"value": v, "source": src,
                                 "error": (summary[k] - v) / v} for k, (v, src) in refs.items()}

@@ -64,8 +64,9 @@ class LocalExecutor:
 
 
 class DaskExecutor:
-    """Jobs as tasks of a Dask cluster: the scheduler at ``address``, or a LocalCluster of ``workers``
-    single-threaded worker processes started here (and closed after)."""
+    """Jobs as tasks of a Dask cluster: the scheduler at ``address``, else the ``distributed.Client`` this
+    process already has (made by the user), else a LocalCluster of ``workers`` single-threaded worker
+    processes started here (and closed after)."""
 
     name = "dask"
 
@@ -78,9 +79,11 @@ class DaskExecutor:
         except ImportError:
             raise InputError("executor.type = 'dask': the 'distributed' package is not installed "
                              "(pip install distributed)") from None
-        cluster = None
+        cluster, own = None, True
         if self.spec.address:
             client = Client(self.spec.address)
+        elif _default_client() is not None:          # a Client the user made in this process (Python API)
+            client, own = _default_client(), False
         else:
             workers = self.spec.workers or max(1, (os.cpu_count() or 1) // self.np)
             cluster = LocalCluster(n_workers=min(workers, len(folders)), threads_per_worker=1, processes=True,
@@ -94,9 +97,19 @@ class DaskExecutor:
             for fut in dask_completed(futures):
                 yield futures[fut], fut.result()
         finally:
-            client.close()
+            if own:
+                client.close()
             if cluster is not None:
                 cluster.close()
+
+
+def _default_client():
+    from distributed import default_client
+
+    try:
+        return default_client()
+    except ValueError:
+        return None
 
 
 class SlurmExecutor:

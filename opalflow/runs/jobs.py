@@ -125,8 +125,13 @@ def _run_job(folder: Path, np_: int) -> dict:
     if is_finished(folder):
         return read_summary(folder)
 
+    last = [0.0]
+
     def say(msg: str) -> None:
         print(f"[{label}] {msg}", file=sys.stderr, flush=True)
+        if time.time() - last[0] > 2.0:          # what the job says last, for status (a LAMMPS run's
+            last[0] = time.time()                # step counter writes progress.json itself)
+            write_json_atomic(folder / "progress.json", {"message": msg, "time": last[0]})
 
     update_job(folder, state="running", host=os.uname().nodename, slurm_job=slurm_job(), pid=os.getpid(),
                attempted=time.time(), error="", log_tail="")

@@ -25,6 +25,8 @@ def _progress(folder: Path) -> str:
     except (OSError, ValueError):
         return ""
     age = time.time() - p.get("time", 0)
+    if "message" in p:
+        return p["message"] + (f" (as of {age:.0f} s ago)" if age > 30 else "")
     left = p.get("left_s")
     return (f"step {p['step']}/{p['total']} ({100 * p['step'] / max(p['total'], 1):.0f} %), "
             f"{p['rate_steps_s']:.0f} steps/s, {'?' if left is None else f'{left:.0f} s'} left"
