@@ -286,6 +286,8 @@ def test_plan_prices_a_study_without_running_it(tmp_path, capsys, monkeypatch):
     out = capsys.readouterr().out.splitlines()
     rows = [line for line in out if line.strip().startswith("p0.")]
     assert len(rows) == 4 and all(" static " in r for r in rows) and sum(r.endswith("~") for r in rows) == 2
+    bonds = [int(r.split()[3]) for r in rows]          # the unbuilt jobs lie between the built ones
+    assert min(bonds[0], bonds[3]) <= min(bonds[1:3]) and max(bonds[1:3]) <= max(bonds[0], bonds[3])
     assert out[-2].startswith("total: ") and out[-1].startswith("SLURM (x1.5 margin): --array=0-3 --ntasks=1 ")
     assert list(tmp_path.iterdir()) == []
     from opalflow.runs.plan import plan

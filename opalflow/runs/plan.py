@@ -97,6 +97,26 @@ def _sample(n: int, k: int) -> list[int]:
     return sorted({round(i * (n - 1) / (k - 1)) for i in range(k)}) if k > 1 else [0]
 
 
+def _between(costs: dict[int, dict], i: int) -> dict:
+    """The facts of job ``i``: its own where it was built, else interpolated in the job's index between the
+    built jobs on either side (a study's jobs run along its parameter), the nearest one beyond the ends."""
+    if i in costs:
+        return costs[i]
+    lo = max((k for k in costs if k < i), default=None)
+    hi = min((k for k in costs if k > i), default=None)
+    if lo is None or hi is None:
+        return costs[lo if hi is None else hi]
+    w = (i - lo) / (hi - lo)
+    out = dict(costs[lo])
+    for key, a in costs[lo].items():
+        b = costs[hi].get(key)
+        if isinstance(a, (int, float)) and not isinstance(a, bool) and isinstance(b, (int, float)):
+            out[key] = type(a)(a + w * (b - a)) if isinstance(a, float) else round(a + w * (b - a))
+    if out["method"] == "static" and costs[lo].get("solver") != costs[hi].get("solver"):
+        out["solver"] = costs[lo if w < 0.5 else hi]["solver"]
+    return out
+
+
 def measured(folder: Path, label: str, single: bool) -> dict | None:
     job = folder if single else next(iter(sorted(folder.glob(f"jobs/{label}-*"))), None)
     if job is None:
@@ -108,8 +128,8 @@ def measured(folder: Path, label: str, single: bool) -> dict | None:
 
 
 def plan(spec, *, ranks: int = 1, sample: int = 3, against: Path | None = None, say=print) -> dict:
-    """Price the jobs of ``spec`` (the first, middle and last ``sample`` of a study are built; the others
-    take the nearest sampled job's facts) and return rows and totals."""
+    """Price the jobs of ``spec`` (``sample`` of a study's jobs are built, spread from the first to the last;
+    the others are interpolated between them) and return rows and totals."""
     law = laws()
     kind = registry.get(spec.kind)
     jobs = jobs_of(spec)
@@ -126,8 +146,7 @@ def plan(spec, *, ranks: int = 1, sample: int = 3, against: Path | None = None, 
         costs[i] = registry.resolve(registry.get(jobs[i].spec.kind).cost)(jobs[i].spec)
     rows = []
     for i, j in enumerate(jobs):
-        near = min(picked, key=lambda p: abs(p - i))
-        facts = costs[near]
+        facts = _between(costs, i)
         row = {"label": j.label, "built": i in costs, **facts, **predict(facts, law, ranks)}
         if against is not None:
             row["measured"] = measured(Path(against), j.label, single="executor" not in kind.options)
@@ -162,7 +181,7 @@ def plan_lines(p: dict) -> list[str]:
     s = p["slurm"]
     lines += [f"total: {p['core_hours']:.3g} core-hours; longest job {p['longest_job_s']:.0f} s "
               f"({p['longest_job_s'] / 3600:.2f} h); peak memory {p['peak_MiB'] / 1024:.2f} GiB per job "
-              "(~: job priced by the nearest built one)",
+              "(~: job interpolated between built ones)",
               f"SLURM (x{MARGIN} margin): --array={s['array']} --ntasks={s['ntasks']} --mem={s['mem']} "
               f"--time={s['time_min']}  ([executor] type = \"slurm\", mem_gb, time_min)"]
     return lines
