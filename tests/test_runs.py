@@ -296,3 +296,13 @@ def test_plan_prices_a_study_without_running_it(tmp_path, capsys, monkeypatch):
     p = plan(load_spec(WORKFLOWS / "opal_quick.toml"), say=lambda m: None)
     (job,) = p["jobs"]
     assert job["method"] == "dynamic" and job["steps"] > 100 and job["wall_s"] > job["build_s"]
+
+
+def test_a_relative_out_folder(tmp_path, monkeypatch, capsys):
+    """Was: `run quickstart --out runs/quickstart` (relative, as the README's first command) failed at the
+    first progress line: LAMMPS works inside the folder, progress.json was written relative to it."""
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", "lattice_sc", "--out", "runs/sc", *[x for s in LATTICE for x in ("--set", s)]]) == 0
+    assert capsys.readouterr().out.startswith("E = ")
+    assert json.loads((tmp_path / "runs/sc/progress.json").read_text())["step"] > 0
+    assert RunRecord.read("runs/sc").state == "finished"

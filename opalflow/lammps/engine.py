@@ -173,7 +173,7 @@ class Progress:
         self.total, self.start, self.label, self.interval = total_steps, start_step, label, interval
         self.t0 = self.last = time.perf_counter()
         self.out = out or sys.stderr
-        self.folder = folder
+        self.folder = None if folder is None else Path(folder).resolve()
 
     def update(self, step: int, strain: float | None = None, force: bool = False) -> None:
         now = time.perf_counter()
@@ -224,6 +224,7 @@ def run_in_process(folder: Path, script: str, *, every: int, strain_per_step: fl
     of the chunk and raises :class:`Preempted`.
     """
     t = time.perf_counter()
+    folder = Path(folder).resolve()          # the session works inside it: progress.json needs the full path
     with session(folder, suffix=suffix) as lmp:
         for cmd in script_commands(script):
             words = cmd.split()

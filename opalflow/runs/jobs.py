@@ -113,7 +113,7 @@ def run_job(folder: str, np_: int = 1, threads: int = 1) -> dict:
     from threadpoolctl import threadpool_limits
 
     with threadpool_limits(limits=threads):
-        return _run_job(Path(folder), np_)
+        return _run_job(Path(folder).resolve(), np_)
 
 
 def _run_job(folder: Path, np_: int) -> dict:

@@ -339,7 +339,8 @@ def _plot_porosity(runs, fits, path: Path) -> None:
     axes[1].set_ylabel("strength (MPa)")
     for ax in axes[:2]:
         ax.set_xlabel("porosity")
-        ax.legend(fontsize=8)
+        if ax.get_legend_handles_labels()[0]:      # no strength panel legend for static solves
+            ax.legend(fontsize=8)
     axes[2].set_xlabel("density (kg/m^3)")
     axes[2].set_ylabel("E (GPa)")
     save_figure(fig, path)
