@@ -269,7 +269,7 @@ def analyze(out: Path, wall_s: float | None = None, lammps_s: float | None = Non
 
     # all results or none (a full disk leaves the earlier set whole); summary.json is renamed last
     return finish(out, summary, report.compression_report(info, summary, fit, bool(frames)), files=files,
-                  record=record if record.sessions else None)
+                  record=record)
 
 
 def _fill_h5(h, info, curve, strain, stress, stress_plate, stress_substrate, broken, snapshots, histograms,

@@ -173,7 +173,7 @@ class Progress:
         self.total, self.start, self.label, self.interval = total_steps, start_step, label, interval
         self.t0 = self.last = time.perf_counter()
         self.out = out or sys.stderr
-        self.folder = None if folder is None else Path(folder).resolve()
+        self.folder = folder
 
     def update(self, step: int, strain: float | None = None, force: bool = False) -> None:
         now = time.perf_counter()

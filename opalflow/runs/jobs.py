@@ -19,7 +19,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from opalflow.runs.record import is_finished, read_summary, run_kind, slurm_job
+from opalflow.runs.record import finished_summary, run_kind, slurm_job
 from opalflow.spec import WorkflowSpec
 from opalflow.store import write_json_atomic
 
@@ -63,16 +63,15 @@ def update_job(folder: str | os.PathLike, **fields) -> dict:
 def finished(job: Job, root: Path) -> dict | None:
     """The job's summary if it has completed with this very spec, else None."""
     folder = job.folder(root)
-    if read_job(folder).get("hash") != job.key or not is_finished(folder):
-        return None
-    return read_summary(folder)
+    return finished_summary(folder) if read_job(folder).get("hash") == job.key else None
 
 
 def outcome(folder: str | os.PathLike) -> dict:
     """What a job folder holds now: its summary when finished, else ``{"failed": ..., "log_tail": ...}``
     (with ``"state"``: failed, or pending / running / requeued for one that has not ended)."""
-    if is_finished(folder):
-        return read_summary(folder)
+    summary = finished_summary(folder)
+    if summary is not None:
+        return summary
     meta = read_job(folder)
     state = meta.get("state", "pending")
     if state == "failed":
@@ -122,8 +121,9 @@ def _run_job(folder: Path, np_: int) -> dict:
 
     meta = read_job(folder)
     label = meta.get("label", folder.name)
-    if is_finished(folder):
-        return read_summary(folder)
+    done = finished_summary(folder)
+    if done is not None:
+        return done
 
     last = [0.0]
 

@@ -93,9 +93,10 @@ class RunRecord:
     schema: int = SCHEMA
 
     @classmethod
-    def new(cls, spec, *, deck: dict | None = None, references: dict | None = None, state: str = "built") -> RunRecord:
-        return cls(kind=spec.kind, workflow=spec.name, spec=spec.to_dict(), state=state,
-                   references=references if references is not None else _references(spec), deck=deck or {})
+    def new(cls, spec, *, deck: dict | None = None) -> RunRecord:
+        """A built run of ``spec`` (its references from the spec where it has them)."""
+        return cls(kind=spec.kind, workflow=spec.name, spec=spec.to_dict(), references=_references(spec),
+                   deck=deck or {})
 
     # ------------------------------------------------------------------ disk
     @classmethod
@@ -136,10 +137,6 @@ class RunRecord:
     def facts(self) -> dict:
         """The deck facts with the spec, the workflow name and the references: what an analysis reads."""
         return {**self.deck, "workflow": self.workflow, "spec": self.spec, "references": self.references}
-
-    def steps_before(self) -> int:
-        """Steps of all sessions before the current one."""
-        return sum((s.last_step or s.first_step) - s.first_step for s in self.sessions[:-1])
 
     # ------------------------------------------------------------------ state changes
     def begin(self, folder, *, launcher: str = "in-process", restart: str = "", first_step: int = 0) -> Session:
@@ -185,19 +182,20 @@ def read_summary(folder: str | os.PathLike) -> dict | None:
     return data if isinstance(data, dict) else None
 
 
-def is_finished(folder: str | os.PathLike) -> bool:
-    """A folder whose summary.json is a run's result (not ``build``'s)."""
+def finished_summary(folder: str | os.PathLike) -> dict | None:
+    """The summary of a finished run in ``folder`` (not ``build``'s), else None."""
     s = read_summary(folder)
-    return s is not None and s.get("state", "finished") != "built"
+    return s if s is not None and s.get("state", "finished") != "built" else None
+
+
+def is_finished(folder: str | os.PathLike) -> bool:
+    return finished_summary(folder) is not None
 
 
 def write_build_summary(folder: str | os.PathLike, summary: dict) -> None:
     """``build``'s summary.json (``state = "built"``); refused where it would overwrite a finished run."""
-    folder = Path(folder)
-    if is_finished(folder):
-        raise SpecError("--out", str(folder), "holds a finished run (summary.json, results); build into another "
-                        "folder or remove it first")
-    write_json_atomic(folder / SUMMARY, {**summary, "state": "built"})
+    refuse_finished(folder)
+    write_json_atomic(Path(folder) / SUMMARY, {**summary, "state": "built"})
 
 
 def refuse_finished(folder: str | os.PathLike) -> None:

@@ -17,20 +17,21 @@ from opalflow.spec import SpecError
 STATES = ("pending", "running", "requeued", "finished", "failed")
 
 
-def _progress(folder: Path) -> str:
+def _progress(folder: Path) -> tuple[str, float | None]:
+    """What the running job says (step, rate, time left; or its last message) and its seconds left."""
     import json
 
     try:
         p = json.loads((folder / "progress.json").read_text())
     except (OSError, ValueError):
-        return ""
+        return "", None
     age = time.time() - p.get("time", 0)
+    stale = f" (as of {age:.0f} s ago)" if age > 30 else ""
     if "message" in p:
-        return p["message"] + (f" (as of {age:.0f} s ago)" if age > 30 else "")
+        return p["message"] + stale, None
     left = p.get("left_s")
     return (f"step {p['step']}/{p['total']} ({100 * p['step'] / max(p['total'], 1):.0f} %), "
-            f"{p['rate_steps_s']:.0f} steps/s, {'?' if left is None else f'{left:.0f} s'} left"
-            + (f" (as of {age:.0f} s ago)" if age > 30 else ""))
+            f"{p['rate_steps_s']:.0f} steps/s, {'?' if left is None else f'{left:.0f} s'} left{stale}"), left
 
 
 def run_state(folder: Path) -> tuple[str, dict]:
@@ -58,7 +59,7 @@ def status_lines(folder: str | Path, tail: int = 8) -> list[str]:
         if not RunRecord.exists(folder) and not (folder / "job.json").exists():
             raise SpecError("folder", str(folder), "holds neither a study (jobs/*/job.json) nor a run (run.json)")
         jobs = [folder]
-    rows, counts = [], Counter()
+    rows, counts, lefts = [], Counter(), []
     for job in jobs:
         state, meta = run_state(job)
         counts[state] += 1
@@ -73,27 +74,21 @@ def status_lines(folder: str | Path, tail: int = 8) -> list[str]:
             rows.append(f"  FAILED    {label}: {meta.get('error', '')} [{job}]")
             rows += [f"            | {line}" for line in meta.get("log_tail", "").splitlines()[-tail:]]
         elif state in ("running", "requeued"):
-            rec_note = ""
-            if RunRecord.exists(job):
-                try:
-                    rec = RunRecord.read(job)
-                    rec_note = f", {len(rec.sessions)} session(s), {rec.requeues} requeue(s)" if rec.sessions else ""
-                except SpecError:
-                    pass
-            rows.append(f"  {state:<9} {label}: {_progress(job) or 'starting'}{rec_note}" + (f" [{where}]" if where else ""))
+            said, left = _progress(job)
+            if state == "running":
+                lefts.append(left)
+            rows.append(f"  {state:<9} {label}: {said or 'starting'}{_sessions(job)}" + (f" [{where}]" if where else ""))
         else:
             rows.append(f"  pending   {label}")
     head = f"{folder}: {len(jobs)} job(s): " + ", ".join(f"{counts[s]} {s}" for s in STATES if counts[s])
-    left = [_left(j) for j in jobs if run_state(j)[0] == "running"]
-    if left and all(x is not None for x in left):
-        head += f"; running jobs done in ~{max(left):.0f} s"
+    if lefts and all(x is not None for x in lefts):
+        head += f"; running jobs done in ~{max(lefts):.0f} s"
     return [head, *rows]
 
 
-def _left(folder: Path) -> float | None:
-    import json
-
+def _sessions(folder: Path) -> str:
     try:
-        return json.loads((folder / "progress.json").read_text()).get("left_s")
-    except (OSError, ValueError):
-        return None
+        rec = RunRecord.read(folder)
+    except SpecError:
+        return ""
+    return f", {len(rec.sessions)} session(s), {rec.requeues} requeue(s)" if rec.sessions else ""
