@@ -42,6 +42,9 @@ SlurmUser=root
 SlurmctldPort=6817
 SlurmdPort=6818
 AuthType=auth/munge
+# a job credential lives 10 s (default 120): SLURM holds a requeued job that long before it starts it
+# again (the node refuses the old credential until then), so a time-limited test requeues in seconds
+AuthInfo=cred_expire=10
 StateSaveLocation=$STATE/ctld
 SlurmdSpoolDir=$STATE/d
 SlurmctldPidFile=$STATE/slurmctld.pid

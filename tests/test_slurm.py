@@ -105,8 +105,8 @@ def test_a_study_survives_a_controller_restart(slurm, tmp_path):
 
 def test_time_limit_requeues_from_the_restart_to_the_same_numbers(slurm, tmp_path):
     """The quickstart (bonds breaking) to half its strain under a 1-minute limit: SLURM signals it (USR1, 45 s
-    before the limit, at its next time-limit check), it writes a restart file and requeues itself, the
-    waiting executor releases it, it continues; E, strength and broken bonds equal the run's without a
+    before the limit, at its next time-limit check), it writes a restart file and requeues itself, SLURM
+    starts it again after the credential hold, it continues; E, strength and broken bonds equal the run's without a
     limit, and the report counts the requeues."""
     sets = ["compression.strain_max=0.015", "compression.snapshot_strains=[]"]
     whole = opalflow.run("quickstart", tmp_path / "whole", set=sets, quiet=True)

@@ -166,7 +166,7 @@ class SlurmExecutor:
     def _wait(self, array: str, folders: list[str], say) -> Iterator[Outcome]:
         left = {str(Path(f).resolve()): k for k, f in enumerate(folders)}
         missing: dict[str, int] = {}
-        released: dict[str, float] = {}         # the session each requeued task was released after
+        said: dict[str, float] = {}             # the session after which each requeued task was announced
         quiet_since = None
         while left:
             for f in list(left):
@@ -174,9 +174,11 @@ class SlurmExecutor:
                 if meta.get("state") in ("finished", "failed"):
                     del left[f]
                     yield f, outcome(f)
-                elif meta.get("state") == "requeued" and released.get(f) != meta.get("attempted"):
-                    _release(meta, say)
-                    released[f] = meta.get("attempted")
+                elif meta.get("state") == "requeued" and said.get(f) != meta.get("attempted"):
+                    said[f] = meta.get("attempted")
+                    say(f"slurm: task {meta.get('slurm_job', array)} requeued itself from its restart file; SLURM "
+                        "starts it again once its job credential has expired (AuthInfo cred_expire, 120 s by "
+                        "default)")
             if not left:
                 return
             queued = _queued(array)
@@ -199,22 +201,6 @@ class SlurmExecutor:
                                          f"out of time; {got['failed']}); a rerun continues it")
                         yield f, got
             time.sleep(self.spec.poll_s)
-
-
-def _release(meta: dict, say) -> None:
-    """SLURM holds a requeued batch job for about two minutes (its BeginTime); a task that requeued itself
-    from a restart file may start again at once.  The update is refused until the job is pending again."""
-    job = meta.get("slurm_job", "")
-    if not job:
-        return
-    for _ in range(10):
-        res = _slurm(["scontrol", "update", f"JobId={job}", "StartTime=now"])
-        if res.returncode == 0:
-            say(f"slurm: task {job} requeued from its restart file, released")
-            return
-        time.sleep(1.0)
-    say(f"slurm: task {job} requeued from its restart file; SLURM holds it before it starts again "
-        f"({(res.stdout + res.stderr).strip() or 'no reason given'})")
 
 
 def _slurm(cmd: list[str]) -> subprocess.CompletedProcess:
