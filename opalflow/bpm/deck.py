@@ -15,11 +15,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from opalflow.bpm.loading import CONTACT_LAWS, LOADINGS
 from opalflow.bpm.spec import BpmWorkflow
 from opalflow.bpm.timestep import TimestepEstimate, estimate_timestep
 from opalflow.lammps.syntax import name, num, render
-from opalflow.materials import (BondCoefficients, ContactProperties, bond_coefficients, contact_properties,
-                                linear_contact_stiffness)
+from opalflow.materials import BondCoefficients, ContactProperties, bond_coefficients, contact_properties
 from opalflow.spec import SpecError
 from opalflow.structure import Structure
 from opalflow.version import __version__
@@ -93,18 +93,6 @@ def plate_contact_E(particle: ContactProperties, plate: ContactProperties) -> fl
     return 2.0 * (1.0 - particle.poisson_ratio**2) * e_star
 
 
-def contact_args(c: ContactProperties, E: float | None = None, k: float | None = None) -> str:
-    """pair_coeff / wall arguments of a contact: Hertz-Mindlin with Young's modulus E, or linear with
-    normal stiffness k (pN/nm; tangential k_t = ``c.tangential_ratio`` k)."""
-    if c.model == "linear":
-        kn = k if k is not None else c.stiffness
-        return (f"hooke {num(kn)} {num(c.restitution)} tangential linear_history {num(c.tangential_ratio * kn)} "
-                f"1.0 {num(c.friction)} damping coeff_restitution")
-    return (f"hertz/material {num(E if E is not None else c.youngs_modulus_MPa)} {num(c.restitution)} "
-            f"{num(c.poisson_ratio)} tangential mindlin NULL 1.0 {num(c.friction)} "
-            "damping coeff_restitution")
-
-
 @dataclass
 class CompressionDeck:
     """Everything a compression run needs: the data, the decks and the numbers behind them."""
@@ -132,6 +120,8 @@ class CompressionDeck:
     top_z0_nm: float = 0.0
     top_layer: np.ndarray | None = None     # the top particle layer (LAMMPS group "top")
     initial_ke_zJ: float = 0.0              # kinetic energy given at the start (glued: affine field, top layer)
+    loading: str = "plate"                  # compression.loading (opalflow.bpm.loading.LOADINGS)
+    loading_sense: int = 1                  # +1: compression, -1: tension (strain and stress positive in it)
 
     def info(self) -> dict:
         return {
@@ -141,6 +131,7 @@ class CompressionDeck:
             "plate_speed_m_s": self.plate_speed_nm_ns, "blocks": self.blocks,
             "modulus_affine_GPa": self.modulus_affine_MPa / 1e3, "omega1_per_ns": self.omega1_per_ns,
             "viscous_gamma": self.viscous_gamma, "top_z0_nm": self.top_z0_nm,
+            "loading": self.loading, "loading_sense": self.loading_sense,
             "timestep_estimate_s": self.timestep.as_seconds(),
             "bond_types": [{"material": m, "length_nm": L, "count": c, "kr_pN": cf.kr, "ks_pN": cf.ks,
                             "kt_pN_nm": cf.kt, "kb_pN_nm": cf.kb, "fr_c_pN": cf.fr_c, "fs_c_pN": cf.fs_c}
@@ -186,12 +177,12 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
     plate = contact_properties(DIAMOND)
     given = {k: v for k, v in (("friction", spec.contacts.friction), ("restitution", spec.contacts.restitution))
              if v is not None}
-    contacts = {k + 1: dataclasses.replace(contact_properties(particle_material(n, spec.material)), **given)
+    law = CONTACT_LAWS[spec.contacts.model]
+    loading = LOADINGS[c.loading]
+    contacts = {k + 1: law.prepare(dataclasses.replace(contact_properties(particle_material(n, spec.material)), **given),
+                                   0.5 * float(np.mean(s.diameters[s.types == k + 1])) if np.any(s.types == k + 1)
+                                   else 0.5 * d_mean)
                 for k, n in enumerate(s.type_names)}
-    if spec.contacts.model == "linear":
-        contacts = {t: dataclasses.replace(cp, model="linear", stiffness=linear_contact_stiffness(
-            cp, 0.5 * float(np.mean(s.diameters[s.types == t])) if np.any(s.types == t) else 0.5 * d_mean))
-            for t, cp in contacts.items()}
     plate_E = {t: plate_contact_E(cp, plate) for t, cp in contacts.items()}
     estimate = estimate_timestep(data, coeffs, contacts if spec.contacts.enabled else {},
                                  plate_E, contacts, r0, spectral=spec.compression.method != "static")
@@ -208,6 +199,8 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
     substrate = s.groups.get("substrate", np.zeros(s.n_particles, bool))
     if not substrate.any():
         raise SpecError("substrate.layers", 0, "the compression needs a fixed substrate (layers >= 1)")
+    if loading.needs_bonds and (s.n_bonds == 0 or not np.any(s.bond_types)):
+        raise SpecError("compression.loading", c.loading, "needs a bonded sample (this one has no bonds to pull on)")
     top = float(np.max(s.positions[:, 2] + s.diameters / 2))
     base = float(np.max(s.positions[substrate, 2] + s.diameters[substrate] / 2))
     height = top - base
@@ -230,7 +223,7 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
 
     omega1, modulus_affine = fundamental_mode(data, coeffs, height, area, masses, r0)
     initial_ke = 0.0
-    if c.loading == "glued":     # the start gives the mobile particles the affine field, fix move the top v
+    if loading.glued:     # the start gives the mobile particles the affine field, fix move the top v
         moving = ~substrate & ~top_group
         v_z = v * np.clip((s.positions[:, 2] - base) / height, 0.0, 1.0)
         initial_ke = float(0.5 * np.sum(masses[moving] * v_z[moving] ** 2) + 0.5 * np.sum(masses[top_group]) * v**2)
@@ -244,33 +237,29 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
                   data_file="data.lmp", boundary="p p f" if s.periodic[0] else "m m f")
     blocks = {
         "system": render("system", **common),
-        "groups": render("groups" if c.loading == "plate" else "groups_glued", substrate_type=num(substrate_type),
-                         top_layer_z=num(top - 0.75 * d_mean)),
         "bonds": render("bonds_spring" if contact_bond else "bonds", breakable="yes" if spec.bonds.breakable else "no",
-                        bond_coeffs=bond_lines),
+                        smooth="yes" if spec.bonds.breakable and spec.bonds.smooth else "no", bond_coeffs=bond_lines),
         "contacts": render("contacts", pair_coeffs="\n".join(
-            f"pair_coeff      {t} {t} {contact_args(cp)}" for t, cp in contacts.items())),
+            f"pair_coeff      {t} {t} {law.args(cp)}" for t, cp in contacts.items())),
         "integrate": render("integrate", skin=num(0.2 * d_mean), timestep=num(dt)),
-        "damping": render("damping", zeta=num(c.global_damping), gamma=num(gamma), plate_speed=num(v),
+        "damping": render("damping", zeta=num(c.global_damping), gamma=num(gamma), plate_speed=num(loading.sense * v),
                           base=num(base), height=num(height)),
-        "plate": render("plate", plate_speed=num(v), plate_z0=num(top),
-                        plate_contact=contact_args(contacts[1], plate_E[1], 2 * contacts[1].stiffness))
-        if c.loading == "plate" else render("plate_glued", plate_speed=num(v)),
-        "affine_start": render("affine_start", plate_speed=num(v), base=num(base), top=num(top)),
+        **loading.blocks(v, substrate_type, top - 0.75 * d_mean, top, base,
+                         law.args(contacts[1], plate_E[1], 2 * contacts[1].stiffness)),
         "snapshots": render("snapshots", next_snapshot=_next_snapshot(snaps), count_bonds=COUNT_BONDS),
         "run": render("run", restart_every=num(restart_every), steps=num(steps)),
     }
     wanted = ["system", "groups", "bonds"] + (["contacts"] if spec.contacts.enabled else []) + \
              ["integrate"] + (["damping"] if c.global_damping > 0 else []) + \
-             ["plate"] + (["affine_start"] if c.loading == "glued" else []) + ["output"] + \
+             ["plate"] + (["affine_start"] if "affine_start" in blocks else []) + ["output"] + \
              (["snapshots"] if snaps else []) + ["run"]
-    title = f"# opalflow {__version__}: {name(spec.name)} - uniaxial compression by a plate\n"
+    title = f"# opalflow {__version__}: {name(spec.name)} - {loading.title}\n"
 
     def deck(fresh: bool) -> str:
         parts = []
         for b in wanted:
             if b == "output":
-                parts.append(render("output", height=num(height), every=num(every),
+                parts.append(render("output", height=num(height), every=num(every), strain_sign=loading.strain_expression(),
                                     curve_file="file" if fresh else "append"))
             elif fresh:
                 parts.append(blocks[b])
@@ -291,7 +280,8 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
                            restart_every=restart_every, snapshot_steps=snaps, height_nm=height,
                            area_nm2=area, plate_z0_nm=top, plate_speed_nm_ns=v, blocks=wanted,
                            modulus_affine_MPa=modulus_affine, omega1_per_ns=omega1, viscous_gamma=gamma,
-                           top_z0_nm=top_z0, top_layer=top_group, initial_ke_zJ=initial_ke)
+                           top_z0_nm=top_z0, top_layer=top_group, initial_ke_zJ=initial_ke,
+                           loading=loading.name, loading_sense=loading.sense)
 
 
 def fundamental_mode(s: Structure, coeffs: list[BondCoefficients], height: float, area: float,

@@ -157,15 +157,24 @@ def newest_readable_restart(out: Path) -> int | None:
     return None
 
 
-def boundary_stresses(curve: dict, area: float) -> tuple[np.ndarray, np.ndarray]:
-    """Compressive stress (MPa, positive) on the plate and on the substrate.
+def boundary_stresses(curve: dict, area: float, sense: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """Stress (MPa) on the plate and on the substrate, positive in the loading's sense (``sense`` +1:
+    compression, -1: tension).
 
     fix wall/gran/region reports the force on the particles in its 'contacts' array
     (negative z: the plate pushes down); the substrate's reaction is the force on its
     particles (negative: pulled down).  The sample stress is their mean, the stress at
     mid-height, which also cancels what inertia and damping add at one end.  pN/nm^2 = MPa.
     """
-    return -curve["plate_fz_pN"] / area, -curve["substrate_fz_pN"] / area
+    return -sense * curve["plate_fz_pN"] / area, -sense * curve["substrate_fz_pN"] / area
+
+
+def curve_strain_stress(curve: dict, info: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Strain of the wall, mean stress, plate and substrate stresses of a curve, positive in the
+    loading's sense (``loading_sense`` of the deck facts; +1 before there were tension loadings)."""
+    sense = info.get("loading_sense", 1)
+    plate, substrate = boundary_stresses(curve, info["area_nm2"], sense)
+    return -sense * curve["plate_dz_nm"] / info["height_nm"], 0.5 * (plate + substrate), plate, substrate
 
 
 def git_commit() -> str:
@@ -186,13 +195,11 @@ def analyze(out: Path, wall_s: float | None = None, lammps_s: float | None = Non
         curve = mech.read_curve(out / "curve.txt")
     except ValueError as exc:
         raise SpecError("folder", str(out), f"curve.txt is damaged or empty ({str(exc).splitlines()[0]})") from None
-    height, area = info["height_nm"], info["area_nm2"]
-    strain = -curve["plate_dz_nm"] / height
-    stress_plate, stress_substrate = boundary_stresses(curve, area)
-    stress = 0.5 * (stress_plate + stress_substrate)
+    height = info["height_nm"]
+    strain, stress, stress_plate, stress_substrate = curve_strain_stress(curve, info)
     fit = mech.fit_elastic(strain, stress)
     # specimen strain: mean displacement of the top particle layer (no plate indentation)
-    strain_top = (info["top_z0_nm"] - curve["top_z_nm"]) / height
+    strain_top = info.get("loading_sense", 1) * (info["top_z0_nm"] - curve["top_z_nm"]) / height
     fit_top = mech.fit_elastic(strain_top, stress)
     peak = int(np.argmax(stress))
     n_bonds0 = info["n_bonds"]
@@ -340,13 +347,20 @@ def analyze_folder(out: Path) -> dict:
 def run_workflow(spec: BpmWorkflow, out: Path, *, np_: int = 1, resume: bool = False, say=print,
                  suffix: str | None = None) -> dict:
     """prepare (unless resuming) -> execute -> analyze; the rate check runs a half-speed twin.
-    ``compression.method = "static"``: one linear solve instead (opalflow.bpm.static_run)."""
+    ``compression.method = "static"``: one linear solve instead (opalflow.bpm.static_run); "quasistatic": the
+    event-driven fracture of the linear network (opalflow.bpm.quasistatic_run)."""
     if spec.compression.method == "static":
         if resume or np_ > 1 or suffix:
             raise SpecError("compression.method", "static", "a static solve has no --resume, --np or --suffix")
         from opalflow.bpm.static_run import run_static
 
         return run_static(spec, out, say=say)
+    if spec.compression.method == "quasistatic":
+        if np_ > 1 or suffix:
+            raise SpecError("compression.method", "quasistatic", "the quasi-static method has no --np or --suffix")
+        from opalflow.bpm.quasistatic_run import run_quasistatic
+
+        return run_quasistatic(spec, out, resume=resume, say=say)
     t = time.perf_counter()
     if not resume:
         deck = prepare(spec, out, progress=say)
@@ -363,8 +377,8 @@ def run_workflow(spec: BpmWorkflow, out: Path, *, np_: int = 1, resume: bool = F
         slow = analyze(sub)
         fast_curve = mech.read_curve(out / "curve.txt")
         info = RunRecord.read(out).deck
-        fast_stress = np.mean(boundary_stresses(fast_curve, info["area_nm2"]), axis=0)
-        fast_fit = mech.fit_elastic(-fast_curve["plate_dz_nm"] / info["height_nm"], fast_stress)
+        fast_strain, fast_stress, _, _ = curve_strain_stress(fast_curve, info)
+        fast_fit = mech.fit_elastic(fast_strain, fast_stress)
         fast_strength = float(np.max(fast_stress))
         extra["rate_check"] = {
             "youngs_modulus_change": slow["youngs_modulus_GPa"] / (fast_fit.modulus_MPa / 1e3) - 1,

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from opalflow.bpm.loading import CONTACT_LAWS, LOADINGS
 from opalflow.materials import OVERRIDABLE, material_names
 from opalflow.spec import WorkflowSpec, check, check_name, is_number
 
@@ -19,7 +20,7 @@ SIDES = ("periodic", "open")
 #: = force only (bpm/spring)
 BOND_MODELS = ("parallel", "contact")
 #: contact force laws between unbonded particles: Hertz-Mindlin or linear (PFC's two stiffness models)
-CONTACT_MODELS = ("hertz", "linear")
+CONTACT_MODELS = tuple(CONTACT_LAWS)
 #: allowed range of each material property a workflow may override (far around any ceramic's)
 PROPERTY_RANGES = {"density_kg_m3": (1.0, 1e5), "bond_youngs_modulus_GPa": (1e-6, 1e4),
                    "bond_poisson_ratio": (-0.99, 0.499), "bond_strength_MPa": (1e-6, 1e6)}
@@ -40,6 +41,9 @@ class BondsSpec:
     length_bins: int = 8
     breakable: bool = True
     damping_ratio: float = 0.05
+    #: LAMMPS's ``smooth``: a bond's force and torque scaled by 1 - B^4 (B its breaking index), so it fades out
+    #: before it breaks; false breaks it at full load (the paper's bonds, the quasi-static method's rule)
+    smooth: bool = True
 
 
 @dataclass
@@ -53,12 +57,13 @@ class ContactsSpec:
     restitution: float | None = None
 
 
-#: how a compression is computed: a LAMMPS run, or the linear solve of opalflow.bpm.static
-METHODS = ("dynamic", "static")
-#: how the top is loaded: a contact plate (fix wall/gran) or the top particle layer glued to a moving wall
-LOADINGS = ("plate", "glued")
+#: how a compression is computed: a LAMMPS run, the linear solve of opalflow.bpm.static (E, no strength), or
+#: the event-driven fracture of the linear network, opalflow.bpm.quasistatic (E and strength at zero rate)
+METHODS = ("dynamic", "static", "quasistatic")
 #: solvers of the static method (opalflow.bpm.static.SOLVERS)
 STATIC_SOLVERS = ("auto", "amg", "block-amg", "cg", "cg-jax")
+#: re-solves of the quasistatic method (opalflow.bpm.quasistatic.RESOLVERS)
+RESOLVERS = ("auto", "direct", "amg")
 
 
 @dataclass
@@ -78,6 +83,10 @@ class CompressionSpec:
     method: str = "dynamic"          # dynamic: LAMMPS; static: one linear solve (E and stresses only)
     solver: str = "auto"             # static: auto, amg, block-amg, cg or cg-jax (opalflow/bpm/static.py)
     drop_loose: bool = False         # static: leave out particles with no bond path to the substrate
+    resolver: str = "auto"           # quasistatic: re-solves by direct (Cholesky + Woodbury), amg, or auto
+    event_tolerance: float = 0.0     # quasistatic: break every bond within this fraction of the next one's limit
+    stop_fraction: float = 0.5       # quasistatic: stop when the stress has fallen below this fraction of the peak
+    events_max: int = 100_000        # quasistatic: at most this many events
 
 
 @dataclass
@@ -183,11 +192,20 @@ class BpmWorkflow(WorkflowSpec):
         check(c.method in METHODS, "compression.method", c.method, f"must be one of {', '.join(METHODS)}")
         check(c.solver in STATIC_SOLVERS, "compression.solver", c.solver,
               f"must be one of {', '.join(STATIC_SOLVERS)} (static method)")
-        check(not (c.method == "static" and c.check_rate), "compression.check_rate", c.check_rate,
-              "must be false with method = \"static\" (a static solve has no loading rate)")
-        check(not (c.method == "static" and b.model == "contact"), "bonds.model", b.model,
-              "must be \"parallel\" with compression.method = \"static\" (contact bonds carry no moment: "
+        linear = c.method in ("static", "quasistatic")
+        check(not (linear and c.check_rate), "compression.check_rate", c.check_rate,
+              f"must be false with method = \"{c.method}\" (a linear solve has no loading rate)")
+        check(not (linear and b.model == "contact"), "bonds.model", b.model,
+              f"must be \"parallel\" with compression.method = \"{c.method}\" (contact bonds carry no moment: "
               "a tree-like network of them is a mechanism with no static stiffness)")
+        check(not (c.method == "quasistatic" and not b.breakable), "bonds.breakable", b.breakable,
+              "must be true with compression.method = \"quasistatic\" (it breaks bonds; \"static\" gives E alone)")
+        check(c.resolver in RESOLVERS, "compression.resolver", c.resolver,
+              f"must be one of {', '.join(RESOLVERS)} (quasistatic method)")
+        check(0 <= c.event_tolerance <= 0.5, "compression.event_tolerance", c.event_tolerance,
+              "must be in [0, 0.5] (bonds within this fraction of the next limit break in one event)")
+        check(0 <= c.stop_fraction < 1, "compression.stop_fraction", c.stop_fraction, "must be in [0, 1)")
+        check(1 <= c.events_max <= 10**8, "compression.events_max", c.events_max, "must be in [1, 1e8]")
         self._apply_calibration()
         check(0 < c.restart_every_strain <= 1, "compression.restart_every_strain", c.restart_every_strain,
               "must be in (0, 1] (restart files every this much strain; >= strain_max: none)")

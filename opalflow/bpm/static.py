@@ -123,12 +123,13 @@ def rigid_body_modes(positions: np.ndarray) -> np.ndarray:
 def solve_compression(net: BondNetwork, positions: np.ndarray, fixed: np.ndarray, top: np.ndarray,
                       height: float, area: float, *, strain: float = 1e-4, solver: str = "auto",
                       rtol: float = 1e-6, maxiter: int = 20000, drop_loose: bool = False, clamp_top: bool = False,
-                      say=print) -> StaticResult:
+                      sense: int = 1, say=print) -> StaticResult:
     """Uniaxial compression by a prescribed top-layer displacement (see the module docstring).
 
     ``fixed``: the substrate; ``top``: the top layer (both boolean over particles); the top layer moves
     only in z and is free sideways and in rotation (a frictionless plate), or with ``clamp_top`` is held
-    in its other five degrees of freedom (glued to the wall: ``compression.loading = "glued"``).  The strain is
+    in its other five degrees of freedom (glued to the wall: ``compression.loading = "glued"``); ``sense`` -1
+    pulls it up instead (``"tension"``; strain and stress are positive in the loading's sense).  The strain is
     small and the answer linear in it; the stress is reported for ``strain``.  ``rtol``: CG stops at this
     relative residual; E converges far faster than the residual (quickstart at d = 30 nm: E to 1e-10 at
     1e-6, to 7e-7 at 1e-4), so 1e-6 is plenty.  Particles with no bond path
@@ -150,7 +151,7 @@ def solve_compression(net: BondNetwork, positions: np.ndarray, fixed: np.ndarray
     prescribed[top & ~fixed & ~loose, slice(None) if clamp_top else 2] = True
     x_p = np.zeros((n, 6))
     delta = strain * height
-    x_p[top & ~fixed & ~loose, 2] = -delta
+    x_p[top & ~fixed & ~loose, 2] = -sense * delta
     free = ~prescribed.ravel()
     rhs = -net.matvec(x_p.ravel())[free]
     history: list[float] = []
@@ -184,7 +185,7 @@ def solve_compression(net: BondNetwork, positions: np.ndarray, fixed: np.ndarray
     x[free] = x_f
     x = x.reshape(n, 6)
     reaction = net.matvec(x.ravel()).reshape(n, 6)           # K x: the force the supports apply
-    force_top = -float(np.sum(reaction[top & ~fixed & ~loose, 2]))    # compressive, > 0
+    force_top = -sense * float(np.sum(reaction[top & ~fixed & ~loose, 2]))    # > 0 in the loading's sense
     stress = force_top / area
     seconds = time.perf_counter() - t0
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0

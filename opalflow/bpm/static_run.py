@@ -21,6 +21,7 @@ import numpy as np
 
 from opalflow.analysis import compression as mech
 from opalflow.bpm.deck import bond_model, compression_deck
+from opalflow.bpm.loading import LOADINGS
 from opalflow.bpm.scene import scene_of, solid_fraction
 from opalflow.bpm.spec import BpmWorkflow
 from opalflow.bpm.static import (VOIGT, LooseParticlesError, StaticResult, loose_message, loose_particles,
@@ -35,10 +36,11 @@ from opalflow.version import __version__
 STRAIN = 1e-4
 
 
-def particle_stress(net: BondNetwork, res: StaticResult, volumes: np.ndarray) -> np.ndarray:
+def particle_stress(net: BondNetwork, u: np.ndarray, theta: np.ndarray, volumes: np.ndarray) -> np.ndarray:
     """Eq. 21 per particle (MPa, tension positive), columns xx yy zz xy xz yz, as LAMMPS's compute
-    stress/atom tallies a bond (ev_tally_xyz: 1/2 r_a F_b to each partner, r = x_i - x_j, F = force1on2)."""
-    F = net.bond_forces(res.u, res.theta)
+    stress/atom tallies a bond (ev_tally_xyz: 1/2 r_a F_b to each partner, r = x_i - x_j, F = force1on2), for
+    displacements ``u`` and rotations ``theta`` (N, 3)."""
+    F = net.bond_forces(u, theta)
     r = net.n * net.L[:, None]
     pairs = [(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)]
     sigma = np.zeros((net.n_particles, 6))
@@ -53,40 +55,53 @@ def bond_strain(net: BondNetwork, u: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", net.n, u[net.i] - u[net.j]) / net.L
 
 
-def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
-    """Build the scene, solve the compression, write the results (see the module docstring)."""
-    t0 = time.perf_counter()
+def network_run(spec: BpmWorkflow, s, out: Path, t0: float, *, launcher: str, resume: str = ""):
+    """What the static and quasi-static runs of a scene ``s`` share: the deck's bonded structure, its linear
+    network (loose particles refused before anything is written, unless ``compression.drop_loose``),
+    data.lmp and the run record, begun (``resume``: the state file a session continues from).  Returns
+    (deck, network, info, record)."""
     c = spec.compression
-    scene = scene_of(spec)
-    s = scene.build(spec, say)
-    if np.all(s.periodic):
-        return run_tensor(spec, s, out, t0, say)
     deck = compression_deck(spec, s)
     build_s = time.perf_counter() - t0
     data = deck.structure
     net = stiffness_network(data, deck.coefficients)
-    substrate = data.groups["substrate"]
-    loose = loose_particles(net, substrate)
+    loose = loose_particles(net, data.groups["substrate"])
     if loose.any() and not c.drop_loose:     # refused before anything is written
         raise LooseParticlesError(loose_message(int(loose.sum())))
     out.mkdir(parents=True, exist_ok=True)
-    write_data(out / "data.lmp", data, title=f"opalflow {__version__} {spec.name} (static)")
-    info = {"workflow": spec.name, "method": "static", "spec": spec.to_dict(), "opalflow_version": __version__,
+    write_data(out / "data.lmp", data, title=f"opalflow {__version__} {spec.name} ({c.method})")
+    info = {"workflow": spec.name, "method": c.method, "spec": spec.to_dict(), "opalflow_version": __version__,
             "type_names": data.type_names, "n_particles": s.n_particles, "n_bonds": s.n_bonds,
             "solid_fraction": solid_fraction(s), "build_s": build_s, "references": spec.references(),
-            "height_nm": deck.height_nm, "area_nm2": deck.area_nm2, "top_layer_particles": int(deck.top_layer.sum())}
+            "height_nm": deck.height_nm, "area_nm2": deck.area_nm2, "top_layer_particles": int(deck.top_layer.sum()),
+            "loading": deck.loading, "loading_sense": deck.loading_sense}
+    scene = scene_of(spec)
     if scene.run_keys:
         stats = scene.statistics(deck.source)
         info["structure"] = {k: stats[k] for k in scene.run_keys}
-    _record(spec, info).begin(out, launcher="in-process (static solve)")
+    record = RunRecord.read(out) if resume else _record(spec, info)
+    record.begin(out, launcher=launcher, restart=resume or "")
+    return deck, net, info, record
 
+
+def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
+    """Build the scene, solve the compression, write the results (see the module docstring)."""
+    t0 = time.perf_counter()
+    c = spec.compression
+    s = scene_of(spec).build(spec, say)
+    if np.all(s.periodic):
+        return run_tensor(spec, s, out, t0, say)
+    deck, net, info, _ = network_run(spec, s, out, t0, launcher="in-process (static solve)")
+    build_s = info["build_s"]
+    data = deck.structure
+    substrate = data.groups["substrate"]
     say(f"static solve ({c.solver}): {s.n_particles} particles, {s.n_bonds} bonds, {6 * s.n_particles} dofs")
     res = solve_compression(net, data.positions, substrate, deck.top_layer, deck.height_nm, deck.area_nm2,
                             strain=STRAIN, solver=c.solver, drop_loose=c.drop_loose,
-                            clamp_top=c.loading == "glued", say=say)
+                            clamp_top=LOADINGS[c.loading].glued, sense=LOADINGS[c.loading].sense, say=say)
     E_GPa = res.modulus_MPa / 1e3
     volumes = data.particle_volumes()
-    sigma_unit = particle_stress(net, res, volumes) / STRAIN       # per unit strain
+    sigma_unit = particle_stress(net, res.u, res.theta, volumes) / STRAIN       # per unit strain
     strain_unit = bond_strain(net, res.u) / STRAIN
     types = data.types
     snapshots = {}
@@ -166,12 +181,13 @@ def _plots(stage, data, res: StaticResult, snapshots, strain_unit, strains) -> N
 
 
 def _report(spec: BpmWorkflow, info: dict, summary: dict, res: StaticResult, sides: str) -> str:
-    lines = [f"# {spec.name}: static compression", "",
+    loading = LOADINGS[spec.compression.loading]
+    lines = [f"# {spec.name}: static {loading.title}", "",
              f"{info['n_particles']} particles, {info['n_bonds']} bonds; the bond network linearised from LAMMPS's "
              "bpm/rotational (opalflow/bpm/stiffness.py); substrate fixed, top layer "
-             f"({info['top_layer_particles']} particles) pushed down by strain {res.strain:g} x H "
-             f"(H = {info['height_nm']:.1f} nm), "
-             + ("glued to the wall (x, y and rotations held)" if spec.compression.loading == "glued"
+             f"({info['top_layer_particles']} particles) {'pushed down' if loading.sense > 0 else 'pulled up'} by "
+             f"strain {res.strain:g} x H (H = {info['height_nm']:.1f} nm), "
+             + ("glued to the wall (x, y and rotations held)" if loading.glued
                 else "its x, y and rotations free") + "; sides "
              f"{sides}. Contacts carry no load at the reference state and bonds do not break: "
              "no strength.", "",

@@ -1,0 +1,357 @@
+"""Quasi-static fracture of a bonded-particle network: event-driven breaking on the linear network
+(sequentially linear analysis: Rots et al., Eng. Fract. Mech. 75:5155, 2008; Eliáš, Frantík and
+Vořechovský, Eng. Fract. Mech. 77:2187, 2010), with LAMMPS's own breaking rule.
+
+The breaking rule, from BondBPMRotational::elastic_forces and ::compute (src/BPM/bond_bpm_rotational.cpp,
+LAMMPS 22 Jul 2025): a bond breaks when
+
+    B = Fr / Fcr + |Fs| / Fcs + |Tb| / Tcb + |Tt| / Tct >= 1,
+
+with Fr = Kr (r - r0) the signed normal force (tension positive: compression lowers B, a bond in pure
+compression never breaks), Fs the shear force (from the bond's tilt, ``Ks r gamma s``, plus the part from
+the relative rotation, ``Fsp``), Tb = Kb theta the bending and Tt = Kt psi the twisting torque of the
+relative rotation; the shear torque Ts does not count, and B is clipped at 0.  Linearised
+(:mod:`opalflow.bpm.stiffness`): Fr = a_r n.(u_i - u_j), Fs = P F (the bond force's part normal to the
+bond), Tb = kb P (theta_i - theta_j), Tt = kt n.(theta_i - theta_j).  ``smooth yes`` scales the forces by
+1 - B^4 before the bond breaks (it carries nothing at B = 1); the linear method cannot follow that and
+breaks bonds at full load, as ``smooth no`` (``bonds.smooth = false``) and as the paper's bonds do.
+
+Under a prescribed strain e of the top layer the linear network's B of every bond is e B_1 (B_1 at unit
+strain; Fr is linear in e and the magnitudes grow with e > 0), so the next bond to break is the one with
+the largest B_1, at e = 1 / max B_1.  An event breaks it (and, with ``tolerance`` > 0, every bond with B_1
+within that fraction of the largest), the network is solved again, and so on: the sequence of (strain,
+stress) before and after each event is the saw-tooth whose envelope is the stress-strain curve at zero
+loading rate; its maximum is the strength.  Particles that lose their last bond path to the supports
+are held still (they carry nothing).
+
+Re-solves (measured in bench/bench_quasistatic.py, kept: ``auto``):
+
+- ``direct``: K_ff factorised once (sparse Cholesky, cholespy/CHOLMOD); each broken bond removes its 12 x 12
+  block, a rank <= 6 change, applied by the Sherman-Morrison-Woodbury formula on the old factor; the
+  factor is renewed every ``refactor_every`` broken bonds and when particles come loose;
+- ``amg``: the smoothed-aggregation AMG of the intact network as the preconditioner of CG on the damaged
+  one, warm-started from the last solution (the change of one bond is local: few iterations);
+- ``auto``: ``direct`` up to DIRECT_MAX_DOFS free degrees of freedom (the factor's fill grows fast in
+  3D), ``amg`` above.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from opalflow.bpm.spec import RESOLVERS
+from opalflow.bpm.static import amg_hierarchy, bond_blocks, pcg, rigid_body_modes
+from opalflow.bpm.stiffness import BondNetwork
+from opalflow.spec import InputError
+
+#: ``resolver = "auto"``: the factor up to this many free dofs (quickstart 11 k: 0.23 s and 8 MB of factor)
+DIRECT_MAX_DOFS = 300_000
+
+
+@dataclass
+class Strengths:
+    """Each bond's critical normal and shear force and bending and twisting torque (pN, pN nm)."""
+
+    fr_c: np.ndarray
+    fs_c: np.ndarray
+    tb_c: np.ndarray
+    tt_c: np.ndarray
+
+
+def breaking_index(net: BondNetwork, x: np.ndarray, c: Strengths) -> np.ndarray:
+    """LAMMPS's B of every bond (not clipped) for displacements and rotations x (N, 6) (module docstring)."""
+    u, th = x[:, :3], x[:, 3:]
+    n = net.n
+    F = net.bond_forces(u, th)
+    Fr = np.einsum("ij,ij->i", n, F)
+    Fs = F - Fr[:, None] * n
+    dth = th[net.i] - th[net.j]
+    twist = np.einsum("ij,ij->i", n, dth)
+    bend = dth - twist[:, None] * n
+    return (Fr / c.fr_c + np.linalg.norm(Fs, axis=1) / c.fs_c + net.bend * np.linalg.norm(bend, axis=1) / c.tb_c
+            + net.twist * np.abs(twist) / c.tt_c)
+
+
+class StiffnessMatrix:
+    """K of the intact bonds as one CSR matrix (6 N x 6 N) and where each bond's 144 entries sit in it, so
+    that a broken bond is subtracted in place."""
+
+    def __init__(self, net: BondNetwork):
+        blocks = bond_blocks(net)
+        dof = lambda p: (6 * p[:, None] + np.arange(6)[None]).reshape(-1, 6)  # noqa: E731
+        self.dofs = np.concatenate([dof(net.i), dof(net.j)], axis=1)          # (M, 12)
+        size = 6 * net.n_particles
+        rows = np.broadcast_to(self.dofs[:, :, None], blocks.shape).reshape(len(net.L), 144)
+        cols = np.broadcast_to(self.dofs[:, None, :], blocks.shape).reshape(len(net.L), 144)
+        keys = rows.astype(np.int64) * size + cols
+        unique = np.unique(keys)
+        self.slots = np.searchsorted(unique, keys).astype(np.int32 if len(unique) < 2**31 else np.int64)
+        self.blocks = blocks.reshape(len(net.L), 144)
+        data = np.bincount(self.slots.ravel(), self.blocks.ravel(), len(unique))
+        indptr = np.concatenate([[0], np.cumsum(np.bincount(unique // size, minlength=size))])
+        self.K = sp.csr_matrix((data, (unique % size).astype(np.int32), indptr), shape=(size, size))
+
+    def remove(self, bonds: np.ndarray) -> None:
+        np.subtract.at(self.K.data, self.slots[bonds].ravel(), self.blocks[bonds].ravel())
+
+
+class DirectResolver:
+    """Cholesky factor of K_ff with Woodbury updates for the bonds removed since (module docstring)."""
+
+    name = "direct"
+
+    def __init__(self, km: StiffnessMatrix, free: np.ndarray, refactor_every: int = 50):
+        self.km, self.refactor_every = km, refactor_every
+        self.factorizations = 0
+        self._factor(free)
+
+    def _factor(self, free: np.ndarray) -> None:
+        import cholespy
+
+        self.free = free.copy()
+        self.index = np.full(free.size, -1)
+        self.index[free] = np.arange(int(free.sum()))
+        A = self.km.K[free][:, free].tocoo()
+        A.eliminate_zeros()
+        self.chol = cholespy.CholeskySolverD(A.shape[0], A.row.astype(np.int32), A.col.astype(np.int32), A.data,
+                                             cholespy.MatrixType.COO)
+        self.U = sp.csc_matrix((A.shape[0], 0))
+        self.W = np.zeros((A.shape[0], 0))
+        self.Cinv = np.zeros(0)
+        self.removed = 0
+        self.factorizations += 1
+
+    def _inverse(self, b: np.ndarray) -> np.ndarray:
+        b = np.ascontiguousarray(b)
+        x = np.zeros_like(b)
+        self.chol.solve(b, x)
+        return x
+
+    def remove(self, bonds: np.ndarray, free: np.ndarray) -> None:
+        if np.any(self.free & ~free) or self.removed + len(bonds) > self.refactor_every:
+            self._factor(free)
+            return
+        cols, diag = [], []
+        for b in bonds:
+            dofs = self.index[self.km.dofs[b]]
+            keep = dofs >= 0
+            block = self.km.blocks[b].reshape(12, 12)[np.ix_(keep, keep)]
+            w, V = np.linalg.eigh(block)
+            big = w > 1e-12 * max(float(w.max(initial=0.0)), 1e-300)
+            for k in np.flatnonzero(big):
+                cols.append(sp.csc_matrix((V[:, k], (dofs[keep], np.zeros(int(keep.sum()), int))),
+                                          shape=(self.U.shape[0], 1)))
+                diag.append(1.0 / w[k])
+        if not cols:
+            return
+        new = sp.hstack(cols).tocsc()
+        self.W = np.hstack([self.W, self._inverse(new.toarray())])
+        self.U = sp.hstack([self.U, new]).tocsc()
+        self.Cinv = np.concatenate([self.Cinv, diag])
+        self.removed += len(bonds)
+
+    def solve(self, b: np.ndarray, x0: np.ndarray) -> tuple[np.ndarray, int]:
+        """x with K_ff x = b on the free dofs (the full vector; prescribed entries of b are copied)."""
+        y = self._inverse(b[self.free])
+        if self.U.shape[1]:
+            S = np.diag(self.Cinv) - (self.U.T @ self.W)
+            y = y + self.W @ np.linalg.solve(S, self.U.T @ y)
+        x = b.copy()
+        x[self.free] = y
+        return x, 1
+
+
+class AmgResolver:
+    """CG on the damaged network, preconditioned by the AMG of the intact one, warm-started."""
+
+    name = "amg"
+
+    def __init__(self, km: StiffnessMatrix, free: np.ndarray, positions: np.ndarray, rtol: float):
+        self.km, self.rtol = km, rtol
+        self.free0 = free.copy()
+        self.factorizations = 1
+        K = km.K[free][:, free].tocsr()
+        self.vcycle = amg_hierarchy(K, rigid_body_modes(positions)[free]).aspreconditioner(cycle="V")
+        self.free = free.copy()
+
+    def remove(self, bonds: np.ndarray, free: np.ndarray) -> None:
+        self.free = free.copy()
+
+    def solve(self, b: np.ndarray, x0: np.ndarray) -> tuple[np.ndarray, int]:
+        m = self.free.astype(float)
+        K = self.km.K
+
+        def matvec(v):
+            return m * (K @ (m * v)) + (1 - m) * v
+
+        def precondition(r):
+            z = np.zeros_like(r)
+            z[self.free0] = self.vcycle.matvec(r[self.free0])
+            return m * z + (1 - m) * r
+
+        x0 = np.where(self.free, x0, b)
+        r0 = b - matvec(x0)
+        scale = float(np.linalg.norm(b))
+        if np.linalg.norm(r0) <= self.rtol * scale:
+            return x0, 0
+        d, its = pcg(matvec, precondition, r0, self.rtol * scale / float(np.linalg.norm(r0)), 20000,
+                     lambda k, r: None)
+        return x0 + d, its
+
+
+@dataclass
+class Event:
+    """One event: the strain and stress at which it happened, the stress just after, the bonds broken."""
+
+    strain: float
+    stress_MPa: float
+    stress_after_MPa: float
+    bonds: list[int]
+    iterations: int = 0
+
+
+@dataclass
+class FractureResult:
+    modulus_MPa: float
+    events: list[Event]
+    alive: np.ndarray
+    stopped: str
+    seconds: float
+    setup_seconds: float
+    resolver: str
+    factorizations: int
+    peak_alive: np.ndarray | None = None    # the intact bonds just before the peak event
+    peak_x: np.ndarray | None = None        # displacements and rotations (N, 6) just before the peak event
+    end_x: np.ndarray | None = None         # ... just after the last event
+    loose: int = 0
+
+    @property
+    def peak(self) -> int:
+        return int(np.argmax([e.stress_MPa for e in self.events])) if self.events else -1
+
+
+def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray, fixed: np.ndarray,
+                   top: np.ndarray, height: float, area: float, *, clamp_top: bool = False, sense: int = 1,
+                   strain_max: float = 0.04, stop_fraction: float = 0.5, events_max: int = 100_000,
+                   tolerance: float = 0.0, resolver: str = "auto", rtol: float = 1e-9, refactor_every: int = 50,
+                   state: dict | None = None, checkpoint=None, say=print) -> FractureResult:
+    """The event loop of the module docstring under the loading of
+    :func:`opalflow.bpm.static.solve_compression` (``fixed``: substrate; ``top``: the top layer, pushed in
+    z in the loading's ``sense``, held in its other dofs with ``clamp_top``).
+
+    Stops when the next event would lie beyond ``strain_max``, when the stress after an event has fallen
+    below ``stop_fraction`` of the peak, when no path carries load, or after ``events_max`` events.
+    ``state`` (from ``checkpoint(state)``, which is called every few seconds): continue a killed run from
+    its broken bonds and events; the result is the same.
+    """
+    if resolver not in RESOLVERS:
+        raise InputError(f"compression.resolver = {resolver!r}: must be one of {', '.join(RESOLVERS)}")
+    t0 = time.perf_counter()
+    n, m = net.n_particles, len(net.L)
+    km = StiffnessMatrix(net)
+    alive = np.ones(m, bool)
+    events: list[Event] = []
+    if state:
+        alive = np.asarray(state["alive"], bool).copy()
+        events = [Event(**e) for e in state["events"]]
+        km.remove(np.flatnonzero(~alive))
+    anchored = fixed | (top if clamp_top else np.zeros(n, bool))
+
+    def loose_of(alive):
+        from scipy.sparse.csgraph import connected_components
+
+        i, j = net.i[alive], net.j[alive]
+        label = connected_components(sp.coo_matrix((np.ones(len(i)), (i, j)), shape=(n, n)), directed=False)[1]
+        return ~np.isin(label, np.unique(label[anchored]))
+
+    def constraints(loose):
+        pres = np.zeros((n, 6), bool)
+        pres[fixed | loose] = True
+        loaded = top & ~fixed & ~loose
+        pres[loaded, slice(None) if clamp_top else 2] = True
+        x_p = np.zeros((n, 6))
+        x_p[loaded, 2] = -sense * height                 # unit strain
+        return ~pres.ravel(), x_p.ravel(), loaded
+
+    loose = loose_of(alive)
+    free, x_p, loaded = constraints(loose)
+    if resolver == "auto":
+        resolver = "direct" if free.sum() <= DIRECT_MAX_DOFS else "amg"
+    solver = (DirectResolver(km, free, refactor_every) if resolver == "direct"
+              else AmgResolver(km, free, positions, rtol))
+    setup = time.perf_counter() - t0
+
+    def solve(x_prev):
+        b = np.where(free, -(km.K @ x_p), x_p)
+        x, its = solver.solve(b, x_prev)
+        reaction = (km.K @ x).reshape(n, 6)
+        stress = -sense * float(np.sum(reaction[loaded, 2])) / area      # per unit strain, > 0
+        return x, stress, its
+
+    x, stress_unit, its = solve(x_p.copy())
+    modulus = float(state["modulus_MPa"]) if state else stress_unit
+    peak_stress = max((e.stress_MPa for e in events), default=0.0)
+    peak_alive = np.asarray(state["peak_alive"], bool) if state and state.get("peak_alive") is not None else None
+    peak_x = None
+    stopped = "events_max"
+    last_said = time.perf_counter()
+    last_saved = time.perf_counter()
+    while len(events) < events_max:
+        if stress_unit <= 0 or not loaded.any():
+            stopped = "no load path"
+            break
+        B = breaking_index(net, x.reshape(n, 6), strengths)
+        B[~alive] = -np.inf
+        worst = float(B.max(initial=-np.inf))
+        if worst <= 0:
+            stopped = "no bond loaded towards breaking"
+            break
+        strain = 1.0 / worst
+        if strain > strain_max:
+            stopped = f"the network holds to strain_max = {strain_max:g}"
+            break
+        stress = strain * stress_unit
+        if stress > peak_stress:
+            peak_stress, peak_alive, peak_x = stress, alive.copy(), strain * x.reshape(n, 6)
+        broken = np.flatnonzero(B >= worst / (1.0 + tolerance))
+        alive[broken] = False
+        km.remove(broken)
+        new_loose = loose_of(alive)
+        if np.any(new_loose & ~loose):
+            loose = new_loose
+            free, x_p, loaded = constraints(loose)
+        solver.remove(broken, free)
+        x, stress_unit, its = solve(x)
+        events.append(Event(strain, stress, strain * stress_unit, broken.tolist(), its))
+        now = time.perf_counter()
+        if now - last_said > 10:
+            last_said = now
+            say(f"quasi-static: event {len(events)}, {int((~alive).sum())} bonds broken, strain {strain:.5f} "
+                f"(max {strain_max:g}), stress {stress:.4g} MPa (peak {peak_stress:.4g}), "
+                f"{len(events) / (now - t0 - setup):.1f} events/s")
+        if checkpoint and now - last_saved > 5:
+            last_saved = now
+            checkpoint({"alive": alive, "events": [e.__dict__ for e in events], "modulus_MPa": modulus,
+                        "peak_alive": peak_alive})
+        if events[-1].stress_after_MPa < stop_fraction * peak_stress:
+            stopped = f"stress fell below {stop_fraction:g} of the peak"
+            break
+    return FractureResult(modulus_MPa=modulus, events=events, alive=alive, stopped=stopped,
+                          seconds=time.perf_counter() - t0, setup_seconds=setup, resolver=solver.name,
+                          factorizations=solver.factorizations, peak_alive=peak_alive, peak_x=peak_x,
+                          end_x=events[-1].strain * x.reshape(n, 6) if events else None, loose=int(loose.sum()))
+
+
+def summary_of(res: FractureResult) -> dict:
+    """Strength, strain at peak, E of the first branch and the event counts."""
+    if not res.events:
+        return {"youngs_modulus_GPa": res.modulus_MPa / 1e3, "strength_MPa": math.nan, "strain_at_peak": math.nan,
+                "events": 0, "broken_bonds": 0}
+    p = res.peak
+    return {"youngs_modulus_GPa": res.modulus_MPa / 1e3, "strength_MPa": res.events[p].stress_MPa,
+            "strain_at_peak": res.events[p].strain, "events": len(res.events),
+            "broken_bonds": int((~res.alive).sum()), "broken_bonds_at_peak": sum(len(e.bonds) for e in res.events[:p])}

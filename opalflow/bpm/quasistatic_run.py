@@ -1,0 +1,217 @@
+"""``compression.method = "quasistatic"``: strength without dynamics, by event-driven breaking on the
+linear network (:mod:`opalflow.bpm.quasistatic`), for any bonded-particle scene and loading.
+
+The run folder gets what a dynamic run writes where it applies: ``data.lmp``, ``run.json``,
+``results.h5`` (group ``quasistatic``: each event's strain, stress before and after, bonds broken),
+``summary.json`` (E of the first branch, strength, strain at peak, bonds broken in all and per material),
+``report.md``, ``stress_strain.png`` (the saw-tooth and its envelope), ``fracture.png`` and, for OVITO,
+``fracture.peak.dump`` and ``fracture.end.dump`` (LAMMPS text dumps: particles with the bonds each has lost).
+A killed run continues with ``--resume`` from ``quasistatic_state.npz`` (written every few seconds) to
+the same numbers.
+"""
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from opalflow.analysis import fracture
+from opalflow.bpm.loading import LOADINGS
+from opalflow.bpm.quasistatic import Strengths, solve_fracture, summary_of
+from opalflow.bpm.scene import scene_of
+from opalflow.bpm.spec import BpmWorkflow
+from opalflow.bpm.static_run import network_run, particle_stress
+from opalflow.runs.record import finish
+from opalflow.spec import SpecError
+from opalflow.store import h5_bytes, new_figure, put, save_figure
+
+STATE = "quasistatic_state.npz"
+
+
+def strengths_of(data, coefficients) -> Strengths:
+    """Each bond's critical forces and torques, from its type's bpm/rotational coefficients."""
+    t = data.bond_types - 1
+    pick = lambda k: np.array([getattr(c, k) for c in coefficients], float)[t]  # noqa: E731
+    return Strengths(pick("fr_c"), pick("fs_c"), pick("tb_c"), pick("tt_c"))
+
+
+def _save_state(path: Path, state: dict) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "wb") as f:
+        np.savez(f, alive=state["alive"], peak_alive=state["peak_alive"] if state["peak_alive"] is not None
+                 else np.zeros(0, bool), meta=json.dumps({"events": state["events"],
+                                                          "modulus_MPa": state["modulus_MPa"]}))
+    os.replace(tmp, path)
+
+
+def _load_state(path: Path) -> dict:
+    with np.load(path) as z:
+        meta = json.loads(str(z["meta"]))
+        return {"alive": z["alive"], "peak_alive": z["peak_alive"] if z["peak_alive"].size else None, **meta}
+
+
+def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=print) -> dict:
+    """Build the scene, run the event loop, write the results (see the module docstring)."""
+    t0 = time.perf_counter()
+    c = spec.compression
+    state = None
+    if resume:
+        if not (out / STATE).exists():
+            raise SpecError("--resume", str(out), f"no {STATE} in the folder (the run saved none yet): run it anew")
+        state = _load_state(out / STATE)
+    s = scene_of(spec).build(spec, say)
+    loading = LOADINGS[c.loading]
+    deck, net, info, record = network_run(spec, s, out, t0, launcher="in-process (quasi-static)",
+                                          resume=STATE if resume else "")
+    data = deck.structure
+    say(f"quasi-static ({loading.title}): {s.n_particles} particles, {s.n_bonds} bonds, to strain {c.strain_max:g}")
+    res = solve_fracture(net, strengths_of(data, deck.coefficients), data.positions, data.groups["substrate"],
+                         deck.top_layer, deck.height_nm, deck.area_nm2, clamp_top=loading.glued, sense=loading.sense,
+                         strain_max=c.strain_max, stop_fraction=c.stop_fraction, events_max=c.events_max,
+                         tolerance=c.event_tolerance, resolver=c.resolver, state=state,
+                         checkpoint=lambda st: _save_state(out / STATE, st), say=say)
+    got = summary_of(res)
+    materials = np.array(deck.bins.materials)[data.bond_types - 1]
+    broken = ~res.alive
+    by_material = {m: int(np.sum(broken & (materials == m))) for m in sorted(set(deck.bins.materials))}
+    E = got["youngs_modulus_GPa"]
+    summary = {
+        "workflow": spec.name, "method": "quasistatic", "loading": loading.name,
+        "youngs_modulus_GPa": E, "youngs_modulus_specimen_GPa": E,
+        "strength_MPa": got["strength_MPa"], "strain_at_peak": got["strain_at_peak"],
+        "broken_bonds": got["broken_bonds"], "broken_bonds_by_material": by_material,
+        "broken_bonds_at_peak": got.get("broken_bonds_at_peak", 0),
+        "n_particles": s.n_particles, "n_bonds": s.n_bonds, "solid_fraction": info["solid_fraction"],
+        "complete": True, "build_s": info["build_s"],
+        "quasistatic": {"events": got["events"], "stopped": res.stopped, "resolver": res.resolver,
+                        "tolerance": c.event_tolerance, "setup_s": round(res.setup_seconds, 3),
+                        "events_s": round(res.seconds - res.setup_seconds, 3),
+                        "factorizations": res.factorizations,
+                        "cg_iterations": int(sum(e.iterations for e in res.events)) if res.resolver == "amg" else 0,
+                        "loose_particles": res.loose},
+        **info.get("structure", {}),
+        "headline": f"E = {E:.4g} GPa, strength = {got['strength_MPa']:.4g} MPa (strain at peak "
+                    f"{got['strain_at_peak']:.4f}; quasi-static, {got['events']} events, {got['broken_bonds']} "
+                    f"bonds broken)",
+    }
+    summary["reference"] = {k: {"value": v, "source": src, "error": (summary[k] - v) / v}
+                            for k, (v, src) in info["references"].items() if k in summary}
+    summary["wall_s"] = time.perf_counter() - t0
+    record.sessions[-1].last_step = got["events"]
+
+    def files(stage):
+        stage("results.h5").write_bytes(h5_bytes(lambda h: _fill_h5(h, res, data, summary)))
+        _plot_curve(stage("stress_strain.png"), res, summary)
+        frames = _frames(net, data, res)
+        if frames:
+            fracture.plot_fracture(stage("fracture.png"), frames, data.box_lengths, float(np.mean(data.diameters)),
+                                   title=f"{spec.name} (quasi-static, {loading.name})")
+            for tag, (_, snap) in zip(("peak", "end"), frames):
+                _write_dump(stage(f"fracture.{tag}.dump"), data, snap)
+
+    summary = finish(out, summary, lambda: _report(spec, info, summary, res, loading), files=files, record=record)
+    (out / STATE).unlink(missing_ok=True)
+    return summary
+
+
+def _broken_per_particle(net, alive: np.ndarray) -> np.ndarray:
+    dead = ~alive
+    return np.bincount(net.i[dead], minlength=net.n_particles) + np.bincount(net.j[dead], minlength=net.n_particles)
+
+
+def _frames(net, data, res) -> list[tuple[str, dict]]:
+    """Fracture pictures at the peak and at the end (the snapshots of :mod:`opalflow.analysis.fracture`)."""
+    if not res.events:
+        return []
+    volumes = data.particle_volumes()
+
+    def snap(alive, x, strain):
+        """The particles displaced (x: None after a resume, which keeps no displacements: zero stress drawn)."""
+        x = np.zeros((data.n_particles, 6)) if x is None else x
+        return {"strain": strain, "position_nm": data.positions + x[:, :3], "radius_nm": data.diameters / 2,
+                "type": data.types, "id": np.arange(1, data.n_particles + 1),
+                "broken_bonds": _broken_per_particle(net, alive),
+                "sigma_MPa": particle_stress(net.part(alive), x[:, :3], x[:, 3:], volumes)}
+
+    p, last = res.peak, res.events[-1]
+    peak_alive = res.peak_alive if res.peak_alive is not None else res.alive
+    return [(f"at the peak (strain {100 * res.events[p].strain:.2f} %)", snap(peak_alive, res.peak_x, res.events[p].strain)),
+            (f"at the end (strain {100 * last.strain:.2f} %, {int((~res.alive).sum())} bonds broken)",
+             snap(res.alive, res.end_x, last.strain))]
+
+
+def _write_dump(path: Path, data, snap: dict) -> None:
+    """A LAMMPS text dump (OVITO reads it): id type x y z radius broken_bonds (positions displaced)."""
+    lo, hi = data.box_lo, data.box_hi
+    bounds = "pp" if data.periodic[0] else "ff"
+    head = ["ITEM: TIMESTEP", "0", "ITEM: NUMBER OF ATOMS", str(data.n_particles),
+            f"ITEM: BOX BOUNDS {bounds} {bounds} ff"] + [f"{lo[k]!r} {hi[k]!r}" for k in range(3)]
+    head.append("ITEM: ATOMS id type x y z radius broken_bonds")
+    rows = np.column_stack([snap["id"], data.types, snap["position_nm"], data.diameters / 2, snap["broken_bonds"]])
+    with open(path, "w") as f:
+        f.write("\n".join(head) + "\n")
+        np.savetxt(f, rows, fmt=["%d", "%d", "%.6f", "%.6f", "%.6f", "%.6f", "%d"])
+
+
+def _fill_h5(h, res, data, summary) -> None:
+    h.attrs["method"] = "quasistatic"
+    h.attrs["youngs_modulus_GPa"] = summary["youngs_modulus_GPa"]
+    g = h.create_group("quasistatic")
+    ev = res.events
+    put(g, "strain", np.array([e.strain for e in ev]), "1", description="strain of each event (the next bond's limit)")
+    put(g, "stress_MPa", np.array([e.stress_MPa for e in ev]), "MPa", description="stress just before each event")
+    put(g, "stress_after_MPa", np.array([e.stress_after_MPa for e in ev]), "MPa",
+        description="stress at the same strain just after the event's bonds broke")
+    put(g, "bonds_per_event", np.array([len(e.bonds) for e in ev]), "1")
+    put(g, "broken_bond_index", np.concatenate([e.bonds for e in ev]).astype(np.int64) if ev else np.zeros(0, int), "1",
+        description="0-based bond index (data.lmp order) of the broken bonds, in order")
+    put(g, "intact", res.alive.astype(np.int8), "1", description="1 for each bond intact at the end")
+    put(g, "position_nm", data.positions, "nm", ["x", "y", "z"])
+
+
+def _plot_curve(path: Path, res, summary) -> None:
+    fig, ax = new_figure()
+    pts = [(0.0, 0.0)]
+    for e in res.events:
+        pts += [(e.strain, e.stress_MPa), (e.strain, e.stress_after_MPa)]
+    x, y = np.array(pts).T
+    ax.plot(x, y, "-", lw=0.8, color="0.5", label="saw-tooth: load to each event, drop as its bonds break")
+    ax.plot([e.strain for e in res.events], [e.stress_MPa for e in res.events], ".", ms=4, color="C0",
+            label="events (the envelope)")
+    if res.events:
+        ax.plot([summary["strain_at_peak"]], [summary["strength_MPa"]], "o", color="C3",
+                label=f"strength {summary['strength_MPa']:.3g} MPa")
+    ax.set_xlabel("strain")
+    ax.set_ylabel("stress (MPa)")
+    ax.legend()
+    save_figure(fig, path)
+
+
+def _report(spec, info, summary, res, loading) -> str:
+    q = summary["quasistatic"]
+    lines = [f"# {spec.name}: quasi-static {loading.title}", "",
+             f"{info['n_particles']} particles, {info['n_bonds']} bonds; the bond network linearised from LAMMPS's "
+             "bpm/rotational, bonds broken one event at a time by LAMMPS's rule B = Fr/Fcr + |Fs|/Fcs + |Tb|/Tcb + "
+             "|Tt|/Tct >= 1 at full load (as `smooth no`; opalflow/bpm/quasistatic.py); substrate fixed, top layer "
+             f"({info['top_layer_particles']} particles) {'pushed down' if loading.sense > 0 else 'pulled up'}"
+             + (", glued to the wall" if loading.glued else ", its x, y and rotations free") + ".", "",
+             "| quantity | value | reference | error |", "|---|---|---|---|"]
+    for key, label in (("youngs_modulus_GPa", "Young's modulus, first branch (GPa)"),
+                       ("strength_MPa", "strength (MPa)"), ("strain_at_peak", "strain at peak")):
+        ref = summary["reference"].get(key) or (summary["reference"].get("youngs_modulus_specimen_GPa")
+                                                if key == "youngs_modulus_GPa" else None)
+        lines.append(f"| {label} | {summary[key]:.4g} | "
+                     + (f"{ref['value']:g} ({ref['source']}) | {100 * ref['error']:+.2f} % |" if ref else "- | - |"))
+    lines += ["", f"{q['events']} events, {summary['broken_bonds']} bonds broken "
+              f"({', '.join(f'{m}: {k}' for m, k in summary['broken_bonds_by_material'].items())}), "
+              f"{summary['broken_bonds_at_peak']} before the peak; stopped: {q['stopped']}.",
+              f"Re-solves `{q['resolver']}`: set-up {q['setup_s']:.1f} s, events {q['events_s']:.1f} s, "
+              f"{q['factorizations']} factorisations" + (f", {q['cg_iterations']} CG iterations" if q["cg_iterations"]
+                                                         else "")
+              + f"; structure built in {summary['build_s']:.1f} s; wall {summary['wall_s']:.1f} s.", "",
+              "Plots: stress_strain.png, fracture.png. Data: results.h5 (group `quasistatic`), fracture.peak.dump and "
+              "fracture.end.dump (OVITO), summary.json."]
+    return "\n".join(lines) + "\n"
