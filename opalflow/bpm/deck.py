@@ -199,8 +199,6 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
     substrate = s.groups.get("substrate", np.zeros(s.n_particles, bool))
     if not substrate.any():
         raise SpecError("substrate.layers", 0, "the compression needs a fixed substrate (layers >= 1)")
-    if loading.needs_bonds and (s.n_bonds == 0 or not np.any(s.bond_types)):
-        raise SpecError("compression.loading", c.loading, "needs a bonded sample (this one has no bonds to pull on)")
     top = float(np.max(s.positions[:, 2] + s.diameters / 2))
     base = float(np.max(s.positions[substrate, 2] + s.diameters[substrate] / 2))
     height = top - base

@@ -61,7 +61,6 @@ class Loading:
     name = ""
     sense = 1
     glued = True
-    needs_bonds = False            # a loading that pulls needs a bonded sample to pull on
     title = ""
 
     def blocks(self, v: float, substrate_type: int, top_layer_z: float, top: float, base: float,
@@ -101,7 +100,7 @@ class UniaxialTension(Loading):
     """The top particle layer glued to a wall moving up: uniaxial tension (Roy and Hossain's direct
     tension test, the tensile strength of eq. 10.4)."""
 
-    name, sense, glued, needs_bonds, title = "tension", -1, True, True, "uniaxial tension, top layer pulled"
+    name, sense, glued, title = "tension", -1, True, "uniaxial tension, top layer pulled"
 
 
 #: ``compression.loading`` -> loading

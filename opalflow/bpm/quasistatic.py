@@ -203,6 +203,14 @@ class AmgResolver:
         return x0 + d, its
 
 
+class Stopped(Exception):
+    """The event loop stopped when asked (a scheduler's signal) after ``events`` events, its state saved."""
+
+    def __init__(self, events: int):
+        super().__init__(f"stopped after {events} events")
+        self.events = events
+
+
 @dataclass
 class Event:
     """One event: the strain and stress at which it happened, the stress just after, the bonds broken."""
@@ -238,27 +246,26 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
                    top: np.ndarray, height: float, area: float, *, clamp_top: bool = False, sense: int = 1,
                    strain_max: float = 0.04, stop_fraction: float = 0.5, events_max: int = 100_000,
                    tolerance: float = 0.0, resolver: str = "auto", rtol: float = 1e-9, refactor_every: int = 50,
-                   state: dict | None = None, checkpoint=None, say=print) -> FractureResult:
+                   state: dict | None = None, checkpoint=None, checkpoint_s: float = 5.0, should_stop=lambda: False,
+                   say=print) -> FractureResult:
     """The event loop of the module docstring under the loading of
     :func:`opalflow.bpm.static.solve_compression` (``fixed``: substrate; ``top``: the top layer, pushed in
     z in the loading's ``sense``, held in its other dofs with ``clamp_top``).
 
     Stops when the next event would lie beyond ``strain_max``, when the stress after an event has fallen
     below ``stop_fraction`` of the peak, when no path carries load, or after ``events_max`` events.
-    ``state`` (from ``checkpoint(state)``, which is called every few seconds): continue a killed run from
-    its broken bonds and events; the result is the same.
+    ``state`` (``{"events": [...], "modulus_MPa": E}``, given to ``checkpoint(state)`` every ``checkpoint_s``
+    seconds, before :class:`Stopped` is raised when ``should_stop()`` turns true, and on Ctrl-C): continue a
+    killed run from its events (the broken bonds are theirs); the result is the same.
     """
     if resolver not in RESOLVERS:
         raise InputError(f"compression.resolver = {resolver!r}: must be one of {', '.join(RESOLVERS)}")
     t0 = time.perf_counter()
     n, m = net.n_particles, len(net.L)
     km = StiffnessMatrix(net)
-    alive = np.ones(m, bool)
-    events: list[Event] = []
-    if state:
-        alive = np.asarray(state["alive"], bool).copy()
-        events = [Event(**e) for e in state["events"]]
-        km.remove(np.flatnonzero(~alive))
+    events = [Event(**e) for e in state["events"]] if state else []
+    alive = _intact(m, events)
+    km.remove(np.flatnonzero(~alive))
     anchored = fixed | (top if clamp_top else np.zeros(n, bool))
 
     def loose_of(alive):
@@ -294,56 +301,76 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
 
     x, stress_unit, its = solve(x_p.copy())
     modulus = float(state["modulus_MPa"]) if state else stress_unit
-    peak_stress = max((e.stress_MPa for e in events), default=0.0)
-    peak_alive = np.asarray(state["peak_alive"], bool) if state and state.get("peak_alive") is not None else None
-    peak_x = None
+    peak = int(np.argmax([e.stress_MPa for e in events])) if events else 0
+    peak_stress = events[peak].stress_MPa if events else 0.0
+    peak_alive = _intact(m, events[:peak]) if events else None
+    peak_x = None           # (not kept across a resume)
+
+    def save():
+        if checkpoint:
+            checkpoint({"events": [e.__dict__ for e in events], "modulus_MPa": modulus})
+
     stopped = "events_max"
     last_said = time.perf_counter()
     last_saved = time.perf_counter()
-    while len(events) < events_max:
-        if stress_unit <= 0 or not loaded.any():
-            stopped = "no load path"
-            break
-        B = breaking_index(net, x.reshape(n, 6), strengths)
-        B[~alive] = -np.inf
-        worst = float(B.max(initial=-np.inf))
-        if worst <= 0:
-            stopped = "no bond loaded towards breaking"
-            break
-        strain = 1.0 / worst
-        if strain > strain_max:
-            stopped = f"the network holds to strain_max = {strain_max:g}"
-            break
-        stress = strain * stress_unit
-        if stress > peak_stress:
-            peak_stress, peak_alive, peak_x = stress, alive.copy(), strain * x.reshape(n, 6)
-        broken = np.flatnonzero(B >= worst / (1.0 + tolerance))
-        alive[broken] = False
-        km.remove(broken)
-        new_loose = loose_of(alive)
-        if np.any(new_loose & ~loose):
-            loose = new_loose
-            free, x_p, loaded = constraints(loose)
-        solver.remove(broken, free)
-        x, stress_unit, its = solve(x)
-        events.append(Event(strain, stress, strain * stress_unit, broken.tolist(), its))
-        now = time.perf_counter()
-        if now - last_said > 10:
-            last_said = now
-            say(f"quasi-static: event {len(events)}, {int((~alive).sum())} bonds broken, strain {strain:.5f} "
-                f"(max {strain_max:g}), stress {stress:.4g} MPa (peak {peak_stress:.4g}), "
-                f"{len(events) / (now - t0 - setup):.1f} events/s")
-        if checkpoint and now - last_saved > 5:
-            last_saved = now
-            checkpoint({"alive": alive, "events": [e.__dict__ for e in events], "modulus_MPa": modulus,
-                        "peak_alive": peak_alive})
-        if events[-1].stress_after_MPa < stop_fraction * peak_stress:
-            stopped = f"stress fell below {stop_fraction:g} of the peak"
-            break
+    try:
+        while len(events) < events_max:
+            if stress_unit <= 0 or not loaded.any():
+                stopped = "no load path"
+                break
+            B = breaking_index(net, x.reshape(n, 6), strengths)
+            B[~alive] = -np.inf
+            worst = float(B.max(initial=-np.inf))
+            if worst <= 0:
+                stopped = "no bond loaded towards breaking"
+                break
+            strain = 1.0 / worst
+            if strain > strain_max:
+                stopped = f"the network holds to strain_max = {strain_max:g}"
+                break
+            stress = strain * stress_unit
+            if stress > peak_stress:
+                peak_stress, peak_alive, peak_x = stress, alive.copy(), strain * x.reshape(n, 6)
+            broken = np.flatnonzero(B >= worst / (1.0 + tolerance))
+            alive[broken] = False
+            km.remove(broken)
+            new_loose = loose_of(alive)
+            if np.any(new_loose & ~loose):
+                loose = new_loose
+                free, x_p, loaded = constraints(loose)
+            solver.remove(broken, free)
+            x, stress_unit, its = solve(x)
+            events.append(Event(strain, stress, strain * stress_unit, broken.tolist(), its))
+            now = time.perf_counter()
+            stop = should_stop()
+            if now - last_said > 10:
+                last_said = now
+                say(f"quasi-static: event {len(events)}, {int((~alive).sum())} bonds broken, strain {strain:.5f} "
+                    f"(max {strain_max:g}), stress {stress:.4g} MPa (peak {peak_stress:.4g}), "
+                    f"{len(events) / (now - t0 - setup):.1f} events/s")
+            if stop or now - last_saved > checkpoint_s:
+                last_saved = now
+                save()
+            if stop:
+                raise Stopped(len(events))
+            if events[-1].stress_after_MPa < stop_fraction * peak_stress:
+                stopped = f"stress fell below {stop_fraction:g} of the peak"
+                break
+    except KeyboardInterrupt:
+        save()       # the events so far (an event cut short is not among them)
+        raise
     return FractureResult(modulus_MPa=modulus, events=events, alive=alive, stopped=stopped,
                           seconds=time.perf_counter() - t0, setup_seconds=setup, resolver=solver.name,
                           factorizations=solver.factorizations, peak_alive=peak_alive, peak_x=peak_x,
                           end_x=events[-1].strain * x.reshape(n, 6) if events else None, loose=int(loose.sum()))
+
+
+def _intact(m: int, events: list[Event]) -> np.ndarray:
+    """The bonds intact after ``events``."""
+    alive = np.ones(m, bool)
+    for e in events:
+        alive[e.bonds] = False
+    return alive
 
 
 def summary_of(res: FractureResult) -> dict:

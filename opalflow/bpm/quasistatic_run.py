@@ -6,13 +6,12 @@ The run folder gets what a dynamic run writes where it applies: ``data.lmp``, ``
 ``summary.json`` (E of the first branch, strength, strain at peak, bonds broken in all and per material),
 ``report.md``, ``stress_strain.png`` (the saw-tooth and its envelope), ``fracture.png`` and, for OVITO,
 ``fracture.peak.dump`` and ``fracture.end.dump`` (LAMMPS text dumps: particles with the bonds each has lost).
-A killed run continues with ``--resume`` from ``quasistatic_state.npz`` (written every few seconds) to
+A killed run continues with ``--resume`` from ``quasistatic_state.json`` (written every few seconds) to
 the same numbers.
 """
 from __future__ import annotations
 
 import json
-import os
 import time
 from pathlib import Path
 
@@ -20,15 +19,16 @@ import numpy as np
 
 from opalflow.analysis import fracture
 from opalflow.bpm.loading import LOADINGS
-from opalflow.bpm.quasistatic import Strengths, solve_fracture, summary_of
+from opalflow.bpm.quasistatic import Stopped, Strengths, solve_fracture, summary_of
 from opalflow.bpm.scene import scene_of
 from opalflow.bpm.spec import BpmWorkflow
 from opalflow.bpm.static_run import network_run, particle_stress
 from opalflow.runs.record import finish
 from opalflow.spec import SpecError
-from opalflow.store import h5_bytes, new_figure, put, save_figure
+from opalflow.lammps.engine import Interrupted, Preempted, stop_requested
+from opalflow.store import h5_bytes, new_figure, put, save_figure, write_json_atomic
 
-STATE = "quasistatic_state.npz"
+STATE = "quasistatic_state.json"
 
 
 def strengths_of(data, coefficients) -> Strengths:
@@ -36,21 +36,6 @@ def strengths_of(data, coefficients) -> Strengths:
     t = data.bond_types - 1
     pick = lambda k: np.array([getattr(c, k) for c in coefficients], float)[t]  # noqa: E731
     return Strengths(pick("fr_c"), pick("fs_c"), pick("tb_c"), pick("tt_c"))
-
-
-def _save_state(path: Path, state: dict) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "wb") as f:
-        np.savez(f, alive=state["alive"], peak_alive=state["peak_alive"] if state["peak_alive"] is not None
-                 else np.zeros(0, bool), meta=json.dumps({"events": state["events"],
-                                                          "modulus_MPa": state["modulus_MPa"]}))
-    os.replace(tmp, path)
-
-
-def _load_state(path: Path) -> dict:
-    with np.load(path) as z:
-        meta = json.loads(str(z["meta"]))
-        return {"alive": z["alive"], "peak_alive": z["peak_alive"] if z["peak_alive"].size else None, **meta}
 
 
 def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=print) -> dict:
@@ -61,18 +46,26 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
     if resume:
         if not (out / STATE).exists():
             raise SpecError("--resume", str(out), f"no {STATE} in the folder (the run saved none yet): run it anew")
-        state = _load_state(out / STATE)
+        state = json.loads((out / STATE).read_text())
     s = scene_of(spec).build(spec, say)
     loading = LOADINGS[c.loading]
     deck, net, info, record = network_run(spec, s, out, t0, launcher="in-process (quasi-static)",
                                           resume=STATE if resume else "")
     data = deck.structure
     say(f"quasi-static ({loading.title}): {s.n_particles} particles, {s.n_bonds} bonds, to strain {c.strain_max:g}")
-    res = solve_fracture(net, strengths_of(data, deck.coefficients), data.positions, data.groups["substrate"],
-                         deck.top_layer, deck.height_nm, deck.area_nm2, clamp_top=loading.glued, sense=loading.sense,
-                         strain_max=c.strain_max, stop_fraction=c.stop_fraction, events_max=c.events_max,
-                         tolerance=c.event_tolerance, resolver=c.resolver, state=state,
-                         checkpoint=lambda st: _save_state(out / STATE, st), say=say)
+    try:
+        res = solve_fracture(net, strengths_of(data, deck.coefficients), data.positions, data.groups["substrate"],
+                             deck.top_layer, deck.height_nm, deck.area_nm2, clamp_top=loading.glued,
+                             sense=loading.sense, strain_max=c.strain_max, stop_fraction=c.stop_fraction,
+                             events_max=c.events_max, tolerance=c.event_tolerance, resolver=c.resolver, state=state,
+                             checkpoint=lambda st: write_json_atomic(out / STATE, st), should_stop=stop_requested,
+                             say=say)
+    except Stopped as exc:                       # a scheduler's signal: the state is saved, a requeue resumes
+        record.end(out, "interrupted", last_step=exc.events)
+        raise Preempted(out, exc.events) from None
+    except KeyboardInterrupt:
+        record.end(out, "interrupted")
+        raise Interrupted(out, None) from None
     got = summary_of(res)
     materials = np.array(deck.bins.materials)[data.bond_types - 1]
     broken = ~res.alive

@@ -164,6 +164,14 @@ def request_stop(signum=None, frame=None) -> None:
     _STOP.append(str(signum))
 
 
+def stop_requested() -> bool:
+    """True once after :func:`request_stop` (for loops other than LAMMPS's: the quasi-static events)."""
+    if _STOP:
+        _STOP.clear()
+        return True
+    return False
+
+
 class Progress:
     """Prints step, strain, rate and time left (to stderr) at most every ``interval`` seconds; with a
     ``folder``, the same in ``folder/progress.json`` for ``python -m opalflow status``."""

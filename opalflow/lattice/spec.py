@@ -31,16 +31,23 @@ class LatticeWorkflow(BpmWorkflow):
     boundary: BoundarySpec = field(default_factory=BoundarySpec)
 
     def references(self) -> dict[str, tuple[float, str]]:
-        """Simple cubic without contacts: E = E_b pi r_b^2 / a^2 (see :mod:`opalflow.lattice.scene`)."""
+        """Simple cubic without contacts: E = E_b pi r_b^2 / a^2 (see :mod:`opalflow.lattice.scene`); pulled
+        along its bonds (``compression.loading = "tension"``), every bond along z carries the same force and
+        they all reach Fr_c = sigma_b pi r_b^2 at once: strength sigma_b pi r_b^2 / a^2 (Roy and Hossain's
+        eq. 10.4 read backwards)."""
         if self.lattice.arrangement != "sc" or self.contacts.enabled:
             return {}
-        E_b = material(self.material, self.materials)["bond_youngs_modulus_GPa"]
+        props = material(self.material, self.materials)
         r = self.bonds.radius_factor / 2
         if self.lattice.periodic_z:      # C11 = C22 = C33, C12 = 0: E along each axis is C11
-            return {"youngs_modulus_GPa": (math.pi * r**2 * E_b, "analytic: C11 = E_b pi r_b^2 / a^2, C12 = 0 "
-                                           "(periodic simple-cubic lattice)")}
-        return {"youngs_modulus_specimen_GPa": (math.pi * r**2 * E_b,
+            return {"youngs_modulus_GPa": (math.pi * r**2 * props["bond_youngs_modulus_GPa"],
+                                           "analytic: C11 = E_b pi r_b^2 / a^2, C12 = 0 (periodic simple-cubic lattice)")}
+        refs = {"youngs_modulus_specimen_GPa": (math.pi * r**2 * props["bond_youngs_modulus_GPa"],
                                                 "analytic: E_b pi r_b^2 / a^2 (simple-cubic lattice)")}
+        if self.compression.loading == "tension" and self.bonds.breakable:
+            refs["strength_MPa"] = (math.pi * r**2 * props["bond_strength_MPa"],
+                                    "analytic: sigma_b pi r_b^2 / a^2 (simple-cubic lattice in tension)")
+        return refs
 
     def validate(self) -> None:
         super().validate()

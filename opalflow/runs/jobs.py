@@ -136,7 +136,9 @@ def _run_job(folder: Path, np_: int) -> dict:
     update_job(folder, state="running", host=os.uname().nodename, slurm_job=slurm_job(), pid=os.getpid(),
                attempted=time.time(), error="", log_tail="")
     _stop_on_signals()
-    resume = (folder / "run.json").exists() and any(folder.glob("restart.*.bin"))
+    # where a stopped run left its state: LAMMPS restart files, or the quasi-static method's events
+    resume = (folder / "run.json").exists() and (any(folder.glob("restart.*.bin"))
+                                                 or (folder / "quasistatic_state.json").exists())
     try:
         spec = registry.spec_from_dict(meta["spec"])
         kind = registry.get(spec.kind)

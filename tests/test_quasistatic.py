@@ -1,0 +1,154 @@
+"""Loadings as objects and the quasi-static fracture method (opalflow/bpm/loading.py,
+opalflow/bpm/quasistatic.py): analytic strengths of the simple-cubic lattice pulled along its bonds, eq.
+10.4 of the calibration in tension, the first branch against the static solver, both re-solve designs, a
+run stopped by a scheduler's signal resumed to the same numbers, and the refusals."""
+import dataclasses
+import json
+import math
+
+import numpy as np
+import pytest
+
+import opalflow
+from opalflow.bpm.loading import LOADINGS, Loading
+from opalflow.cli import main
+from opalflow.lammps import engine
+
+TENSION = ["compression.loading=tension", "bonds.breakable=true", "compression.strain_max=0.02",
+           "compression.snapshot_strains=[]"]
+QUICK = ["compression.method=quasistatic", "compression.snapshot_strains=[]", "compression.strain_max=0.03"]
+
+
+def sc_strength(sigma_b=94.3, f=1.0):
+    """sigma_b pi r_b^2 / a^2 with r_b = f a / 2 (silica bonds, Dosta et al. Table 1)."""
+    return sigma_b * math.pi * f**2 / 4
+
+
+def test_sc_lattice_in_tension_breaks_at_the_bond_strength_quasistatic(tmp_path):
+    s = opalflow.run("lattice_sc", tmp_path / "q", set=[*TENSION, "compression.method=quasistatic"], quiet=True)
+    assert s["strength_MPa"] == pytest.approx(sc_strength(), rel=1e-3)
+    assert s["youngs_modulus_GPa"] == pytest.approx(s["reference"]["youngs_modulus_specimen_GPa"]["value"], rel=1e-6)
+    assert s["strain_at_peak"] == pytest.approx(94.3 / 6530, rel=1e-3)       # sigma_b / E_b
+    assert s["broken_bonds_by_material"] == {"silica": s["broken_bonds"]} and s["broken_bonds"] >= 1
+    for name in ("fracture.png", "stress_strain.png", "fracture.peak.dump", "fracture.end.dump", "results.h5"):
+        assert (tmp_path / "q" / name).exists(), name
+    dump = (tmp_path / "q" / "fracture.end.dump").read_text().splitlines()
+    assert dump[8] == "ITEM: ATOMS id type x y z radius broken_bonds" and len(dump) == 9 + s["n_particles"]
+
+
+def test_sc_lattice_in_tension_dynamic_run_of_the_tension_loading(tmp_path):
+    """The new tension loading through LAMMPS (bonds break at full load: smooth no) within 2 %; with LAMMPS's
+    smoothing (1 - B^4) the same lattice peaks near B = 5^(-1/4), at 0.535 of it."""
+    sets = [*TENSION, "bonds.smooth=false", "compression.plate_speed_m_s=0.5", "compression.output_every_strain=5e-5"]
+    s = opalflow.run("lattice_sc", tmp_path / "d", set=sets, quiet=True)
+    assert s["strength_MPa"] == pytest.approx(sc_strength(), rel=0.02)
+    assert s["strain_at_peak"] > 0 and s["broken_bonds"] >= 16          # the 4 x 4 columns all broke
+    deck = (tmp_path / "d" / "in.lmp").read_text()
+    assert "uniaxial tension" in deck and "move linear 0.0 0.0 0.5 units box" in deck and "smooth no" in deck
+    smooth = opalflow.run("lattice_sc", tmp_path / "s", set=[*sets[:-2], "bonds.smooth=true",
+                                                              "compression.plate_speed_m_s=0.5"], quiet=True)
+    assert smooth["strength_MPa"] / s["strength_MPa"] == pytest.approx(0.8 * 5 ** -0.25, rel=0.05)
+
+
+def test_eq_10_4_calibration_measured_in_tension(tmp_path):
+    """Roy and Hossain eqs. 10.3-10.4 (opalflow.bpm.spec.first_estimate): a simple-cubic array calibrated to
+    E = 3 GPa and sigma_t = 40 MPa has that E and that tensile strength."""
+    s = opalflow.run("lattice_sc", tmp_path / "c", set=[*TENSION, "compression.method=quasistatic",
+                                                         "calibration.target_E_GPa=3",
+                                                         "calibration.target_tensile_strength_MPa=40"], quiet=True)
+    assert s["youngs_modulus_GPa"] == pytest.approx(3.0, rel=1e-6)
+    assert s["strength_MPa"] == pytest.approx(40.0, rel=1e-3)
+
+
+@pytest.fixture(scope="module")
+def quick(tmp_path_factory):
+    root = tmp_path_factory.mktemp("quasistatic")
+    return root, opalflow.run("quickstart", root / "direct", set=QUICK, quiet=True)
+
+
+def test_first_branch_is_the_static_modulus(quick, tmp_path):
+    _, q = quick
+    st = opalflow.run("quickstart", tmp_path / "static", set=["compression.method=static",
+                                                                  "compression.snapshot_strains=[]"], quiet=True)
+    assert q["youngs_modulus_GPa"] == pytest.approx(st["youngs_modulus_GPa"], rel=1e-6)
+    assert q["strength_MPa"] > 0 and 0 < q["strain_at_peak"] < 0.03
+    assert q["broken_bonds_at_peak"] < q["broken_bonds"] and q["quasistatic"]["resolver"] == "direct"
+
+
+def test_both_resolvers_break_the_same_bonds(quick, tmp_path):
+    root, direct = quick
+    amg = opalflow.run("quickstart", tmp_path / "amg", set=[*QUICK, "compression.resolver=amg"], quiet=True)
+    assert amg["quasistatic"]["resolver"] == "amg" and amg["quasistatic"]["cg_iterations"] > 0
+    for key in ("strength_MPa", "strain_at_peak", "youngs_modulus_GPa"):
+        assert amg[key] == pytest.approx(direct[key], rel=1e-6), key
+    import h5py
+
+    with h5py.File(root / "direct" / "results.h5") as a, h5py.File(tmp_path / "amg" / "results.h5") as b:
+        assert np.array_equal(a["quasistatic/broken_bond_index"][()], b["quasistatic/broken_bond_index"][()])
+
+
+def test_a_signal_stops_the_events_and_resume_gives_the_same_numbers(quick, tmp_path):
+    _, whole = quick
+    out = tmp_path / "stopped"
+    engine.request_stop("SIGUSR1")           # as the job's handler does when SLURM signals: stop at the next event
+    with pytest.raises(engine.Preempted):
+        opalflow.run("quickstart", out, set=QUICK, quiet=True)
+    state = json.loads((out / "quasistatic_state.json").read_text())
+    assert len(state["events"]) == 1 and not (out / "summary.json").exists()
+    again = opalflow.run(None, out, resume=True, quiet=True)
+    for key in ("strength_MPa", "strain_at_peak", "youngs_modulus_GPa", "broken_bonds"):
+        assert again[key] == pytest.approx(whole[key], rel=1e-9), key
+    record = json.loads((out / "run.json").read_text())
+    assert len(record["sessions"]) == 2 and record["sessions"][1]["restart"] == "quasistatic_state.json"
+    assert not (out / "quasistatic_state.json").exists()
+
+
+def test_event_tolerance_breaks_more_bonds_per_event(quick, tmp_path):
+    _, exact = quick
+    loose = opalflow.run("quickstart", tmp_path / "tol", set=[*QUICK, "compression.event_tolerance=0.05"], quiet=True)
+    assert loose["quasistatic"]["events"] <= exact["quasistatic"]["events"]
+    assert loose["strength_MPa"] == pytest.approx(exact["strength_MPa"], rel=0.1)
+
+
+def test_a_new_loading_is_one_class_and_one_registry_line():
+    """The loadings the deck and the solvers know come from the registry; each one's blocks render."""
+    assert set(LOADINGS) == {"plate", "glued", "tension"}
+    assert all(isinstance(v, Loading) and v.name == k for k, v in LOADINGS.items())
+    blocks = LOADINGS["tension"].blocks(1.0, 2, 90.0, 100.0, 5.0, "")
+    assert "move linear 0.0 0.0 1.0" in blocks["plate"] and "ramp vz 0.0 1.0" in blocks["affine_start"]
+
+
+@pytest.mark.parametrize("sets, field", [
+    (["compression.method=quasistatic", "bonds.breakable=false"], "bonds.breakable"),
+    (["compression.method=quasistatic", 'bonds.model="contact"'], "bonds.model"),
+    (["compression.loading=pull"], "compression.loading"),
+    (["compression.method=quasistatic", "bonds.breakable=true", "compression.resolver=lu"], "compression.resolver"),
+])
+def test_refusals_are_one_line_and_write_nothing(tmp_path, capsys, sets, field):
+    out = tmp_path / "no"
+    args = ["run", "lattice_sc", "--out", str(out)]
+    for s in sets:
+        args += ["--set", s]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and field in err[0]
+    assert not out.exists()
+
+
+def test_tension_on_a_packing_without_bonds_is_refused(tmp_path, capsys):
+    """A data file with no bonds pulled in tension: one line naming the field, nothing written (every
+    bonded-particle scene refuses a structure without bonds before its loading is looked at)."""
+    from opalflow.bpm.pipeline import build_structure
+    from opalflow.lammps.datafile import write_data
+    from opalflow.registry import load_spec
+    from opalflow.resources import WORKFLOWS
+
+    s = build_structure(load_spec(WORKFLOWS / "lattice_sc.toml", []))
+    s = dataclasses.replace(s, bonds=np.zeros((0, 2), int), bond_types=np.zeros(0, int), bond_type_names=[])
+    write_data(tmp_path / "loose.lmp", s)
+    out = tmp_path / "no"
+    code = main(["run", "lattice_sc", "--out", str(out), "--set", "kind=datafile", "--set", "compression.loading=tension",
+                 "--set", f'datafile.path="{tmp_path / "loose.lmp"}"', "--set", 'datafile.materials=["silica","substrate"]'])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "datafile.path" in err[0] and "no bonds" in err[0], err
+    assert not out.exists()
