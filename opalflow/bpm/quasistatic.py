@@ -77,26 +77,48 @@ def breaking_index(net: BondNetwork, x: np.ndarray, c: Strengths) -> np.ndarray:
 
 
 class StiffnessMatrix:
-    """K of the intact bonds as one CSR matrix (6 N x 6 N) and where each bond's 144 entries sit in it, so
-    that a broken bond is subtracted in place."""
+    """K of the intact bonds as a 6 x 6 block sparse (BSR) matrix, (N + 2 M) blocks: each particle's
+    diagonal block and each bond's two off-diagonal ones, at known places, so that a broken bond's 12 x 12
+    block is subtracted in place (no coordinate list: the paper-scale memory is the blocks alone)."""
 
-    def __init__(self, net: BondNetwork):
-        blocks = bond_blocks(net)
-        dof = lambda p: (6 * p[:, None] + np.arange(6)[None]).reshape(-1, 6)  # noqa: E731
-        self.dofs = np.concatenate([dof(net.i), dof(net.j)], axis=1)          # (M, 12)
-        size = 6 * net.n_particles
-        rows = np.broadcast_to(self.dofs[:, :, None], blocks.shape).reshape(len(net.L), 144)
-        cols = np.broadcast_to(self.dofs[:, None, :], blocks.shape).reshape(len(net.L), 144)
-        keys = rows.astype(np.int64) * size + cols
-        unique = np.unique(keys)
-        self.slots = np.searchsorted(unique, keys).astype(np.int32 if len(unique) < 2**31 else np.int64)
-        self.blocks = blocks.reshape(len(net.L), 144)
-        data = np.bincount(self.slots.ravel(), self.blocks.ravel(), len(unique))
-        indptr = np.concatenate([[0], np.cumsum(np.bincount(unique // size, minlength=size))])
-        self.K = sp.csr_matrix((data, (unique % size).astype(np.int32), indptr), shape=(size, size))
+    def __init__(self, net: BondNetwork, chunk: int = 500_000):
+        self.net = net
+        n, m = net.n_particles, len(net.L)
+        rows = np.concatenate([np.arange(n), net.i, net.j])
+        cols = np.concatenate([np.arange(n), net.j, net.i])
+        order = np.lexsort((cols, rows))
+        self.pos = np.empty(n + 2 * m, np.int64)
+        self.pos[order] = np.arange(n + 2 * m)
+        data = np.zeros((n + 2 * m, 6, 6))
+        for start in range(0, m, chunk):
+            sel = np.arange(start, min(start + chunk, m))
+            self._add(data, sel, bond_blocks(net.part(slice(start, start + len(sel)))), 1.0)
+        indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=n))])
+        self.K = sp.bsr_matrix((data, cols[order].astype(np.int32), indptr), shape=(6 * n, 6 * n))
+
+    def _add(self, data: np.ndarray, bonds: np.ndarray, blocks: np.ndarray, sign: float) -> None:
+        n, m = self.net.n_particles, len(self.net.L)
+        i, j = self.net.i[bonds], self.net.j[bonds]
+        np.add.at(data, self.pos[i], sign * blocks[:, :6, :6])
+        np.add.at(data, self.pos[j], sign * blocks[:, 6:, 6:])
+        data[self.pos[n + bonds]] += sign * blocks[:, :6, 6:]
+        data[self.pos[n + m + bonds]] += sign * blocks[:, 6:, :6]
+
+    def block(self, b: int) -> tuple[np.ndarray, np.ndarray]:
+        """The 12 dofs (u_i, theta_i, u_j, theta_j) of bond ``b`` and its 12 x 12 block."""
+        i, j = int(self.net.i[b]), int(self.net.j[b])
+        dofs = np.concatenate([6 * i + np.arange(6), 6 * j + np.arange(6)])
+        return dofs, bond_blocks(self.net.part(slice(b, b + 1)))[0]
 
     def remove(self, bonds: np.ndarray) -> None:
-        np.subtract.at(self.K.data, self.slots[bonds].ravel(), self.blocks[bonds].ravel())
+        bonds = np.asarray(bonds, np.int64)
+        if len(bonds):
+            self._add(self.K.data, bonds, bond_blocks(self.net.part(bonds)), -1.0)
+
+    def free_part(self, free: np.ndarray):
+        """K_ff (CSR) on the free dofs."""
+        K = self.K.tocsr()
+        return K[free][:, free]
 
 
 class DirectResolver:
@@ -115,7 +137,7 @@ class DirectResolver:
         self.free = free.copy()
         self.index = np.full(free.size, -1)
         self.index[free] = np.arange(int(free.sum()))
-        A = self.km.K[free][:, free].tocoo()
+        A = self.km.free_part(free).tocoo()
         A.eliminate_zeros()
         self.chol = cholespy.CholeskySolverD(A.shape[0], A.row.astype(np.int32), A.col.astype(np.int32), A.data,
                                              cholespy.MatrixType.COO)
@@ -137,9 +159,10 @@ class DirectResolver:
             return
         cols, diag = [], []
         for b in bonds:
-            dofs = self.index[self.km.dofs[b]]
+            dofs, block = self.km.block(b)
+            dofs = self.index[dofs]
             keep = dofs >= 0
-            block = self.km.blocks[b].reshape(12, 12)[np.ix_(keep, keep)]
+            block = block[np.ix_(keep, keep)]
             w, V = np.linalg.eigh(block)
             big = w > 1e-12 * max(float(w.max(initial=0.0)), 1e-300)
             for k in np.flatnonzero(big):
@@ -174,7 +197,7 @@ class AmgResolver:
         self.km, self.rtol = km, rtol
         self.free0 = free.copy()
         self.factorizations = 1
-        K = km.K[free][:, free].tocsr()
+        K = km.free_part(free).tocsr()
         self.vcycle = amg_hierarchy(K, rigid_body_modes(positions)[free]).aspreconditioner(cycle="V")
         self.free = free.copy()
 

@@ -280,7 +280,7 @@ def porosity(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
     eps = np.array([r["porosity"] for r in runs])
     e = np.array([r["youngs_modulus_GPa"] for r in runs])
     fits = {"E_exponential": fit_exponential(eps, e), "E_power": fit_power(eps, e)}
-    if st.method == "dynamic":
+    if st.method != "static":              # dynamic or quasi-static: a strength per job
         fits["strength_exponential"] = fit_exponential(eps, np.array([r["strength_MPa"] for r in runs]))
     ref = paper()["porosity"]
     better = "power" if fits["E_power"].r2 > fits["E_exponential"].r2 else "exponential"

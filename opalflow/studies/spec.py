@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from opalflow.bpm.spec import METHODS
 from opalflow.runs.spec import ExecutorSpec
 from opalflow.spec import WorkflowSpec, check, check_name
 
@@ -19,7 +20,8 @@ class StudySpec:
     paper_scale: bool = False
     set: list[str] = field(default_factory=list)
     np: int = 1                  # MPI ranks per job (the [executor] section says where the jobs run)
-    method: str = "dynamic"      # static: moduli by one linear solve per job (no strength; not calibration)
+    method: str = "dynamic"      # static: moduli by one linear solve per job (no strength; not calibration);
+    #                              quasistatic: E and strength at zero rate by the event-driven fracture method
     # calibration (eqs. 18-19)
     target_E_GPa: float = 1.7
     target_strength_MPa: float = 41.3
@@ -55,7 +57,7 @@ class StudyWorkflow(WorkflowSpec):
             check_name(where, name)
         check(st.np >= 1, "study.np", st.np, "must be >= 1 (MPI processes per job)")
         self.executor.validate()
-        check(st.method in ("dynamic", "static"), "study.method", st.method, "must be 'dynamic' or 'static'")
+        check(st.method in METHODS, "study.method", st.method, f"must be one of {', '.join(METHODS)}")
         check(not (st.method == "static" and st.type == "calibration"), "study.method", st.method,
               "must be 'dynamic' for a calibration (it fits the strength, which a static solve has not)")
         check(st.target_E_GPa > 0, "study.target_E_GPa", st.target_E_GPa, "must be > 0")

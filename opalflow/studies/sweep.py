@@ -26,8 +26,8 @@ def job_spec(spec, overrides: list[str]) -> WorkflowSpec:
     if not path.exists():
         raise SpecError("study.paper_base" if st.paper_scale else "study.base", base,
                         f"no workflow {path.name} in {WORKFLOWS}")
-    static = ["compression.method=static", "compression.drop_loose=true"] if st.method == "static" else []
-    return registry.load_spec(path, [*static, *st.set, *overrides])
+    linear = [f"compression.method={st.method}", "compression.drop_loose=true"] if st.method != "dynamic" else []
+    return registry.load_spec(path, [*linear, *st.set, *overrides])
 
 
 def sweep(spec, out: Path, jobs: list[Job], say) -> dict[str, dict]:
