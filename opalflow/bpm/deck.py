@@ -185,7 +185,7 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
                 for k, n in enumerate(s.type_names)}
     plate_E = {t: plate_contact_E(cp, plate) for t, cp in contacts.items()}
     estimate = estimate_timestep(data, coeffs, contacts if spec.contacts.enabled else {},
-                                 plate_E, contacts, r0, spectral=spec.compression.method != "static")
+                                 plate_E, contacts, r0, spectral=spec.compression.method == "dynamic")
     limit_ns = estimate.limit_ns
     if c.timestep_s:
         dt = c.timestep_s * 1e9

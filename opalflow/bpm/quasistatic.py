@@ -28,7 +28,7 @@ Re-solves (measured in bench/bench_quasistatic.py, kept: ``auto``):
 
 - ``direct``: K_ff factorised once (sparse Cholesky, cholespy/CHOLMOD); each broken bond removes its 12 x 12
   block, a rank <= 6 change, applied by the Sherman-Morrison-Woodbury formula on the old factor; the
-  factor is renewed every ``refactor_every`` broken bonds and when particles come loose;
+  factor is renewed when the updates have cost as much time as it did, and when particles come loose;
 - ``amg``: the smoothed-aggregation AMG of the intact network as the preconditioner of CG on the damaged
   one, warm-started from the last solution (the change of one bond is local: few iterations);
 - ``auto``: ``direct`` up to DIRECT_MAX_DOFS free degrees of freedom (the factor's fill grows fast in
@@ -122,30 +122,42 @@ class StiffnessMatrix:
 
 
 class DirectResolver:
-    """Cholesky factor of K_ff with Woodbury updates for the bonds removed since (module docstring)."""
+    """Cholesky factor of K_ff with Woodbury updates for the bonds removed since (module docstring).
+
+    K_ff - U C U^T, U (n x R) the eigenvectors of the removed blocks (<= 6 per bond, 12 entries each, kept
+    as index and value rows), C their eigenvalues: x = y + W S^-1 U^T y with y = A^-1 b, W = A^-1 U and
+    S = C^-1 - U^T W.  The factor is renewed when the time spent on the update since the last one exceeds
+    the factorisation's own (the classic balance), when the columns would pass ``memory_bytes``, and when
+    particles come loose (their dofs leave the free set)."""
 
     name = "direct"
 
-    def __init__(self, km: StiffnessMatrix, free: np.ndarray, refactor_every: int = 50):
-        self.km, self.refactor_every = km, refactor_every
+    def __init__(self, km: StiffnessMatrix, free: np.ndarray, memory_bytes: float = 1.5e9):
+        self.km, self.memory_bytes = km, memory_bytes
         self.factorizations = 0
         self._factor(free)
 
     def _factor(self, free: np.ndarray) -> None:
         import cholespy
 
+        t = time.perf_counter()
         self.free = free.copy()
         self.index = np.full(free.size, -1)
-        self.index[free] = np.arange(int(free.sum()))
+        nf = int(free.sum())
+        self.index[free] = np.arange(nf)
         A = self.km.free_part(free).tocoo()
         A.eliminate_zeros()
-        self.chol = cholespy.CholeskySolverD(A.shape[0], A.row.astype(np.int32), A.col.astype(np.int32), A.data,
+        self.chol = cholespy.CholeskySolverD(nf, A.row.astype(np.int32), A.col.astype(np.int32), A.data,
                                              cholespy.MatrixType.COO)
-        self.U = sp.csc_matrix((A.shape[0], 0))
-        self.W = np.zeros((A.shape[0], 0))
-        self.Cinv = np.zeros(0)
-        self.removed = 0
+        cap = int(max(6, min(3000, self.memory_bytes / 8 / max(nf, 1))))
+        self.W = np.zeros((nf, cap))
+        self.Uidx = np.zeros((cap, 12), np.int64)
+        self.Uval = np.zeros((cap, 12))
+        self.S = np.zeros((cap, cap))
+        self.R = 0
+        self.last = None                                   # (b, A^-1 b) of the last solve
         self.factorizations += 1
+        self.factor_s, self.update_s = time.perf_counter() - t, 0.0
 
     def _inverse(self, b: np.ndarray) -> np.ndarray:
         b = np.ascontiguousarray(b)
@@ -153,36 +165,62 @@ class DirectResolver:
         self.chol.solve(b, x)
         return x
 
-    def remove(self, bonds: np.ndarray, free: np.ndarray) -> None:
-        if np.any(self.free & ~free) or self.removed + len(bonds) > self.refactor_every:
-            self._factor(free)
-            return
-        cols, diag = [], []
+    def _columns(self, bonds: np.ndarray):
+        """The Woodbury columns of the removed bonds: (index rows, value rows, 1 / eigenvalues)."""
+        idx, val, cinv = [], [], []
         for b in bonds:
             dofs, block = self.km.block(b)
             dofs = self.index[dofs]
             keep = dofs >= 0
-            block = block[np.ix_(keep, keep)]
-            w, V = np.linalg.eigh(block)
-            big = w > 1e-12 * max(float(w.max(initial=0.0)), 1e-300)
-            for k in np.flatnonzero(big):
-                cols.append(sp.csc_matrix((V[:, k], (dofs[keep], np.zeros(int(keep.sum()), int))),
-                                          shape=(self.U.shape[0], 1)))
-                diag.append(1.0 / w[k])
-        if not cols:
+            w, V = np.linalg.eigh(block[np.ix_(keep, keep)])
+            for k in np.flatnonzero(w > 1e-12 * max(float(w.max(initial=0.0)), 1e-300)):
+                row_i, row_v = np.zeros(12, np.int64), np.zeros(12)
+                row_i[:keep.sum()], row_v[:keep.sum()] = dofs[keep], V[:, k]
+                idx.append(row_i)
+                val.append(row_v)
+                cinv.append(1.0 / w[k])
+        return np.array(idx, np.int64).reshape(-1, 12), np.array(val).reshape(-1, 12), np.array(cinv)
+
+    def remove(self, bonds: np.ndarray, free: np.ndarray) -> None:
+        t = time.perf_counter()
+        idx, val, cinv = self._columns(bonds)
+        k = len(cinv)
+        if np.any(self.free & ~free) or self.update_s > self.factor_s or self.R + k > len(self.S):
+            self._factor(free)
             return
-        new = sp.hstack(cols).tocsc()
-        self.W = np.hstack([self.W, self._inverse(new.toarray())])
-        self.U = sp.hstack([self.U, new]).tocsc()
-        self.Cinv = np.concatenate([self.Cinv, diag])
-        self.removed += len(bonds)
+        if not k:
+            return
+        dense = np.zeros((self.W.shape[0], k))
+        np.add.at(dense, (idx, np.arange(k)[:, None]), val)
+        R = self.R
+        W_new = self._inverse(dense)
+        self.W[:, R:R + k] = W_new
+        self.Uidx[R:R + k], self.Uval[R:R + k] = idx, val
+        self.R += k
+        cross = self._ut(W_new)                            # U^T W_new, (R + k, k)
+        self.S[:R + k, R:R + k] = -cross
+        self.S[R:R + k, :R] = -cross[:R].T
+        self.S[np.arange(R, R + k), np.arange(R, R + k)] += cinv
+        self.update_s += time.perf_counter() - t
+
+    def _ut(self, v: np.ndarray) -> np.ndarray:
+        """U^T v for v (n,) or (n, k)."""
+        R = self.R
+        if v.ndim == 1:
+            return np.sum(self.Uval[:R] * v[self.Uidx[:R]], axis=1)
+        return np.einsum("ra,rak->rk", self.Uval[:R], v[self.Uidx[:R]])
 
     def solve(self, b: np.ndarray, x0: np.ndarray) -> tuple[np.ndarray, int]:
         """x with K_ff x = b on the free dofs (the full vector; prescribed entries of b are copied)."""
-        y = self._inverse(b[self.free])
-        if self.U.shape[1]:
-            S = np.diag(self.Cinv) - (self.U.T @ self.W)
-            y = y + self.W @ np.linalg.solve(S, self.U.T @ y)
+        bf = b[self.free]
+        if self.last is None or not np.array_equal(bf, self.last[0]):     # b moves only where a broken bond
+            self.last = (bf, self._inverse(bf))                          # touched a support: A^-1 b kept
+        y = self.last[1]
+        if self.R:
+            t = time.perf_counter()
+            R = self.R
+            y = y + self.W[:, :R] @ np.linalg.solve(self.S[:R, :R], self._ut(y))
+            self.update_s += time.perf_counter() - t
         x = b.copy()
         x[self.free] = y
         return x, 1
@@ -268,7 +306,7 @@ class FractureResult:
 def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray, fixed: np.ndarray,
                    top: np.ndarray, height: float, area: float, *, clamp_top: bool = False, sense: int = 1,
                    strain_max: float = 0.04, stop_fraction: float = 0.5, events_max: int = 100_000,
-                   tolerance: float = 0.0, resolver: str = "auto", rtol: float = 1e-9, refactor_every: int = 50,
+                   tolerance: float = 0.0, resolver: str = "auto", rtol: float = 1e-9,
                    state: dict | None = None, checkpoint=None, checkpoint_s: float = 5.0, should_stop=lambda: False,
                    say=print) -> FractureResult:
     """The event loop of the module docstring under the loading of
@@ -311,7 +349,7 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
     free, x_p, loaded = constraints(loose)
     if resolver == "auto":
         resolver = "direct" if free.sum() <= DIRECT_MAX_DOFS else "amg"
-    solver = (DirectResolver(km, free, refactor_every) if resolver == "direct"
+    solver = (DirectResolver(km, free) if resolver == "direct"
               else AmgResolver(km, free, positions, rtol))
     setup = time.perf_counter() - t0
 
