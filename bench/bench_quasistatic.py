@@ -5,9 +5,9 @@ own designs, on the same samples.
     python bench/bench_quasistatic.py resolvers    # re-solve designs: direct (Cholesky + Woodbury) vs amg
     python bench/bench_quasistatic.py compare      # quasi-static vs the dynamic runs extrapolated to zero rate
 
-``dynamic``: quickstart and opal_quick compressed by the plate with LAMMPS's ``smooth yes`` (opalflow's
-default deck) and ``smooth no`` (bonds break at full load, the quasi-static rule), each at four plate
-speeds to strain 0.014 (past every peak), and with contacts off at 0.25 m/s; strength, strain at peak,
+``dynamic``: quickstart and opal_quick compressed by the plate with ``smooth no`` (bonds break at full
+load, the quasi-static rule) at four plate speeds past their peaks, LAMMPS's ``smooth yes`` (opalflow's
+default deck) at four speeds (quickstart) and at 0.25 m/s (opal_quick), and contacts off at 0.25 m/s; strength, strain at peak,
 bonds broken, wall.  The zero-rate value is the intercept of a straight line through strength against
 speed.  ``resolvers``: both designs on quickstart at d = 60 nm and on the first 100 events at d = 40 nm, then whole
 runs at d = 40 nm with event tolerances 0, 0.01, 0.05: events, broken bonds, strength,
@@ -31,6 +31,9 @@ HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results"
 SPEEDS = [1.0, 0.5, 0.25, 0.125]
 SAMPLES = ["quickstart", "opal_quick"]
+#: each sample's runs go past its peak (quasi-static strain at peak 0.0087 and 0.0165; the plate strain of a
+#: dynamic run is larger by the plate's settling on the rough top)
+STRAIN_MAX = {"quickstart": 0.014, "opal_quick": 0.026}
 
 
 def machine() -> dict:
@@ -44,17 +47,18 @@ def dynamic(out: Path) -> None:
     path = RESULTS / "quasistatic_dynamic.json"
     rows = json.loads(path.read_text())["rows"] if path.exists() else []
     done = {(r["workflow"], r["smooth"], r["contacts"], r["plate_speed_m_s"]) for r in rows}
-    plan = [(w, s, True, v) for w in SAMPLES for s in (True, False) for v in SPEEDS]
-    plan += [(w, False, False, 0.25) for w in SAMPLES]
+    plan = [(w, False, True, v) for w in SAMPLES for v in SPEEDS] + [("quickstart", True, True, v) for v in SPEEDS]
+    plan += [("opal_quick", True, True, 0.25)] + [(w, False, False, 0.25) for w in SAMPLES]
     for w, smooth, contacts, v in plan:
         if (w, smooth, contacts, v) in done:
             continue
-        sets = [f"compression.plate_speed_m_s={v}", "compression.strain_max=0.014", "compression.snapshot_strains=[]",
+        sets = [f"compression.plate_speed_m_s={v}", f"compression.strain_max={STRAIN_MAX[w]}", "compression.snapshot_strains=[]",
                 f"bonds.smooth={str(smooth).lower()}", f"contacts.enabled={str(contacts).lower()}"]
         t = time.perf_counter()
         s = opalflow.run(w, out / f"{w}-{smooth}-{contacts}-{v}", set=sets, quiet=True)
-        rows.append({"workflow": w, "smooth": smooth, "contacts": contacts, "plate_speed_m_s": v,
+        rows.append({"workflow": w, "smooth": smooth, "contacts": contacts, "plate_speed_m_s": v, "strain_max": STRAIN_MAX[w],
                      "strength_MPa": s["strength_MPa"], "strain_at_peak": s["strain_at_peak"],
+                     "strain_at_peak_specimen": s.get("strain_at_peak_specimen"),
                      "youngs_modulus_GPa": s["youngs_modulus_GPa"], "broken_bonds": s["broken_bonds"],
                      "wall_s": round(time.perf_counter() - t, 1)})
         print(json.dumps(rows[-1]), flush=True)

@@ -83,7 +83,9 @@ def cost_facts(spec: BpmWorkflow) -> dict:
     deck = compression_deck(spec, s)
     facts = {"method": spec.compression.method, "n_particles": s.n_particles, "n_bonds": s.n_bonds,
              "bond_model": spec.bonds.model, "build_s": time.perf_counter() - t}
-    if spec.compression.method == "static":
+    if spec.compression.method == "quasistatic":      # priced as its first solve (the events are not known)
+        facts["solver"] = "amg"
+    elif spec.compression.method == "static":
         solver = spec.compression.solver
         facts["solver"] = ("amg" if s.n_bonds <= AMG_MAX_BONDS else "block-amg") if solver == "auto" else solver
     else:
@@ -231,6 +233,7 @@ def analyze(out: Path, wall_s: float | None = None, lammps_s: float | None = Non
         "elastic_window_strain": list(fit.window), "elastic_fit_r2": fit.r2,
         "youngs_modulus_specimen_GPa": fit_top.modulus_MPa / 1e3,
         "strength_MPa": float(stress[peak]), "strain_at_peak": float(strain[peak]),
+        "strain_at_peak_specimen": float(strain_top[peak]),      # the top layer's (no plate settling)
         "timestep_s": info["timestep_s"], "steps": int(curve["step"][-1]),
         # the last averaged row lies within one output interval of the last step of a whole run
         "complete": bool(curve["step"][-1] > info["steps"] - info["output_every_steps"]),

@@ -77,7 +77,7 @@ def predict(facts: dict, law: dict, ranks: int = 1) -> dict:
     """Wall seconds, core-seconds and peak memory (MiB) of one job with these facts: the build as timed by
     the plan, plus the solve (static: the solver's law) or the time steps (dynamic), plus the outputs."""
     bonds = max(facts["n_bonds"], 1)
-    if facts["method"] == "static":
+    if facts["method"] in ("static", "quasistatic"):      # quasistatic: its first solve, a lower bound
         sv, st = law["solvers"][facts["solver"]], law["static"]
         wall = facts["build_s"] + sv["c"] * bonds ** sv["p"] + st["rest_s0"] + st["rest_s_per_bond"] * bonds
         mem = law["static_memory"]["m0_MiB"] + (law["static_memory"]["m1_MiB"] * bonds if facts["solver"] == "amg"
@@ -164,7 +164,7 @@ def plan(spec, *, ranks: int = 1, sample: int = 3, against: Path | None = None, 
 def plan_lines(p: dict) -> list[str]:
     lines = [f"plan {p['workflow']} ({p['kind']}, {len(p['jobs'])} job(s); cost laws of {LAWS.name}, measured "
              f"{p['laws_measured']} on {p['machine'].get('cpus', '?')} cores)",
-             f"  {'job':<22} {'method':<8} {'particles':>10} {'bonds':>11} {'steps':>8} {'wall (s)':>10} "
+             f"  {'job':<22} {'method':<11} {'particles':>10} {'bonds':>11} {'steps':>8} {'wall (s)':>10} "
              f"{'core-s':>10} {'memory':>10}" + ("   measured wall / memory" if any("measured" in r for r in p["jobs"])
                                                  else "")]
     for r in p["jobs"]:
@@ -175,7 +175,7 @@ def plan_lines(p: dict) -> list[str]:
             mem = (f"{m['peak_MiB']:.0f} MiB ({100 * (r['peak_MiB'] / m['peak_MiB'] - 1):+.0f} %)"
                    if m.get("peak_MiB") else "-")
             meas = f"   {m['wall_s']:.1f} s{err} / {mem}" if m.get("wall_s") else "   -"
-        lines.append(f"  {r['label']:<22} {r['method']:<8} {r['n_particles']:>10} {r['n_bonds']:>11} "
+        lines.append(f"  {r['label']:<22} {r['method']:<11} {r['n_particles']:>10} {r['n_bonds']:>11} "
                      f"{r.get('steps', '-'):>8} {r['wall_s']:>10.1f} {r['core_s']:>10.1f} "
                      f"{r['peak_MiB'] / 1024:>8.2f} GiB{'' if r['built'] else ' ~'}{meas}")
     s = p["slurm"]
@@ -184,4 +184,7 @@ def plan_lines(p: dict) -> list[str]:
               "(~: job interpolated between built ones)",
               f"SLURM (x{MARGIN} margin): --array={s['array']} --ntasks={s['ntasks']} --mem={s['mem']} "
               f"--time={s['time_min']}  ([executor] type = \"slurm\", mem_gb, time_min)"]
+    if any(r["method"] == "quasistatic" for r in p["jobs"]):
+        lines.append("quasistatic jobs are priced as their first solve, a lower bound: each broken bond costs a "
+                     "re-solve and their number is not known before the run")
     return lines
