@@ -229,3 +229,17 @@ def test_bulk_study_by_static_solves(tmp_path):
     from opalflow.spec import InputError
     with pytest.raises(InputError, match="study.method"):
         load_spec(WORKFLOWS / "calibrate_silica.toml", ["study.method=static"])
+
+
+def test_porosity_study_by_quasistatic_jobs_fits_the_strength(tmp_path):
+    """study.method = "quasistatic": every job a quasi-static fracture (strength at zero rate), so the
+    porosity study fits eq. 26 (strength against porosity) as from dynamic runs."""
+    spec = load_spec(WORKFLOWS / "porosity.toml", [
+        "study.method=quasistatic", "study.porosities=[0.36, 0.49, 0.62]", "study.seeds=[1]",
+        'study.set=["compression.strain_max=0.02","compression.snapshot_strains=[]","pores.cells_x=2",'
+        '"packing.diameter_nm=110.0","pores.porosity_tolerance=0.04"]'])
+    summary = studies.run(spec, tmp_path, say=lambda m: None)
+    assert "strength_exponential" in summary["fits"] and len(summary["runs"]) == 3
+    assert all(r["strength_MPa"] > 0 for r in summary["runs"])
+    job = json.loads(next((tmp_path / "jobs").glob("*/summary.json")).read_text())
+    assert job["method"] == "quasistatic" and job["quasistatic"]["events"] >= 1

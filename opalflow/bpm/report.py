@@ -102,7 +102,8 @@ def _session_row(k: int, x: dict) -> str:
 def compression_report(info: dict, summary: dict, fit, fracture: bool) -> str:
     """The text of report.md (sections :data:`SECTIONS`)."""
     spec = info["spec"]
-    lines = [f"# {info['workflow']}: uniaxial compression", ""]
+    tension = info.get("loading_sense", 1) < 0
+    lines = [f"# {info['workflow']}: uniaxial {'tension' if tension else 'compression'}", ""]
     if not summary["complete"]:
         c = spec["compression"]
         lines += [f"**Incomplete run**: the output stops at step {summary['steps']} of {info['steps']} "
@@ -113,7 +114,7 @@ def compression_report(info: dict, summary: dict, fit, fracture: bool) -> str:
     lines += ["## Results", "", "| quantity | value | reference | error | why the error |", "|---|---|---|---|---|"]
     for key, label, fmt in (("youngs_modulus_GPa", "Young's modulus, plate strain (GPa)", "{:.4g}"),
                             ("youngs_modulus_specimen_GPa", "Young's modulus, top-layer strain (GPa)", "{:.4g}"),
-                            ("strength_MPa", "compressive strength (MPa)", "{:.4g}"),
+                            ("strength_MPa", f"{'tensile' if tension else 'compressive'} strength (MPa)", "{:.4g}"),
                             ("strain_at_peak", "strain at peak", "{:.4f}"),
                             ("broken_bonds", "broken bonds at the end", "{}")):
         ref = summary["reference"].get(key)
