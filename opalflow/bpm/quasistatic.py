@@ -30,7 +30,9 @@ Re-solves (measured in bench/bench_quasistatic.py, kept: ``auto``):
   block, a rank <= 6 change, applied by the Sherman-Morrison-Woodbury formula on the old factor; the
   factor is renewed when the updates have cost as much time as it did, and when particles come loose;
 - ``amg``: the smoothed-aggregation AMG of the intact network as the preconditioner of CG on the damaged
-  one, warm-started from the last solution (the change of one bond is local: few iterations);
+  one, warm-started from the last solution (measured 20-70 iterations per event: the load a broken bond
+  carried spreads through the whole sample); slower per event than ``direct`` (5-10x at 15 k-56 k dofs) but
+  the only one that fits large samples;
 - ``auto``: ``direct`` up to DIRECT_MAX_DOFS free degrees of freedom (the factor's fill grows fast in
   3D), ``amg`` above.
 """
@@ -48,8 +50,9 @@ from opalflow.bpm.static import amg_hierarchy, bond_blocks, pcg, rigid_body_mode
 from opalflow.bpm.stiffness import BondNetwork
 from opalflow.spec import InputError
 
-#: ``resolver = "auto"``: the factor up to this many free dofs (quickstart 11 k: 0.23 s and 8 MB of factor)
-DIRECT_MAX_DOFS = 300_000
+#: ``resolver = "auto"``: the factor up to this many free dofs (measured: 0.2 s at 11 k, 7 s at 56 k; at 1.1 M no
+#: factor after 17 min and 15 GiB; bench/results/quasistatic_*.json), AMG above
+DIRECT_MAX_DOFS = 100_000
 
 
 @dataclass
