@@ -11,7 +11,7 @@ default deck) at four speeds (quickstart) and at 0.25 m/s (opal_quick), and cont
 bonds broken, wall.  The zero-rate value is the intercept of a straight line through strength against
 speed.  ``resolvers``: both designs on quickstart at d = 60 nm and on the first 100 events at d = 40 nm, then whole
 runs at d = 40 nm with event tolerances 0, 0.01, 0.05: events, broken bonds, strength,
-time, factorisations or CG iterations.  Results: bench/results/quasistatic_*.json and quasistatic.md.
+time, factorisations or CG iterations.  Results: bench/results/quasistatic_dynamic.json, _resolvers.json, _compare.json.
 One BLAS thread (threadpoolctl), as the run layer's jobs.
 """
 from __future__ import annotations
