@@ -296,6 +296,10 @@ def test_plan_prices_a_study_without_running_it(tmp_path, capsys, monkeypatch):
     p = plan(load_spec(WORKFLOWS / "opal_quick.toml"), say=lambda m: None)
     (job,) = p["jobs"]
     assert job["method"] == "dynamic" and job["steps"] > 100 and job["wall_s"] > job["build_s"]
+    capsys.readouterr()
+    assert main(["plan", "opal_quick", "--set", "compression.method=quasistatic"]) == 0
+    out = capsys.readouterr().out
+    assert " quasistatic " in out and "priced as their first solve, a lower bound" in out
 
 
 def test_a_relative_out_folder(tmp_path, monkeypatch, capsys):

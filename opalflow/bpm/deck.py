@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from opalflow.bpm.bonds import BOND_MODELS
 from opalflow.bpm.loading import CONTACT_LAWS, LOADINGS
 from opalflow.bpm.spec import BpmWorkflow
 from opalflow.bpm.timestep import TimestepEstimate, estimate_timestep
@@ -162,7 +163,7 @@ def bond_model(spec: BpmWorkflow, s: Structure, r0: np.ndarray | None = None
         r = float(np.mean(s.diameters[on])) / 2
         coeffs.append(bond_coefficients(mat, spec.bonds.radius_factor * r, L, m, 0.4 * m * r * r,
                                         spec.bonds.damping_ratio, spec.materials,
-                                        moments=spec.bonds.model == "parallel"))
+                                        moments=BOND_MODELS[spec.bonds.model].moments))
     return data, bins, coeffs
 
 
@@ -228,14 +229,14 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
     gamma = 2 * c.global_damping * omega1 * float(np.mean(masses[~substrate]))
 
     substrate_type = s.type_names.index("substrate") + 1
-    contact_bond = spec.bonds.model == "contact"
-    bond_lines = "\n".join(f"bond_coeff      {t + 1} " + " ".join(num(x) for x in (
-        cf.spring_values() if contact_bond else cf.values())) for t, cf in enumerate(coeffs))
+    style = BOND_MODELS[spec.bonds.model]
+    bond_lines = "\n".join(f"bond_coeff      {t + 1} " + " ".join(num(x) for x in style.coefficients(cf))
+                           for t, cf in enumerate(coeffs))
     common = dict(ghost_cutoff=num(1.25 * float(np.max(r0, initial=d_mean)) + 0.2 * d_mean),
                   data_file="data.lmp", boundary="p p f" if s.periodic[0] else "m m f")
     blocks = {
         "system": render("system", **common),
-        "bonds": render("bonds_spring" if contact_bond else "bonds", breakable="yes" if spec.bonds.breakable else "no",
+        "bonds": render(style.block, breakable="yes" if spec.bonds.breakable else "no",
                         smooth="yes" if spec.bonds.breakable and spec.bonds.smooth else "no", bond_coeffs=bond_lines),
         "contacts": render("contacts", pair_coeffs="\n".join(
             f"pair_coeff      {t} {t} {law.args(cp)}" for t, cp in contacts.items())),

@@ -4,12 +4,15 @@
 A loading says how the top of the sample is moved (its LAMMPS groups, wall and start blocks) and, for
 the solvers, which degrees of freedom of the top layer it prescribes and in which sense.  Strain and
 stress are reported positive in the loading's own sense (``sense`` +1: compression, -1: tension).  A
-contact law gives the ``pair_coeff`` / wall arguments of ``pair_style granular``.  A new loading (contact
+contact law gives the ``pair_coeff`` / wall arguments of ``pair_style granular`` and its normal stiffness
+for the time step.  (Bond models live with the bonds: :data:`opalflow.bpm.bonds.BOND_MODELS`.)  A new loading (contact
 law) is one class here and one line in :data:`LOADINGS` (:data:`CONTACT_LAWS`).
 """
 from __future__ import annotations
 
 import dataclasses
+
+import numpy as np
 
 from opalflow.lammps.syntax import num, render
 from opalflow.materials import ContactProperties, linear_contact_stiffness
@@ -25,6 +28,11 @@ class ContactLaw:
     def args(self, contact: ContactProperties, E: float | None = None, k: float | None = None) -> str:
         raise NotImplementedError
 
+    def stiffness(self, contact: ContactProperties, radius, overlap, E: float | None = None, wall: bool = False):
+        """Normal contact stiffness (pN/nm) for the time step: two particles of effective radius ``radius``
+        (nm) at ``overlap`` (nm), or (``wall``) one particle on a rigid wall whose contact has modulus E."""
+        raise NotImplementedError
+
 
 class HertzMindlin(ContactLaw):
     """Hertz normal force (``hertz/material``, Young's modulus ``E``: for a wall, E such that its E* is
@@ -34,6 +42,13 @@ class HertzMindlin(ContactLaw):
         return (f"hertz/material {num(E if E is not None else contact.youngs_modulus_MPa)} "
                 f"{num(contact.restitution)} {num(contact.poisson_ratio)} tangential mindlin NULL 1.0 "
                 f"{num(contact.friction)} damping coeff_restitution")
+
+
+    def stiffness(self, contact, radius, overlap, E=None, wall=False):
+        """dF/d(overlap) of Hertz's F = 4/3 E* sqrt(R) overlap^1.5 is 2 E* sqrt(R overlap), with E* =
+        E / (2 (1 - nu^2)) (equal materials: LAMMPS's hertz/material)."""
+        e_star = (E if E is not None else contact.youngs_modulus_MPa) / (2 * (1 - contact.poisson_ratio**2))
+        return 2 * e_star * np.sqrt(radius * overlap)
 
 
 class LinearContact(ContactLaw):
@@ -47,6 +62,10 @@ class LinearContact(ContactLaw):
         kn = k if k is not None else contact.stiffness
         return (f"hooke {num(kn)} {num(contact.restitution)} tangential linear_history "
                 f"{num(contact.tangential_ratio * kn)} 1.0 {num(contact.friction)} damping coeff_restitution")
+
+    def stiffness(self, contact, radius, overlap, E=None, wall=False):
+        """K as it is; on a wall one ball of the two in series: 2 K."""
+        return (2.0 if wall else 1.0) * contact.stiffness
 
 
 #: ``contacts.model`` -> law

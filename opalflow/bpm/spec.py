@@ -11,16 +11,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from opalflow.bpm.bonds import BOND_MODELS
 from opalflow.bpm.loading import CONTACT_LAWS, LOADINGS
 from opalflow.materials import OVERRIDABLE, material_names
 from opalflow.spec import WorkflowSpec, check, check_name, is_number
 
 SIDES = ("periodic", "open")
-#: bond models (Roy and Hossain, Fig. 10.8): parallel bond = force and moment (bpm/rotational), contact bond
-#: = force only (bpm/spring)
-BOND_MODELS = ("parallel", "contact")
-#: contact force laws between unbonded particles: Hertz-Mindlin or linear (PFC's two stiffness models)
-CONTACT_MODELS = tuple(CONTACT_LAWS)
 #: allowed range of each material property a workflow may override (far around any ceramic's)
 PROPERTY_RANGES = {"density_kg_m3": (1.0, 1e5), "bond_youngs_modulus_GPa": (1e-6, 1e4),
                    "bond_poisson_ratio": (-0.99, 0.499), "bond_strength_MPa": (1e-6, 1e6)}
@@ -161,8 +157,8 @@ class BpmWorkflow(WorkflowSpec):
         check_material("material", self.material)
         b = self.bonds
         check(b.model in BOND_MODELS, "bonds.model", b.model, f"must be one of {', '.join(BOND_MODELS)}")
-        check(self.contacts.model in CONTACT_MODELS, "contacts.model", self.contacts.model,
-              f"must be one of {', '.join(CONTACT_MODELS)}")
+        check(self.contacts.model in CONTACT_LAWS, "contacts.model", self.contacts.model,
+              f"must be one of {', '.join(CONTACT_LAWS)}")
         check(1.0 <= b.cutoff_factor <= 3.0, "bonds.cutoff_factor", b.cutoff_factor,
               "must be in [1.0, 3.0] (bond cutoff in particle diameters)")
         check(0 < b.radius_factor <= 2.0, "bonds.radius_factor", b.radius_factor,
@@ -195,7 +191,7 @@ class BpmWorkflow(WorkflowSpec):
         linear = c.method in ("static", "quasistatic")
         check(not (linear and c.check_rate), "compression.check_rate", c.check_rate,
               f"must be false with method = \"{c.method}\" (a linear solve has no loading rate)")
-        check(not (linear and b.model == "contact"), "bonds.model", b.model,
+        check(not (linear and not BOND_MODELS[b.model].moments), "bonds.model", b.model,
               f"must be \"parallel\" with compression.method = \"{c.method}\" (contact bonds carry no moment: "
               "a tree-like network of them is a mechanism with no static stiffness)")
         check(not (c.method == "quasistatic" and not b.breakable), "bonds.breakable", b.breakable,

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from opalflow.bpm.loading import CONTACT_LAWS
 from opalflow.materials import BondCoefficients, ContactProperties
 from opalflow.structure import Structure
 
@@ -114,14 +115,12 @@ def estimate_timestep(s: Structure, coeffs: list[BondCoefficients],
     types = s.types
     for typ, cp in contacts.items():
         sel = types == typ
-        e_star = cp.youngs_modulus_MPa / (2 * (1 - cp.poisson_ratio**2))
-        k = cp.stiffness if cp.model == "linear" else 2 * e_star * np.sqrt(R[sel] / 2 * DELTA_CONTACT * s.diameters[sel])
+        k = CONTACT_LAWS[cp.model].stiffness(cp, R[sel] / 2, DELTA_CONTACT * s.diameters[sel])
         contact[sel] = 12 * 2 * k / m[sel]
     for typ, E in plate_E.items():
         sel = types == typ
-        e_star = E / (2 * (1 - plate_props[typ].poisson_ratio**2))
-        k = 2 * plate_props[typ].stiffness if plate_props[typ].model == "linear" else \
-            2 * e_star * np.sqrt(R[sel] * DELTA_CONTACT * s.diameters[sel])
+        cp = plate_props[typ]
+        k = CONTACT_LAWS[cp.model].stiffness(cp, R[sel], DELTA_CONTACT * s.diameters[sel], E=E, wall=True)
         contact[sel] += k / m[sel]
     modes["contact"] = contact
     total = total + contact
