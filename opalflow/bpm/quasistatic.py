@@ -409,9 +409,14 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
             stop = should_stop()
             if now - last_said > 10:
                 last_said = now
+                rate = len(events) / max(now - t0 - setup, 1e-9)
+                reached = max(e.strain for e in events)
+                # the rest up to strain_max at the events per strain so far: a lower bound while the events
+                # come faster as damage spreads (before the peak), an upper one after (the run stops early)
+                left = (strain_max - reached) * len(events) / reached / rate
                 say(f"quasi-static: event {len(events)}, {int((~alive).sum())} bonds broken, strain {strain:.5f} "
-                    f"(max {strain_max:g}), stress {stress:.4g} MPa (peak {peak_stress:.4g}), "
-                    f"{len(events) / (now - t0 - setup):.1f} events/s")
+                    f"(max {strain_max:g}), stress {stress:.4g} MPa (peak {peak_stress:.4g}), {rate:.1f} events/s, "
+                    f"~{left:.0f} s left to strain_max at the events per strain so far")
             if stop or now - last_saved > checkpoint_s:
                 last_saved = now
                 save()
