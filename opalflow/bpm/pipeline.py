@@ -251,9 +251,7 @@ def analyze(out: Path, wall_s: float | None = None, lammps_s: float | None = Non
     summary.update({k: v for k, v in info.get("statistics", {}).items() if k not in summary})
     if "build_timings_s" in info:
         summary["build_timings_s"] = info["build_timings_s"]
-    refs = info.get("references", {})
-    summary["reference"] = {k: {"value": v, "source": src,
-                                "error": (summary[k] - v) / v} for k, (v, src) in refs.items()}
+    summary["reference"] = report.reference_errors(summary, info.get("references", {}))
     if extra:
         summary.update(extra)
     if not summary["complete"]:

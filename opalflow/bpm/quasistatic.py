@@ -186,11 +186,11 @@ class DirectResolver:
 
     def remove(self, bonds: np.ndarray, free: np.ndarray) -> None:
         t = time.perf_counter()
+        if np.any(self.free & ~free) or self.update_s > self.factor_s or self.R + 6 * len(bonds) > len(self.S):
+            self._factor(free)       # (at most 6 columns a bond)
+            return
         idx, val, cinv = self._columns(bonds)
         k = len(cinv)
-        if np.any(self.free & ~free) or self.update_s > self.factor_s or self.R + k > len(self.S):
-            self._factor(free)
-            return
         if not k:
             return
         dense = np.zeros((self.W.shape[0], k))

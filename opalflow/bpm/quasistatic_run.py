@@ -22,10 +22,12 @@ from opalflow.bpm.loading import LOADINGS
 from opalflow.bpm.quasistatic import Stopped, Strengths, solve_fracture, summary_of
 from opalflow.bpm.scene import scene_of
 from opalflow.bpm.spec import BpmWorkflow
+from opalflow.bpm.report import reference_errors
 from opalflow.bpm.static_run import network_run, particle_stress
+from opalflow.bpm.stiffness import per_bond
 from opalflow.runs.record import finish
-from opalflow.spec import SpecError
 from opalflow.lammps.engine import Interrupted, Preempted, stop_requested
+from opalflow.spec import SpecError
 from opalflow.store import h5_bytes, new_figure, put, save_figure, write_json_atomic
 
 STATE = "quasistatic_state.json"
@@ -33,9 +35,7 @@ STATE = "quasistatic_state.json"
 
 def strengths_of(data, coefficients) -> Strengths:
     """Each bond's critical forces and torques, from its type's bpm/rotational coefficients."""
-    t = data.bond_types - 1
-    pick = lambda k: np.array([getattr(c, k) for c in coefficients], float)[t]  # noqa: E731
-    return Strengths(pick("fr_c"), pick("fs_c"), pick("tb_c"), pick("tt_c"))
+    return Strengths(*(per_bond(data, coefficients, k) for k in ("fr_c", "fs_c", "tb_c", "tt_c")))
 
 
 def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=print) -> dict:
@@ -90,8 +90,7 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
                     f"{got['strain_at_peak']:.4f}; quasi-static, {got['events']} events, {got['broken_bonds']} "
                     f"bonds broken)",
     }
-    summary["reference"] = {k: {"value": v, "source": src, "error": (summary[k] - v) / v}
-                            for k, (v, src) in info["references"].items() if k in summary}
+    summary["reference"] = reference_errors(summary, info["references"])
     summary["wall_s"] = time.perf_counter() - t0
     record.sessions[-1].last_step = got["events"]
 

@@ -13,6 +13,13 @@ from functools import lru_cache
 from opalflow.analysis import compression as mech
 from opalflow.resources import DATA
 
+
+def reference_errors(summary: dict, references: dict) -> dict:
+    """``summary["reference"]``: each reference value ({key: (value, source)}) with its source and the
+    summary's relative error against it (keys the summary lacks are left out)."""
+    return {k: {"value": v, "source": src, "error": (summary[k] - v) / v}
+            for k, (v, src) in references.items() if k in summary}
+
 #: an error beyond this (relative) gets its reason said where one is known
 LARGE_ERROR = 0.10
 

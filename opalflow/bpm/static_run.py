@@ -22,6 +22,7 @@ import numpy as np
 from opalflow.analysis import compression as mech
 from opalflow.bpm.deck import bond_model, compression_deck
 from opalflow.bpm.loading import LOADINGS
+from opalflow.bpm.report import reference_errors
 from opalflow.bpm.scene import scene_of, solid_fraction
 from opalflow.bpm.spec import BpmWorkflow
 from opalflow.bpm.static import (VOIGT, LooseParticlesError, StaticResult, loose_message, loose_particles,
@@ -125,8 +126,7 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
         "headline": f"E = {E_GPa:.4g} GPa (static, {res.solver}: {res.iterations} iterations, residual "
                     f"{res.residual:.1e}, {res.seconds:.1f} s)",
     }
-    summary["reference"] = {k: {"value": v, "source": src, "error": (summary[k] - v) / v}
-                            for k, (v, src) in info["references"].items() if k in summary}
+    summary["reference"] = reference_errors(summary, info["references"])
     summary["wall_s"] = time.perf_counter() - t0
 
     def files(stage):
@@ -235,8 +235,7 @@ def run_tensor(spec: BpmWorkflow, s, out: Path, t0: float, say=print) -> dict:
         "headline": f"E_z = {E[2]:.4g} GPa, C11 = {C[0, 0]:.4g}, C12 = {C[0, 1]:.3g}, C44 = {C[3, 3]:.4g} GPa "
                     f"(static, periodic, {res.solver}: {sum(res.iterations)} iterations, {res.seconds:.1f} s)",
     }
-    summary["reference"] = {k: {"value": v, "source": src, "error": (summary[k] - v) / v}
-                            for k, (v, src) in info["references"].items() if k in summary}
+    summary["reference"] = reference_errors(summary, info["references"])
     summary["wall_s"] = time.perf_counter() - t0
     names = [f"{'xyz'[a]}{'xyz'[b]}" for a, b in VOIGT]
     lines = [f"# {spec.name}: static stiffness tensor", "",

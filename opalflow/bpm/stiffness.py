@@ -113,19 +113,22 @@ def _geometry(s: Structure, L0: np.ndarray | None):
     return i, j, d / np.linalg.norm(d, axis=1)[:, None], L
 
 
+def per_bond(s: Structure, coeffs: list[BondCoefficients], name: str) -> np.ndarray:
+    """The coefficient ``name`` of each bond of ``s`` (its type, 1-based into ``coeffs``)."""
+    return np.array([getattr(c, name) for c in coeffs], float)[s.bond_types - 1]
+
+
 def stiffness_network(s: Structure, coeffs: list[BondCoefficients], L0: np.ndarray | None = None) -> BondNetwork:
     """The tangent stiffness of ``s``'s bonds (types 1-based into ``coeffs``; ``normalize yes``)."""
     i, j, n, L = _geometry(s, L0)
-    t = s.bond_types - 1
-    pick = lambda name: np.array([getattr(c, name) for c in coeffs], float)[t]  # noqa: E731
+    pick = lambda name: per_bond(s, coeffs, name)  # noqa: E731
     return BondNetwork(s.n_particles, i, j, n, L, pick("kr") / L, pick("ks") / L, pick("kb"), pick("kt"))
 
 
 def damping_network(s: Structure, coeffs: list[BondCoefficients], L0: np.ndarray | None = None) -> BondNetwork:
     """The bond damping matrix of ``s`` (BondBPMRotational::damping_forces, linear in the velocities)."""
     i, j, n, L = _geometry(s, L0)
-    t = s.bond_types - 1
-    pick = lambda name: np.array([getattr(c, name) for c in coeffs], float)[t]  # noqa: E731
+    pick = lambda name: per_bond(s, coeffs, name)  # noqa: E731
     return BondNetwork(s.n_particles, i, j, n, L, pick("gn"), pick("gs"), 0.5 * pick("gr") * L, 0.5 * pick("gt"))
 
 
