@@ -56,7 +56,13 @@ def raw_workflow(workflow: str | Path | dict | WorkflowSpec, set: Settings = Non
     elif isinstance(workflow, dict):
         raw = copy.deepcopy(workflow)
     else:
-        raw = read_toml(workflow_path(workflow))
+        path = workflow_path(workflow)
+        raw = read_toml(path)
+        if not any(isinstance(v, dict) for v in raw.values()):
+            # else every default holds: for an opal, the paper's full sample (1.6 M particles, days of LAMMPS)
+            raise SpecError("workflow", str(path), "has no [section]: a workflow file says what it builds "
+                            "([packing], [lattice], [study], ...); start from one in workflows/ (python -m opalflow "
+                            "list)")
     if isinstance(set, dict):
         for path, value in set.items():
             set_value(raw, str(path), value)

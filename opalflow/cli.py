@@ -1,11 +1,14 @@
 """Command line: ``python -m opalflow info | list | build | run | check | analyze | status | plan | job``: each verb parses its
 arguments and calls the Python API of the same name (:mod:`opalflow.api`); what each kind does comes from
 :mod:`opalflow.registry`.  Bad input: one line, exit 2; a failed LAMMPS run: its log tail, exit 1; Ctrl-C:
-one line saying where it stopped and how to resume, exit 130."""
+one line saying where it stopped and how to resume, exit 130 (SIGTERM: the same, exit 143); a closed pipe
+(``list | head``): quiet, exit 0."""
 from __future__ import annotations
 
 import argparse
 import errno
+import os
+import signal
 import sys
 
 from opalflow import api, registry
@@ -106,20 +109,32 @@ def cmd_analyze(args) -> int:
     return 0
 
 
-def interrupted(args, exc: KeyboardInterrupt) -> str:
-    """The one line Ctrl-C prints: where the run stopped and how to go on."""
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (``kill``, a shutdown): stops the run as Ctrl-C does (restart files kept, lock released)."""
+
+
+def _terminate(signum, frame):
+    raise Terminated()
+
+
+def interrupted(args, exc: KeyboardInterrupt, terminated: bool = False) -> str:
+    """The one line Ctrl-C (or SIGTERM) prints: where the run stopped and how to go on; the resume line only
+    where a restart file exists to resume from."""
     step = getattr(exc, "step", None)
-    where = f" at step {step}" if step is not None else ""
+    what = "terminated (SIGTERM)" if terminated else "interrupted"
+    where = f"{what} at step {step}" if step is not None else what
     out = getattr(args, "out", None)
     if args.command != "run" or out is None:
-        return f"interrupted{where}"
+        return where
     try:
         kind = registry.get(api.run_json(out)["spec"]["kind"])
     except InputError:
-        return f"interrupted{where}; nothing was prepared in {out} yet: run the same command again"
+        return f"{where}; nothing was prepared in {out} yet: run the same command again"
     if "resume" in kind.options:
-        return f"interrupted{where}; resume with: python -m opalflow run --out {out} --resume"
-    return f"interrupted{where}; finished parts are kept in {out}: run the same command again to go on"
+        if kind.resumable and not registry.resolve(kind.resumable)(out):
+            return f"{where}; no restart file was written yet: run the same command again (it starts anew)"
+        return f"{where}; resume with: python -m opalflow run --out {out} --resume"
+    return f"{where}; finished parts are kept in {out}: run the same command again to go on"
 
 
 def parser() -> argparse.ArgumentParser:
@@ -180,17 +195,27 @@ def parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = parser().parse_args(argv)
+    previous = signal.signal(signal.SIGTERM, _terminate)
     try:
-        return args.func(args)
+        code = args.func(args)
+        sys.stdout.flush()           # here, where a closed pipe is caught, not at the interpreter's exit
+        return code
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as exc:
-        print(interrupted(args, exc), file=sys.stderr)
-        return 130
+        terminated = isinstance(exc, Terminated) or isinstance(exc.__context__, Terminated)
+        print(interrupted(args, exc, terminated), file=sys.stderr)
+        return 128 + signal.SIGTERM if terminated else 130
+    except BrokenPipeError:
+        # the reader went away (``list | head``): no traceback; Python's exit flush must not raise again
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except OSError as exc:
         if exc.errno not in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT):
             raise
         print(f"error: cannot write {exc.filename or 'a result file'}: {exc.strerror}; files written before "
               "are intact (every result is written under a temporary name, then renamed)", file=sys.stderr)
         return 1
+    finally:
+        signal.signal(signal.SIGTERM, previous)

@@ -65,6 +65,8 @@ class Kind:
     cost : ``"module:function"`` called as ``cost(spec)`` -> {method, n_particles, n_bonds, steps, ...}: what
         ``python -m opalflow plan`` prices a run by (:mod:`opalflow.runs.plan`); "" if it has none.
     options : the names in :data:`OPTIONS` it takes.
+    resumable : ``"module:function"`` called as ``resumable(folder)`` -> bool: whether ``--resume`` has something
+        to go on from in the folder (a restart file); "" where a written run record is enough.
     refusal : why it does not take the others (said when one is given).
     summary : one line for ``list`` and ``info``.
     """
@@ -78,6 +80,7 @@ class Kind:
     scene: str = ""
     cost: str = ""
     options: tuple[str, ...] = ()
+    resumable: str = ""
     refusal: str = ""
     summary: str = ""
 
@@ -120,7 +123,7 @@ def _compression(name: str, spec: str, scene: str, summary: str) -> Kind:
     return Kind(name, spec, run="opalflow.bpm.pipeline:run_workflow", build="opalflow.bpm.pipeline:build",
                 analyze="opalflow.bpm.pipeline:analyze_folder",
                 check="opalflow.bpm.stability:check_workflow", scene=scene, cost="opalflow.bpm.pipeline:cost_facts",
-                options=("np", "resume", "suffix"),
+                options=("np", "resume", "suffix"), resumable="opalflow.bpm.pipeline:resumable",
                 summary=summary)
 
 

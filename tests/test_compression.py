@@ -437,3 +437,16 @@ def test_run_sh_killed_at_a_random_step_resumes_with_run_sh(breaking_run, tmp_pa
     assert_same_curve(breaking_run, out, info["restart_every_steps"])
     assert main(["analyze", str(out)]) == 0
     assert json.loads((out / "summary.json").read_text())["complete"]
+
+
+def test_lattice_headline_gives_the_checked_modulus_and_no_strength_for_unbreakable_bonds(tmp_path):
+    """Was: ``lattice_sc`` printed ``E = 3.627 GPa, strength = 12.75 MPa``: the plate-strain E, 29 % under the
+    analytic 5.129 GPa the workflow is about, and a strength for bonds that cannot break."""
+    from opalflow.api import run
+
+    s = run("lattice_sc", tmp_path / "sc", quiet=True)
+    assert s["headline"].startswith("E (top-layer strain) = ") and "no strength" in s["headline"], s["headline"]
+    E = float(s["headline"].split("= ")[1].split()[0])
+    ref = s["reference"]["youngs_modulus_specimen_GPa"]
+    assert abs(E / ref["value"] - 1) < 0.02 and s["strength_MPa"] is None and s["peak_stress_MPa"] > 0
+    assert "none: bonds unbreakable" in (tmp_path / "sc" / "report.md").read_text()

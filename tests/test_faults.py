@@ -137,3 +137,89 @@ def test_a_full_disk_while_writing_results_keeps_the_earlier_ones(tmp_path, caps
         assert after == before
     finally:
         subprocess.run(["umount", str(disk)], check=False)
+
+
+def _cli_child(args: list[str], **popen) -> subprocess.Popen:
+    """``python -m opalflow ARGS`` in a child that takes Ctrl-C and SIGTERM as a terminal would send them
+    (Python keeps SIGINT ignored where its parent ignored it: the child restores it itself)."""
+    child = ("import runpy, signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+             f"sys.argv = ['opalflow'] + {args!r}; runpy.run_module('opalflow', run_name='__main__')")
+    return subprocess.Popen([sys.executable, "-c", child], stderr=subprocess.PIPE, text=True, **popen)
+
+
+def _wait_for(cond, seconds=120.0):
+    deadline = time.time() + seconds
+    while time.time() < deadline and not cond():
+        time.sleep(0.1)
+    assert cond(), "timed out"
+
+
+def test_sigterm_stops_with_one_line_releases_the_lock_and_resumes(tmp_path):
+    """Was: SIGTERM ended a run with no message and left .opalflow.lock behind."""
+    import signal
+
+    out = tmp_path / "sc"
+    p = _cli_child(["run", "lattice_sc", "--out", str(out), "--set", "compression.strain_max=0.03",
+                    "--set", "compression.restart_every_strain=0.001"])
+    _wait_for(lambda: list(out.glob("restart.*.bin")))
+    p.send_signal(signal.SIGTERM)
+    err = p.stderr.read()
+    assert p.wait() == 143
+    last = err.strip().splitlines()[-1]
+    assert last.startswith("terminated (SIGTERM) at step ") and f"--out {out} --resume" in last, last
+    assert "Traceback" not in err and not (out / LOCK_FILE).exists()
+    assert json.loads((out / "run.json").read_text())["state"] == "interrupted"
+    assert main(["run", "--out", str(out), "--resume"]) == 0
+
+
+def test_ctrl_c_before_the_first_restart_says_run_again_not_resume(tmp_path):
+    """Was: Ctrl-C before the first restart file printed a --resume line that then failed ('no readable
+    restart file in the folder')."""
+    import signal
+
+    out = tmp_path / "sc"
+    p = _cli_child(["run", "lattice_sc", "--out", str(out), "--set", "compression.strain_max=0.05",
+                    "--set", "compression.restart_every_strain=0.05"])
+    _wait_for(lambda: (out / "log.lammps").exists())
+    p.send_signal(signal.SIGINT)
+    err = p.stderr.read()
+    assert p.wait() == 130
+    assert not list(out.glob("restart.*.bin"))
+    last = err.strip().splitlines()[-1]
+    assert last.startswith("interrupted") and "--resume" not in last and "run the same command again" in last, last
+    assert not (out / LOCK_FILE).exists()
+
+
+def test_a_pipe_closed_early_exits_quietly():
+    """Was: ``list | head`` and ``info | head`` ended with BrokenPipeError (exit 1) in some tries."""
+    for verb in ("list", "info"):
+        p = subprocess.Popen([sys.executable, "-m", "opalflow", verb], stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True)
+        p.stdout.close()              # the reader is gone before the first line is written
+        err = p.stderr.read()
+        assert p.wait() == 0 and err == "", (verb, err)
+
+
+@pytest.mark.parametrize("text", ["", "# nothing yet\n", 'kind = "opal"\nmaterial = "silica"\n'])
+def test_an_empty_or_sectionless_workflow_file_is_one_line(tmp_path, capsys, text):
+    """Was: an empty workflow file built the paper's full sample (1.6 M particles, 587 MB) without a word."""
+    path = tmp_path / "w.toml"
+    path.write_text(text)
+    out = tmp_path / "out"
+    assert main(["build", str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"error: workflow = '{path}': has no [section]")
+    assert not out.exists()
+
+
+def test_a_run_longer_than_an_hour_says_its_estimate():
+    """Was: nothing said how long a run would take (the empty file's sample: ~3.9 days)."""
+    from opalflow.api import load_workflow
+    from opalflow.bpm.deck import compression_deck
+    from opalflow.bpm.pipeline import build_structure, long_run_estimate
+
+    quick = load_workflow("lattice_sc")
+    assert long_run_estimate(quick, compression_deck(quick, build_structure(quick))) == ""
+    slow = load_workflow("lattice_sc", {"compression.plate_speed_m_s": 1e-5})     # 10 000x the steps
+    line = long_run_estimate(slow, compression_deck(slow, build_structure(slow)))
+    assert line.startswith("estimate: this run takes about ") and "compression.method" in line, line

@@ -44,6 +44,24 @@ PROGRESS_S = 3.0
 BACKOFF = 1e-9
 
 
+def time_left(history: list[tuple[float, int]]) -> float:
+    """Seconds until one cluster is left, from (elapsed s, clusters left) so far: the cluster count's decay
+    n ~ t^-z over the last halving of the elapsed time, extrapolated to n = 1 (nan until it can be).
+
+    The fraction of mergers done says nothing about time (measured: 97 % of the mergers in 4 % of the
+    time); the wall time goes to the last clusters, whose moves each cost their size.  Their decay speeds
+    up as the gel forms, so the extrapolation overestimates: by 1.4-3x at solid fraction 0.005 and 0.02
+    (5 000 and 10 000 spheres), which ``said`` states as "up to"."""
+    if len(history) < 2:
+        return math.nan
+    t1, n1 = history[-1]
+    t0, n0 = min(history[:-1], key=lambda h: abs(h[0] - t1 / 2))
+    if n1 <= 1 or n0 <= n1 or t1 <= t0:
+        return math.nan
+    z = math.log(n0 / n1) / math.log(t1 / t0)
+    return t1 * (n1 ** (1 / z) - 1)
+
+
 @dataclass
 class Aggregate:
     """The result of an aggregation: spheres in a periodic cube and what the process recorded."""
@@ -181,13 +199,15 @@ def _place_random(r, box, nc, head, nxt, prv, cell_of, pos, max_tries):
 
 @njit(cache=True)
 def _aggregate(pos, upos, r, box, nc, head, nxt, prv, cell_of, cl, chead, cnext, ctail, csize, csum, csq,
-               active, where, state, step0, alpha, p_stick, max_moves, rec_i, rec_j, rec_n, rec_rg2, arrival):
-    """Up to ``max_moves`` moves; state = [clusters left, moves, collisions, mergers]."""
+               active, where, state, step0, alpha, p_stick, max_moves, min_left, rec_i, rec_j, rec_n, rec_rg2,
+               arrival):
+    """Up to ``max_moves`` moves, until ``min_left`` (>= 1) clusters are left; state = [clusters left, moves,
+    collisions, mergers]."""
     u = np.empty(3)
     w = np.empty(3)
     for _ in range(max_moves):
         na = state[0]
-        if na <= 1:
+        if na <= min_left:
             break
         c = active[np.random.randint(0, na)]
         n = csize[c]
@@ -367,19 +387,22 @@ def aggregate(diameters: np.ndarray, box: float, *, seed: int, step_fraction: fl
     rec_rg2 = np.zeros(len(rec_i))
     arrival = np.full(n, -1, np.int64)
     t_start = time.perf_counter()
+    history: list[tuple[float, int]] = []
+    said_at = -PROGRESS_S
     while state[0] > 1:
         t_chunk = time.perf_counter()
         _aggregate(pos, upos, r, box, nc, head, nxt, prv, cell_of, cl, chead, cnext, ctail, csize, csum, csq,
                    active, where, state, step0, mobility_exponent, sticking_probability, chunk_moves,
+                   max(1, state[0] // 2),      # a chunk at most halves the clusters: the last ones are slow
                    rec_i, rec_j, rec_n, rec_rg2, arrival)
         # about one progress line every PROGRESS_S seconds (the moves do not depend on the chunking)
         grow = PROGRESS_S / max(time.perf_counter() - t_chunk, 1e-3)
         chunk_moves = int(np.clip(chunk_moves * min(grow, 2.0), 1000, 10**8))
-        if progress is not None:
-            el = time.perf_counter() - t_start
-            done = (n - state[0]) / max(n - 1, 1)
-            progress(int(state[0]), n, int(state[1]), state[1] / max(el, 1e-9),
-                     el * (1 - done) / done if done > 0 else math.nan)
+        el = time.perf_counter() - t_start
+        history.append((el, int(state[0])))
+        if progress is not None and state[0] > 1 and el - said_at >= PROGRESS_S:
+            said_at = el
+            progress(int(state[0]), n, int(state[1]), state[1] / max(el, 1e-9), time_left(history))
     m = int(state[3])
     return Aggregate(positions=pos, diameters=np.asarray(diameters, float), box=float(box), cluster=cl,
                      arrival=arrival, contacts=np.stack([rec_i[:m], rec_j[:m]], -1), merger_size=rec_n[:m].copy(),

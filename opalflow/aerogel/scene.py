@@ -16,6 +16,8 @@ wall, which loads the network where it reaches highest).
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
@@ -34,8 +36,8 @@ def make_aggregate(a: AggregateSpec, progress=None) -> Aggregate:
     d = gaussian_diameters(a.particles, a.diameter_nm, a.diameter_std_nm, np.random.default_rng(a.seed))
 
     def said(left, n, moves, rate, eta):
-        progress(f"  aggregation: {left} clusters of {n} spheres left, {moves} moves ({rate:,.0f}/s), "
-                 f"about {eta:.0f} s left")
+        eta_txt = "time left not known yet" if math.isnan(eta) else f"up to about {eta:.0f} s left"
+        progress(f"  aggregation: {left} clusters of {n} spheres left, {moves} moves ({rate:,.0f}/s), {eta_txt}")
 
     return aggregate(d, box_edge(d, a.solid_fraction), seed=a.seed, step_fraction=a.step_fraction,
                      mobility_exponent=a.mobility_exponent,

@@ -93,6 +93,30 @@ def cost_facts(spec: BpmWorkflow) -> dict:
     return facts
 
 
+#: a dynamic run predicted to take longer than this says so before it starts
+LONG_RUN_S = 3600.0
+
+
+def long_run_estimate(spec: BpmWorkflow, deck: CompressionDeck, ranks: int = 1) -> str:
+    """One line with the predicted wall time of a dynamic run longer than :data:`LONG_RUN_S` (the cost laws
+    of :mod:`opalflow.runs.plan`, measured here by ``bench/bench_cost.py``), "" for a shorter one."""
+    from opalflow.runs.plan import LAWS, laws, predict
+
+    try:
+        law = laws()
+    except SpecError:              # no cost laws measured: nothing to say
+        return ""
+    facts = {"method": "dynamic", "n_bonds": deck.structure.n_bonds, "steps": deck.steps * (
+        2 if spec.compression.check_rate else 1), "bond_model": spec.bonds.model, "build_s": 0.0}
+    wall = predict(facts, law, ranks)["wall_s"]
+    if wall < LONG_RUN_S:
+        return ""
+    when = f"{wall / 86400:.1f} days" if wall > 2 * 86400 else f"{wall / 3600:.1f} h"
+    return (f"estimate: this run takes about {when} here on {ranks} rank(s) ({facts['steps']} steps x "
+            f"{facts['n_bonds']} bonds; cost laws of {LAWS.name}, measured {law.get('date', '?')}); "
+            "compression.method = \"static\" gives E in minutes, \"quasistatic\" the strength without dynamics")
+
+
 def build(spec: BpmWorkflow, out: Path, say=print) -> dict:
     """Structure + full deck (data.lmp, in.lmp, resume.lmp, run.sh) + summary.json; no run."""
     start = time.perf_counter()
@@ -139,6 +163,13 @@ def execute(out: Path, *, np_: int = 1, resume: bool = False, label: str = "", s
     return run_in_process(out, script, every=info["output_every_steps"],
                           strain_per_step=info["plate_speed_m_s"] * info["timestep_s"] * 1e9 / info["height_nm"],
                           suffix=suffix, label=label)
+
+
+def resumable(out: Path) -> bool:
+    """Whether ``--resume`` can go on in ``out``: a restart file (dynamic) or the quasi-static state."""
+    from opalflow.bpm.quasistatic_run import STATE
+
+    return any(p.name.split(".")[1].isdigit() for p in Path(out).glob("restart.*.bin")) or (Path(out) / STATE).exists()
 
 
 def newest_readable_restart(out: Path) -> int | None:
@@ -245,9 +276,11 @@ def analyze(out: Path, wall_s: float | None = None, lammps_s: float | None = Non
         "bond_stiffness_error_max": info["bond_stiffness_error_max"],
         "timestep_estimate_s": info["timestep_estimate_s"],
         **info.get("structure", {}),
-        "headline": f"E = {E_GPa:.4g} GPa, strength = {float(stress[peak]):.4g} MPa "
-                    f"(strain at peak {float(strain[peak]):.4f})",
     }
+    breakable = info["spec"]["bonds"]["breakable"]
+    if not breakable:            # the peak of a loading that breaks nothing is not a strength
+        summary["peak_stress_MPa"], summary["strength_MPa"] = summary["strength_MPa"], None
+    summary["headline"] = report.headline(summary, info.get("references", {}), breakable)
     summary.update({k: v for k, v in info.get("statistics", {}).items() if k not in summary})
     if "build_timings_s" in info:
         summary["build_timings_s"] = info["build_timings_s"]
@@ -367,6 +400,9 @@ def run_workflow(spec: BpmWorkflow, out: Path, *, np_: int = 1, resume: bool = F
         deck = prepare(spec, out, progress=say)
         say(f"deck: {len(deck.bins.lengths)} bond types, dt = {deck.dt_ns * 1e-9:.3g} s "
             f"(limit {deck.timestep.limit_ns * 1e-9:.3g} s, stiffest: {deck.timestep.stiffest}), {deck.steps} steps")
+        estimate = long_run_estimate(spec, deck, np_)
+        if estimate:
+            say(estimate)
     lammps_s = execute(out, np_=np_, resume=resume, label=f"{spec.name}: ", suffix=suffix)
     extra = {}
     if spec.compression.check_rate and not resume:
@@ -383,7 +419,8 @@ def run_workflow(spec: BpmWorkflow, out: Path, *, np_: int = 1, resume: bool = F
         fast_strength = float(np.max(fast_stress))
         extra["rate_check"] = {
             "youngs_modulus_change": slow["youngs_modulus_GPa"] / (fast_fit.modulus_MPa / 1e3) - 1,
-            "strength_change": slow["strength_MPa"] / fast_strength - 1,
+            "strength_change": (slow["strength_MPa"] / fast_strength - 1 if slow["strength_MPa"] is not None
+                                else None),
             "half_speed_youngs_modulus_GPa": slow["youngs_modulus_GPa"],
             "half_speed_strength_MPa": slow["strength_MPa"]}
     return analyze(out, wall_s=time.perf_counter() - t, lammps_s=lammps_s, extra=extra)

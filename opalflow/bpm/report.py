@@ -18,7 +18,20 @@ def reference_errors(summary: dict, references: dict) -> dict:
     """``summary["reference"]``: each reference value ({key: (value, source)}) with its source and the
     summary's relative error against it (keys the summary lacks are left out)."""
     return {k: {"value": v, "source": src, "error": (summary[k] - v) / v}
-            for k, (v, src) in references.items() if k in summary}
+            for k, (v, src) in references.items() if summary.get(k) is not None}
+
+def headline(summary: dict, references: dict, breakable: bool) -> str:
+    """The one line ``run`` prints: the modulus the scene's reference is about (the top layer's where only that
+    one has a reference: the lattice's analytic E excludes the plate's Hertz settling) and, with breakable
+    bonds, the strength and its strain."""
+    specimen = "youngs_modulus_specimen_GPa" in references and "youngs_modulus_GPa" not in references
+    E = summary["youngs_modulus_specimen_GPa" if specimen else "youngs_modulus_GPa"]
+    line = f"E{' (top-layer strain)' if specimen else ''} = {E:.4g} GPa"
+    if not breakable:
+        return f"{line} (bonds unbreakable: no strength)"
+    strain = summary["strain_at_peak_specimen" if specimen else "strain_at_peak"]
+    return f"{line}, strength = {summary['strength_MPa']:.4g} MPa (strain at peak {strain:.4f})"
+
 
 #: an error beyond this (relative) gets its reason said where one is known
 LARGE_ERROR = 0.10
@@ -124,6 +137,12 @@ def compression_report(info: dict, summary: dict, fit, fracture: bool) -> str:
                             ("strength_MPa", f"{'tensile' if tension else 'compressive'} strength (MPa)", "{:.4g}"),
                             ("strain_at_peak", "strain at peak", "{:.4f}"),
                             ("broken_bonds", "broken bonds at the end", "{}")):
+        if summary.get("strength_MPa") is None and key == "strain_at_peak":
+            continue
+        if summary.get(key) is None:       # strength of unbreakable bonds
+            lines.append(f"| {label} | none: bonds unbreakable (peak stress {summary['peak_stress_MPa']:.4g} MPa at "
+                         "the end of loading) | - | - | - |")
+            continue
         ref = summary["reference"].get(key)
         ref_txt = f"{ref['value']:g} ({ref['source']})" if ref else "-"
         err_txt = f"{100 * ref['error']:+.1f} %" if ref else "-"
@@ -134,8 +153,10 @@ def compression_report(info: dict, summary: dict, fit, fracture: bool) -> str:
               f"{100 * summary['bond_stiffness_error_max']:.2f} %."]
     if "rate_check" in summary:
         rc = summary["rate_check"]
-        lines += ["", f"Rate check (half plate speed): E changes by {100 * rc['youngs_modulus_change']:+.2f} %, "
-                  f"strength by {100 * rc['strength_change']:+.2f} % (limits 2 % and 5 %)."]
+        strength = ("" if rc["strength_change"] is None
+                    else f", strength by {100 * rc['strength_change']:+.2f} %")
+        lines += ["", f"Rate check (half plate speed): E changes by {100 * rc['youngs_modulus_change']:+.2f} %"
+                  f"{strength} (limits 2 % and 5 %)."]
     lines += ["", "![stress-strain](stress_strain.png)", ""]
     lines += ["## Particle stresses", ""]
     table = mech.stress_table(summary["stress_by_material"])
