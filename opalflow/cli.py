@@ -1,4 +1,4 @@
-"""Command line: ``python -m opalflow info | list | build | run | check | analyze | status | plan | job``: each verb parses its
+"""Command line: ``python -m opalflow info | list | build | run | check | analyze | status | plan | job | regress``: each verb parses its
 arguments and calls the Python API of the same name (:mod:`opalflow.api`); what each kind does comes from
 :mod:`opalflow.registry`.  Bad input: one line, exit 2; a failed LAMMPS run: its log tail, exit 1; Ctrl-C:
 one line saying where it stopped and how to resume, exit 130 (SIGTERM: the same, exit 143); a closed pipe
@@ -117,6 +117,24 @@ def _terminate(signum, frame):
     raise Terminated()
 
 
+def cmd_regress(args) -> int:
+    """The workflows' outputs against data/regression/: a table per reference, exit 1 on a regression."""
+    import shutil
+    import time
+
+    from opalflow import regress
+
+    t = time.perf_counter()
+    checks, out = regress.regress(args.names, out=args.out, fast=args.fast, update=args.why if args.update else None,
+                                  say=lambda m: print(m, flush=True))
+    lines = regress.verdict_lines(checks, out, time.perf_counter() - t)
+    print("\n".join(lines))
+    failed = any(c.failed for c in checks)
+    if not failed and args.out is None:
+        shutil.rmtree(out, ignore_errors=True)
+    return 1 if failed and not args.update else 0
+
+
 def interrupted(args, exc: KeyboardInterrupt, terminated: bool = False) -> str:
     """The one line Ctrl-C (or SIGTERM) prints: where the run stopped and how to go on; the resume line only
     where a restart file exists to resume from."""
@@ -187,6 +205,14 @@ def parser() -> argparse.ArgumentParser:
     c.add_argument("--bisect", action="store_true", help="also find the largest stable time step by bisection")
     c.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
     c.set_defaults(func=cmd_check)
+    g = sub.add_parser("regress", help="run workflows and compare their outputs with data/regression/ (exit 1 on a "
+                                           "regression)")
+    g.add_argument("names", nargs="*", help="references (default: all; see data/regression/)")
+    g.add_argument("--fast", action="store_true", help="only the references that run in under 30 s here")
+    g.add_argument("--out", default=None, help="folder for the runs (default: a temporary one, kept on failure)")
+    g.add_argument("--update", action="store_true", help="rewrite the stored values with this run's (needs --why)")
+    g.add_argument("--why", default="", help="the reason for --update, recorded in the reference's history")
+    g.set_defaults(func=cmd_regress)
     a = sub.add_parser("analyze", help="analyze a run folder's LAMMPS output (e.g. after bash run.sh)")
     a.add_argument("folder")
     a.set_defaults(func=cmd_analyze)

@@ -38,11 +38,23 @@ class Results:
     data: dict[str, np.ndarray] = field(default_factory=dict)
     attrs: dict[str, dict] = field(default_factory=dict)
 
-    def __getitem__(self, path: str) -> np.ndarray:
-        return self.data[path]
+    def __getitem__(self, path: str):
+        """A dataset of results.h5 by its path (``"curve/stress_MPa"``), else a key of summary.json
+        (``"youngs_modulus_GPa"``)."""
+        if path in self.data:
+            return self.data[path]
+        if path in self.summary:
+            return self.summary[path]
+        raise KeyError(f"{path!r} is neither a dataset of results.h5 nor a key of summary.json (datasets: "
+                       f"{', '.join(sorted({k.split('/')[0] + '/...' for k in self.data})) or 'none'})")
 
     def __contains__(self, path: str) -> bool:
-        return path in self.data
+        return path in self.data or path in self.summary
+
+    def snapshot_steps(self) -> list[int]:
+        """The steps of the snapshots (``snapshots/STEP/...``), in order."""
+        return sorted({int(k.split("/")[1]) for k in self.data if k.startswith("snapshots/") and
+                       k.split("/")[1].isdigit()})
 
     def keys(self) -> list[str]:
         return list(self.data)

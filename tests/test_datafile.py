@@ -1,5 +1,9 @@
 """bpm/sphere data files: exact round trip, real LAMMPS and MDAnalysis read them."""
+import json
+from pathlib import Path
+
 import numpy as np
+import pytest
 
 from opalflow.opal.scene import build_opal
 from opalflow.lammps.datafile import read_data, write_data
@@ -129,3 +133,104 @@ def test_every_malformed_data_file_is_one_line_naming_it(tmp_path, capsys):
         assert [line for line in err if "error" in line.lower()] == err[-1:], (name, err)
         assert err[-1].startswith(f"error: data file {path}: "), (name, err)
         assert not out.exists(), name
+
+
+def rod_frame(path, cells: int = 2, step: float = 0.1) -> tuple[int, int]:
+    """A frame of rods in LAMMPS's own format for its BPM examples (examples/bpm/metamaterial): ``atom_style
+    hybrid bpm/sphere dipole``, lj units, nodes (type 2, magnetic) on a cubic grid of spacing 1 joined along x,
+    y and z by rods of spheres (type 1) of diameter ``step``; a bond between neighbours along each rod.
+    Atoms lines: id type x y z molecule diameter density q mux muy muz."""
+    import itertools
+
+    atoms, bonds, node = [], [], {}
+    grid = range(cells + 1)
+    for p in itertools.product(grid, grid, grid):
+        atoms.append((2, p, (1.0, 0.0, 0.0)))
+        node[p] = len(atoms)
+    n = int(round(1 / step))
+    for p in itertools.product(grid, grid, grid):
+        for axis in range(3):
+            if p[axis] == cells:
+                continue
+            prev = node[p]
+            for k in range(1, n):
+                x = list(map(float, p))
+                x[axis] += k * step
+                atoms.append((1, tuple(x), (0.0, 0.0, 0.0)))
+                bonds.append((prev, len(atoms)))
+                prev = len(atoms)
+            q = list(p)
+            q[axis] += 1
+            bonds.append((prev, node[tuple(q)]))
+    lines = ["LAMMPS data file", "", f"{len(atoms)} atoms", f"{len(bonds)} bonds", "", "2 atom types", "1 bond types", ""]
+    lines += [f"-0.5 {cells + 0.5} {a}lo {a}hi" for a in "xyz"] + ["", "Atoms # hybrid", ""]
+    lines += [f"{i} {t} {x[0]:.6f} {x[1]:.6f} {x[2]:.6f} 1 {step:.6f} 1.000000 0.0 {m[0]} {m[1]} {m[2]}"
+              for i, (t, x, m) in enumerate(atoms, 1)]
+    lines += ["", "Bonds", ""] + [f"{k} 1 {a} {b}" for k, (a, b) in enumerate(bonds, 1)]
+    Path(path).write_text("\n".join(lines) + "\n")
+    return len(atoms), len(bonds)
+
+
+RODS = ['kind="datafile"', 'datafile.atom_style="hybrid bpm/sphere dipole"', 'datafile.units="lj"',
+        "datafile.length_unit_nm=100.0", 'datafile.substrate="z < 0.05"', "datafile.periodic_sides=false",
+        "contacts.enabled=false"]
+
+
+def test_a_lammps_hybrid_lj_data_file_runs_with_its_substrate_and_length_unit(tmp_path):
+    """LAMMPS's BPM examples write ``atom_style hybrid bpm/sphere dipole`` in lj units: read with the style and
+    a length unit, the substrate chosen explicitly, densities from the material, the stress on the frame's
+    footprint, and the report says which columns, units and bonds were used."""
+    from opalflow.api import run
+
+    path = tmp_path / "frame.data"
+    n_atoms, n_bonds = rod_frame(path)
+    sets = {k: v for k, v in (s.split("=", 1) for s in RODS)}
+    from opalflow.spec import parse_value
+
+    sets = {k: parse_value(v) for k, v in sets.items()} | {"datafile.path": str(path)}
+    s = run("lattice_sc", tmp_path / "static", set=sets | {"compression.method": "static"}, quiet=True)
+    assert s["n_particles"] == n_atoms and s["n_bonds"] == n_bonds and s["youngs_modulus_GPa"] > 0
+    info = json.loads((tmp_path / "static" / "run.json").read_text())["deck"]
+    frame = (2 * 100.0 + 10.0) ** 2               # 2 cells of 100 nm plus a rod diameter: not the box's 300 nm
+    assert info["area_nm2"] == pytest.approx(frame, rel=1e-6)
+    report = (tmp_path / "static" / "report.md").read_text()
+    assert "atom style hybrid bpm/sphere dipole, units lj, 1 length unit = 100 nm" in report
+    assert f"bonds: the file's {n_bonds}, typed by material (silica)" in report
+    from opalflow.lammps.datafile import read_data
+    from opalflow.materials import material
+
+    silica = material("silica")["density_kg_m3"]
+
+    data = read_data(tmp_path / "static" / "data.lmp", periodic=(False, False, False))
+    assert np.allclose(data.densities * 1e6, silica, rtol=0.01) and np.allclose(data.diameters, 10.0)
+    d = run("lattice_sc", tmp_path / "dynamic", set=sets | {"compression.strain_max": 0.002,
+                                                            "compression.snapshot_strains": [0.001]}, quiet=True)
+    # the dynamic plate run of the slender-rod frame (0.1 m/s, strain 0.002) measured 16 % under the zero-rate solve
+    assert d["youngs_modulus_specimen_GPa"] == pytest.approx(s["youngs_modulus_GPa"], rel=0.25)
+    bonds_row = next(line for line in (tmp_path / "dynamic" / "report.md").read_text().splitlines()
+                     if line.startswith("| bonds |"))
+    assert "from the data file" in bonds_row and "cutoff" not in bonds_row
+
+
+@pytest.mark.parametrize("change,field", [
+    ({"datafile.atom_style": "bpm/sphere"}, "data file"),
+    ({"datafile.atom_style": "hybrid dipole"}, "datafile.atom_style"),
+    ({"datafile.atom_style": "hybrid bpm/sphere body"}, "datafile.atom_style"),
+    ({"datafile.length_unit_nm": 0.0}, "datafile.length_unit_nm"),
+    ({"datafile.density": "file"}, "datafile.density"),
+    ({"datafile.substrate": "z < -1"}, "datafile.substrate"),
+    ({"datafile.substrate": "z < 0.1; shell rm"}, "datafile.substrate"),
+    ({"datafile.substrate": ""}, "datafile.substrate"),
+    ({"datafile.substrate": "type 7"}, "datafile.substrate"),
+])
+def test_a_data_file_workflow_that_cannot_be_read_is_one_line(tmp_path, capsys, change, field):
+    from opalflow.cli import main
+
+    path = tmp_path / "frame.data"
+    rod_frame(path, cells=1)
+    sets = RODS + [f'datafile.path="{path}"'] + [f"{k}={json.dumps(v)}" for k, v in change.items()]
+    out = tmp_path / "out"
+    assert main(["build", "lattice_sc", "--out", str(out), *[x for s in sets for x in ("--set", s)]]) == 2
+    err = [line for line in capsys.readouterr().err.strip().splitlines() if line.startswith("error")]
+    assert len(err) == 1 and err[0].startswith(f"error: {field}"), err
+    assert not out.exists()

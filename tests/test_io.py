@@ -33,7 +33,7 @@ def test_python_api_gives_the_cli_numbers(api_run, tmp_path, capsys):
     assert res.summary["youngs_modulus_GPa"] == summary["youngs_modulus_GPa"]
     assert res.units("curve/stress_MPa") == "MPa"
     stress = res["curve/stress_MPa"]
-    assert len(stress) == len(res["curve/strain"]) and np.max(stress) == pytest.approx(summary["strength_MPa"])
+    assert len(stress) == len(res["curve/strain"]) and np.max(stress) == pytest.approx(summary["peak_stress_MPa"])
     step = next(k.split("/")[1] for k in res.keys() if k.startswith("snapshots/"))
     assert res.columns(f"snapshots/{step}/sigma_MPa") == ["xx", "yy", "zz", "xy", "xz", "yz"]
     assert set(res.table(f"snapshots/{step}/position_nm")) == {"x", "y", "z"}

@@ -199,14 +199,20 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
 
     substrate = s.groups.get("substrate", np.zeros(s.n_particles, bool))
     if not substrate.any():
-        raise SpecError("substrate.layers", 0, "the compression needs a fixed substrate (layers >= 1)")
+        field = "datafile.substrate" if spec.kind == "datafile" else "substrate.layers"
+        raise SpecError(field, getattr(getattr(spec, field.split(".")[0], None), field.split(".")[1], 0),
+                        "the compression needs fixed substrate particles")
     top = float(np.max(s.positions[:, 2] + s.diameters / 2))
     base = float(np.max(s.positions[substrate, 2] + s.diameters[substrate] / 2))
     height = top - base
     # the top particle layer: centres within 3/4 of a diameter of the top surface
     top_group = (s.positions[:, 2] >= top - 0.75 * d_mean) & ~substrate
     top_z0 = float(np.mean(s.positions[top_group, 2]))
-    area = float(s.box_lengths[0] * s.box_lengths[1])
+    # the loaded cross-section: the box across periodic sides, the particles' footprint across open ones
+    r = s.diameters / 2
+    extent = [float(s.box_lengths[k]) if s.periodic[k] else float(np.max(s.positions[:, k] + r) -
+                                                                    np.min(s.positions[:, k] - r)) for k in (0, 1)]
+    area = extent[0] * extent[1]
     v = c.plate_speed_m_s                       # m/s = nm/ns
     steps_per_strain = height / v / dt
     steps = int(math.ceil(c.strain_max * steps_per_strain))

@@ -60,7 +60,7 @@ def prepare(spec: BpmWorkflow, out: Path, progress=None) -> CompressionDeck:
     info = {"type_names": deck.structure.type_names, "n_particles": s.n_particles, "n_bonds": s.n_bonds,
             "solid_fraction": solid_fraction(s), "build_s": build_s,
             "mean_diameter_nm": float(np.mean(s.diameters)), "box_nm": s.box_lengths.tolist(),
-            "periodic": s.periodic.tolist(),
+            "periodic": s.periodic.tolist(), "source": s.meta.get("source", ""),
             "materials": {n: material(particle_material(n, spec.material), spec.materials)
                           for n in dict.fromkeys(particle_material(t, spec.material) for t in s.type_names)},
             **deck.info()}

@@ -22,7 +22,7 @@ from opalflow.bpm.loading import LOADINGS
 from opalflow.bpm.quasistatic import Stopped, Strengths, solve_fracture, summary_of
 from opalflow.bpm.scene import scene_of
 from opalflow.bpm.spec import BpmWorkflow
-from opalflow.bpm.report import reference_errors
+from opalflow.bpm.report import reference_errors, sample_lines
 from opalflow.bpm.static_run import network_run, particle_stress
 from opalflow.bpm.stiffness import per_bond
 from opalflow.runs.record import finish
@@ -190,7 +190,7 @@ def _report(spec, info, summary, res, loading) -> str:
              "|Tt|/Tct >= 1 at full load (as `smooth no`; opalflow/bpm/quasistatic.py); substrate fixed, top layer "
              f"({info['top_layer_particles']} particles) {'pushed down' if loading.sense > 0 else 'pulled up'}"
              + (", glued to the wall" if loading.glued else ", its x, y and rotations free") + ".", "",
-             "| quantity | value | reference | error |", "|---|---|---|---|"]
+             *sample_lines(info), "| quantity | value | reference | error |", "|---|---|---|---|"]
     for key, label in (("youngs_modulus_GPa", "Young's modulus, first branch (GPa)"),
                        ("strength_MPa", "strength (MPa)"), ("strain_at_peak", "strain at peak")):
         ref = summary["reference"].get(key) or (summary["reference"].get("youngs_modulus_specimen_GPa")

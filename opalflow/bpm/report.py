@@ -69,6 +69,14 @@ def why(key: str, error: float, diameter_nm: float) -> str:
     return ""
 
 
+def sample_lines(info: dict) -> list[str]:
+    """What the static and quasi-static reports say of the sample: the data file read (where one was) and the
+    area the stress is taken on."""
+    lines = [f"Data file: {info['source']}.", ""] if info.get("source") else []
+    return lines + [f"Stress on {info['area_nm2']:.4g} nm^2: "
+                    f"{'the box' if info['periodic'][0] else 'the particles footprint (open sides)'}.", ""]
+
+
 def _inputs(info: dict, summary: dict) -> list[str]:
     spec = info["spec"]
     c = spec["compression"]
@@ -77,13 +85,17 @@ def _inputs(info: dict, summary: dict) -> list[str]:
     structure = info.get("structure", {})
     rows = [("scene", f"{spec['kind']}: {spec.get('description') or spec['name']}"),
             ("sample", f"{box[0]:.0f} x {box[1]:.0f} nm (x, y; sides {sides}), {info['height_nm']:.0f} nm high above "
-                       f"the fixed substrate"),
+                       f"the fixed substrate; stress on {info['area_nm2']:.4g} nm^2 ("
+                       f"{'the box' if info['periodic'][0] else 'the particles footprint: open sides'})"),
             ("particles", f"{info['n_particles']}, mean diameter d = {info['mean_diameter_nm']:.3g} nm"),
             ("bonds", f"{info['n_bonds']} ({info['n_bonds'] / max(1, info['n_particles']):.1f} per particle, the paper's "
                       f"measure; coordination {2 * info['n_bonds'] / max(1, info['n_particles']):.1f}), "
-                      f"cutoff {spec['bonds']['cutoff_factor']:g} d, model {spec['bonds']['model']}, "
+                      + ("from the data file, " if info.get("source") else
+                         f"cutoff {spec['bonds']['cutoff_factor']:g} d, ") + f"model {spec['bonds']['model']}, "
                       f"{'breakable' if spec['bonds']['breakable'] else 'unbreakable'}"),
             ("solid fraction", f"{info['solid_fraction']:.4f} of the sample volume")]
+    if info.get("source"):
+        rows.insert(1, ("data file", info["source"]))
     if "porosity" in structure:
         rows.append(("porosity", f"{structure['porosity']:.4f} (macro-pores; with the packing's voids "
                                  f"{structure['total_porosity']:.4f})"))

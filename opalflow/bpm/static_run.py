@@ -22,7 +22,7 @@ import numpy as np
 from opalflow.analysis import compression as mech
 from opalflow.bpm.deck import bond_model, compression_deck
 from opalflow.bpm.loading import LOADINGS
-from opalflow.bpm.report import reference_errors
+from opalflow.bpm.report import reference_errors, sample_lines
 from opalflow.bpm.scene import scene_of, solid_fraction
 from opalflow.bpm.spec import BpmWorkflow
 from opalflow.bpm.static import (VOIGT, LooseParticlesError, StaticResult, loose_message, loose_particles,
@@ -75,7 +75,8 @@ def network_run(spec: BpmWorkflow, s, out: Path, t0: float, *, launcher: str, re
             "type_names": data.type_names, "n_particles": s.n_particles, "n_bonds": s.n_bonds,
             "solid_fraction": solid_fraction(s), "build_s": build_s, "references": spec.references(),
             "height_nm": deck.height_nm, "area_nm2": deck.area_nm2, "top_layer_particles": int(deck.top_layer.sum()),
-            "loading": deck.loading, "loading_sense": deck.loading_sense}
+            "loading": deck.loading, "loading_sense": deck.loading_sense, "periodic": data.periodic.tolist(),
+            "source": data.meta.get("source", "")}
     scene = scene_of(spec)
     if scene.run_keys:
         stats = scene.statistics(deck.source)
@@ -190,7 +191,7 @@ def _report(spec: BpmWorkflow, info: dict, summary: dict, res: StaticResult, sid
              + ("glued to the wall (x, y and rotations held)" if loading.glued
                 else "its x, y and rotations free") + "; sides "
              f"{sides}. Contacts carry no load at the reference state and bonds do not break: "
-             "no strength.", "",
+             "no strength.", "", *sample_lines(info),
              "| quantity | value | reference | error |", "|---|---|---|---|"]
     ref = summary["reference"].get("youngs_modulus_specimen_GPa") or summary["reference"].get("youngs_modulus_GPa")
     lines.append(f"| Young's modulus (GPa) | {summary['youngs_modulus_GPa']:.4g} | "

@@ -139,7 +139,8 @@ class DataFileError(InputError):
         super().__init__(f"data file {path}: {what}")
 
 
-def _table(path, name: str, body: bytes, ncols: tuple[int, ...], expected: int | None) -> np.ndarray:
+def _table(path, name: str, body: bytes, ncols: tuple[int, ...], expected: int | None,
+           layout: str = "id type atom1 atom2") -> np.ndarray:
     """Whitespace-separated numbers (comments stripped) as an (n, ncol) float64 array, ncol one of ``ncols``
     (the same on every line)."""
     if b"#" in body:
@@ -158,22 +159,61 @@ def _table(path, name: str, body: bytes, ncols: tuple[int, ...], expected: int |
     ncol = values.size // max(len(lines), 1)
     if ncol not in ncols or len(lines) * ncol != values.size:
         raise DataFileError(path, f"the {name} section needs {' or '.join(map(str, ncols))} numbers on every line; "
-                                  f"it has {values.size} numbers on {len(lines)} lines"
-                                  + (" (atom style bpm/sphere: id mol type diameter density x y z [ix iy iz])"
-                                     if name == "Atoms" else " (id type atom1 atom2)"))
+                                  f"it has {values.size} numbers on {len(lines)} lines ({layout})")
     if expected is not None and len(lines) != expected:
         raise DataFileError(path, f"the header declares {expected} {name.lower()} but the section has "
                                   f"{len(lines)} lines (a truncated file?)")
     return values.reshape(-1, ncol)
 
 
-def read_data(path: str | os.PathLike, periodic=(True, True, False)) -> Structure:
-    """Read a bpm/sphere data file written by opalflow or LAMMPS (``write_data``).
+#: per-atom fields of the Atoms section by atom style (LAMMPS read_data, "Atoms section" table)
+STYLE_FIELDS = {
+    "bpm/sphere": ("id", "molecule", "type", "diameter", "density", "x", "y", "z"),
+    "sphere": ("id", "type", "diameter", "density", "x", "y", "z"),
+}
+#: fields each sub-style adds after ``id type x y z`` in an ``atom_style hybrid`` line (LAMMPS read_data:
+#: a field an earlier sub-style already gave is not repeated, AtomVecHybrid's merged field list)
+HYBRID_FIELDS = {
+    "bpm/sphere": ("molecule", "diameter", "density"), "sphere": ("diameter", "density"),
+    "dipole": ("q", "mux", "muy", "muz"), "charge": ("q",), "bond": ("molecule",), "angle": ("molecule",),
+    "molecular": ("molecule",), "full": ("molecule", "q"), "atomic": (), "ellipsoid": ("ellipsoidflag", "density"),
+    "sphere/dipole": ("diameter", "density", "q", "mux", "muy", "muz"),
+}
+
+
+def atom_fields(atom_style: str) -> tuple[str, ...]:
+    """The fields of one Atoms line of ``atom_style`` ("bpm/sphere", "sphere", "hybrid bpm/sphere dipole", ...);
+    InputError for a style without diameters and densities."""
+    words = atom_style.split()
+    if len(words) == 1 and words[0] in STYLE_FIELDS:
+        return STYLE_FIELDS[words[0]]
+    if len(words) >= 2 and words[0] == "hybrid":
+        unknown = [w for w in words[1:] if w not in HYBRID_FIELDS]
+        if unknown:
+            raise InputError(f"datafile.atom_style = {atom_style!r}: sub-style {unknown[0]!r} is not one opalflow "
+                             f"reads ({', '.join(HYBRID_FIELDS)})")
+        fields = ["id", "type", "x", "y", "z"]
+        for w in words[1:]:
+            fields += [f for f in HYBRID_FIELDS[w] if f not in fields]
+        if "diameter" not in fields:
+            raise InputError(f"datafile.atom_style = {atom_style!r}: needs a sub-style with diameters and densities "
+                             "(bpm/sphere or sphere)")
+        return tuple(fields)
+    raise InputError(f"datafile.atom_style = {atom_style!r}: must be bpm/sphere, sphere or 'hybrid SUB ...' with "
+                     "bpm/sphere or sphere among the sub-styles")
+
+
+def read_data(path: str | os.PathLike, periodic=(True, True, False), atom_style: str = "bpm/sphere") -> Structure:
+    """Read a data file written by opalflow or LAMMPS (``write_data``) with diameters and densities:
+    ``atom_style`` bpm/sphere (opalflow's), sphere, or hybrid with one of them among its sub-styles (as
+    LAMMPS's read_data, the style is not in the file: the ``# hybrid`` comment names no sub-style).
 
     ``periodic`` is not stored in data files; pass the boundary of the deck.
     Sections other than Atoms and Bonds (Velocities, Coeffs) are skipped.  Anything that is not a
-    whole bpm/sphere data file raises :class:`DataFileError` naming the file and what is wrong.
+    whole data file of that style raises :class:`DataFileError` naming the file and what is wrong.
     """
+    fields = atom_fields(atom_style)
+    col = {f: k for k, f in enumerate(fields)}
     try:
         raw = Path(path).read_bytes()
     except OSError as exc:
@@ -204,20 +244,24 @@ def read_data(path: str | os.PathLike, periodic=(True, True, False)) -> Structur
         end = marks[k + 1].start() if k + 1 < len(marks) else len(raw)
         bodies[m.group(1).decode()] = raw[m.end():end]
         styles[m.group(1).decode()] = m.group(2).decode(errors="replace").strip().lstrip("#").strip()
-    if styles["Atoms"] not in ("", "bpm/sphere"):
-        raise DataFileError(path, f"atom style {styles['Atoms']!r}; opalflow reads bpm/sphere "
-                                  "(id mol type diameter density x y z)")
-    atoms = _table(path, "Atoms", bodies["Atoms"], (8, 11), counts.get("atoms"))
+    declared = styles["Atoms"].split()[0] if styles["Atoms"] else ""
+    if declared and declared != atom_style.split()[0]:
+        raise DataFileError(path, f"its Atoms section says atom style {styles['Atoms']!r}, not {atom_style!r} "
+                                  "(datafile.atom_style names the style, as atom_style does before read_data)")
+    atoms = _table(path, "Atoms", bodies["Atoms"], (len(fields), len(fields) + 3), counts.get("atoms"),
+                   f"atom style {atom_style}: {' '.join(fields)} [ix iy iz]")
     atoms = atoms[np.argsort(atoms[:, 0], kind="stable")]
     ids = atoms[:, 0]
     if len(ids) == 0:
         raise DataFileError(path, "the Atoms section is empty")
     if np.any(ids < 1) or np.any(ids != np.round(ids)) or np.any(np.diff(ids) == 0):
         raise DataFileError(path, "atom ids must be distinct integers >= 1")
-    if np.any(atoms[:, 2] < 1) or np.any(atoms[:, 2] != np.round(atoms[:, 2])):
+    types = atoms[:, col["type"]]
+    if np.any(types < 1) or np.any(types != np.round(types)):
         raise DataFileError(path, "atom types must be integers >= 1")
-    if np.any(atoms[:, 3] <= 0) or np.any(atoms[:, 4] <= 0):
-        raise DataFileError(path, "every diameter and density must be > 0 (bpm/sphere: column 4 diameter, 5 density)")
+    if np.any(atoms[:, col["diameter"]] <= 0) or np.any(atoms[:, col["density"]] <= 0):
+        raise DataFileError(path, f"every diameter and density must be > 0 (columns {col['diameter'] + 1} and "
+                                  f"{col['density'] + 1} of atom style {atom_style})")
     bonds = np.zeros((0, 2), np.int64)
     bond_types = np.zeros(0, np.int32)
     if "Bonds" in bodies:
@@ -237,9 +281,10 @@ def read_data(path: str | os.PathLike, periodic=(True, True, False)) -> Structur
         bond_types = braw[:, 1].astype(np.int32)
     elif counts.get("bonds"):
         raise DataFileError(path, f"the header declares {counts['bonds']} bonds but there is no Bonds section")
+    molecules = atoms[:, col["molecule"]].astype(np.int32) if "molecule" in col else np.zeros(len(atoms), np.int32)
     return Structure(
-        positions=atoms[:, 5:8], diameters=atoms[:, 3], types=atoms[:, 2].astype(np.int32),
-        densities=atoms[:, 4], box_lo=box[:, 0], box_hi=box[:, 1],
-        periodic=np.asarray(periodic), bonds=bonds, bond_types=bond_types,
-        molecules=atoms[:, 1].astype(np.int32), type_names=type_names,
+        positions=atoms[:, [col["x"], col["y"], col["z"]]], diameters=atoms[:, col["diameter"]],
+        types=types.astype(np.int32), densities=atoms[:, col["density"]], box_lo=box[:, 0], box_hi=box[:, 1],
+        periodic=np.asarray(periodic), bonds=bonds, bond_types=bond_types, molecules=molecules,
+        type_names=type_names,
     )

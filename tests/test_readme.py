@@ -1,0 +1,163 @@
+"""The README runs as tests: every fenced block carries a marker comment right above it that says how it is
+checked, and this file does it.
+
+Markers (``<!-- test: WHAT -- why -->``):
+
+- ``run``: each opalflow command of the block runs in a fresh folder, exit 0 (``&&`` chains: the venv and
+  pip segments are not repeated, .ci/run installs the same way); ``skip "TEXT"`` leaves out the commands
+  that hold TEXT and ``set K=V`` adds ``--set K=V`` to each run (small sizes), both said after ``--``;
+- ``not-run``: the reason follows ``--``;
+- ``output``: the block is what the command after ``--`` prints on stderr;
+- ``synopsis``: every verb and option shown exists in the CLI;
+- ``python``: the block runs as it is; each ``print`` whose comment holds numbers prints them;
+- ``toml``: the block is a valid section of a workflow;
+- ``paths``: every path the block names exists.
+"""
+from __future__ import annotations
+
+import re
+import shlex
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from opalflow.resources import ROOT
+
+README = ROOT / "README.md"
+MARKER = re.compile(r"<!-- test: (?P<what>[a-z-]+)(?P<args>[^>]*?)(?: -- (?P<why>.*?))? -->")
+
+
+def blocks() -> list[tuple[int, str, dict]]:
+    """(line, text, marker) of every fenced block; marker {} where the line above has none."""
+    lines = README.read_text().splitlines()
+    out, i = [], 0
+    while i < len(lines):
+        if lines[i].startswith("```"):
+            j = next(k for k in range(i + 1, len(lines)) if lines[k].startswith("```"))
+            m = MARKER.fullmatch(lines[i - 1].strip()) if i else None
+            out.append((i + 1, "\n".join(lines[i + 1:j]), m.groupdict() if m else {}))
+            i = j + 1
+        else:
+            i += 1
+    return out
+
+
+def commands(text: str) -> list[list[str]]:
+    """The opalflow commands of a shell block, as argument lists for this interpreter."""
+    joined = re.sub(r"\\\n\s*", " ", text)
+    out = []
+    for line in joined.splitlines():
+        for part in line.split("&&"):
+            words = shlex.split(re.sub(r"\[[^\]]*\]", "", part), comments=True)
+            if "-m" in words and "opalflow" in words:
+                k = words.index("opalflow")
+                out.append([sys.executable, "-m", "opalflow", *words[k + 1:]])
+    return out
+
+
+BLOCKS = blocks()
+
+
+def test_every_block_says_how_it_is_tested():
+    unmarked = [line for line, _, m in BLOCKS if not m]
+    assert not unmarked, f"README blocks without a <!-- test: ... --> marker at lines {unmarked}"
+    for line, _, m in BLOCKS:
+        if m["what"] in ("not-run", "output") or "skip" in m["args"] or "set" in m["args"]:
+            assert (m["why"] or "").strip(), f"README line {line}: '{m['what']}' needs its reason after --"
+
+
+def _ids(kind):
+    return [pytest.param(text, m, id=f"line{line}") for line, text, m in BLOCKS if m.get("what") == kind]
+
+
+@pytest.mark.parametrize("text,marker", _ids("run"))
+def test_readme_commands_run(text, marker, tmp_path):
+    skips = re.findall(r'skip "([^"]+)"', marker["args"])
+    sets = re.findall(r"set (\S+=\S+)", marker["args"])
+    ran = 0
+    for cmd in commands(text):
+        if any(s in " ".join(cmd) for s in skips):
+            continue
+        if cmd[3] == "run" and sets:
+            cmd = cmd + [x for s in sets for x in ("--set", s)]
+        proc = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True)
+        assert proc.returncode == 0, f"{' '.join(cmd[1:])}\n{proc.stderr[-3000:]}"
+        ran += 1
+        if cmd[3:5] == ["run", "quickstart"] and "--set" not in cmd:      # the README's first command
+            from opalflow import regress
+            from opalflow.io import load_results
+
+            out = tmp_path / cmd[cmd.index("--out") + 1]
+            checks = regress.compare("quickstart", regress.read_reference("quickstart"), load_results(out))
+            assert not [c for c in checks if c.failed], "\n".join(regress.table(checks, "quickstart"))
+    assert ran, "no command of the block ran"
+
+
+@pytest.mark.parametrize("text,marker", _ids("output"))
+def test_readme_output_is_what_the_command_prints(text, marker, tmp_path):
+    cmd = commands(marker["why"].replace("DIR", str(tmp_path / "out")))[0]
+    proc = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True)
+    assert proc.stderr.strip() == text.strip()
+
+
+def test_readme_synopsis_names_real_verbs_and_options():
+    from opalflow.cli import parser
+
+    (text,) = [t for _, t, m in BLOCKS if m.get("what") == "synopsis"]
+    sub = next(a for a in parser()._actions if a.dest == "command")
+    for line in text.splitlines():
+        words = line.split("#")[0].split()
+        verb = words[3]
+        assert verb in sub.choices, line
+        known = {o for a in sub.choices[verb]._actions for o in a.option_strings}
+        for w in re.findall(r"--[a-z-]+", " ".join(words)):
+            assert w in known, f"{verb}: {w}"
+
+
+@pytest.mark.parametrize("text,marker", _ids("python"))
+def test_readme_python_prints_what_it_promises(text, marker, tmp_path):
+    proc = subprocess.run([sys.executable, "-c", text], cwd=tmp_path, capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    printed = proc.stdout.strip().splitlines()
+    promised = [line.split("#", 1)[1] for line in text.splitlines() if line.startswith("print(") and "#" in line]
+    assert len(printed) == sum(1 for line in text.splitlines() if line.startswith("print("))
+    number = r"-?\d+(?:\.\d+)?(?:e-?\d+)?"
+    for want, got in zip(promised, printed):
+        want = want.split("(", 1)[0]
+        for w, g in zip(re.findall(number, want), re.findall(number, got)):
+            digits = len(w.split(".")[1]) if "." in w else 0
+            assert round(float(g), digits) == pytest.approx(float(w)), (want, got)
+
+
+def test_readme_toml_is_a_valid_section():
+    from opalflow.api import raw_workflow
+    from opalflow.registry import spec_from_dict
+
+    for _, text, m in BLOCKS:
+        if m.get("what") == "toml":
+            raw = raw_workflow("quickstart")
+            raw.update(tomllib.loads(text))
+            spec_from_dict(raw)
+
+
+def test_readme_layout_names_existing_paths():
+    (text,) = [t for _, t, m in BLOCKS if m.get("what") == "paths"]
+    for line in text.splitlines():
+        head = line.split("  ")[0].split()
+        if line.startswith(" ") or not head:
+            continue
+        for p in head:
+            assert (ROOT / p).exists(), p
+
+
+
+def test_readme_workflows_table_lists_every_workflow():
+    """Was: the table left out the four aerogel_* workflows."""
+    text = README.read_text()
+    table = text[text.index("### Workflows"):]
+    table = table[:table.index("\n\n", table.index("|---|"))]
+    listed = set(re.findall(r"^\| `([a-z0-9_]+)` \|", table, re.MULTILINE))
+    assert listed == {p.stem for p in (ROOT / "workflows").glob("*.toml")}
