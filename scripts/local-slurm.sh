@@ -30,7 +30,7 @@ install_packages() {
 write_config() {
   local host cpus mem
   host=$(hostname -s)
-  cpus=$(nproc)
+  cpus=$(getconf _NPROCESSORS_ONLN)   # not nproc: it honours OMP_NUM_THREADS (1 inside a test run)
   mem=$(( $(awk '/MemTotal/ {print $2}' /proc/meminfo) / 1024 - 1024 ))
   mkdir -p "$STATE/ctld" "$STATE/d" /etc/slurm
   chown slurm:slurm "$STATE/ctld" 2> /dev/null || true

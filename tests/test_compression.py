@@ -179,8 +179,9 @@ def test_rate_check_switch_reports_the_half_speed_run(tmp_path):
     summary = run_workflow(lattice_spec("compression.check_rate=true"), out, say=lambda *_: None)
     rc = summary["rate_check"]
     assert (out / "rate_half" / "summary.json").exists()
-    assert abs(rc["youngs_modulus_change"]) < 0.02 and abs(rc["strength_change"]) < 0.05
-    assert "Rate check (half plate speed)" in (out / "report.md").read_text()
+    # the lattice's bonds do not break: no strength, so only E is compared
+    assert abs(rc["youngs_modulus_change"]) < 0.02 and rc["strength_change"] is None
+    assert "Rate check (half plate speed): E changes by" in (out / "report.md").read_text()
 
 
 def test_datafile_scene_runs_a_users_file(tmp_path, lattice_run):

@@ -28,7 +28,7 @@ def test_a_second_run_into_a_running_folder_is_refused(tmp_path, capsys):
                                                f"{first.pid}")
     stdout, stderr = first.communicate(timeout=300)
     assert first.returncode == 0, stderr[-2000:]
-    assert stdout.startswith("E = ") and not (out / LOCK_FILE).exists()
+    assert stdout.startswith("E (top-layer strain) = ") and not (out / LOCK_FILE).exists()
     assert json.loads((out / "summary.json").read_text())["complete"]
 
 

@@ -20,7 +20,6 @@ import shlex
 import subprocess
 import sys
 import tomllib
-from pathlib import Path
 
 import pytest
 
@@ -59,6 +58,25 @@ def commands(text: str) -> list[list[str]]:
 
 
 BLOCKS = blocks()
+TIME = re.compile(r"(~?)(\d+(?:\.\d+)?) (s|min|h)\b")
+
+
+def quoted_times(text: str) -> list[tuple[dict, str]]:
+    """(time quoted, command line) for each opalflow command of a block whose comment (or the comment line
+    above it) quotes a time: {"text": "~10 s", "seconds": 10.0, "approximate": True}."""
+    out, pending = [], None
+    for line in re.sub(r"\\\n\s*", " ", text).splitlines():
+        comment = line.split("#", 1)[1] if "#" in line else ""
+        m = TIME.search(comment)
+        if line.strip().startswith("#"):
+            pending = m
+            continue
+        m = m or pending
+        pending = None
+        if m and "-m opalflow" in line:
+            seconds = float(m.group(2)) * {"s": 1, "min": 60, "h": 3600}[m.group(3)]
+            out.append(({"text": m.group(0), "seconds": seconds, "approximate": bool(m.group(1))}, line))
+    return out
 
 
 def test_every_block_says_how_it_is_tested():
@@ -132,14 +150,20 @@ def test_readme_python_prints_what_it_promises(text, marker, tmp_path):
             assert round(float(g), digits) == pytest.approx(float(w)), (want, got)
 
 
-def test_readme_toml_is_a_valid_section():
+def test_readme_toml_is_a_valid_section(tmp_path, monkeypatch):
+    """Each TOML block is valid in a workflow (its data file, where it names one, is a frame of rods written in
+    the same format as LAMMPS's BPM examples)."""
     from opalflow.api import raw_workflow
     from opalflow.registry import spec_from_dict
+    from test_datafile import rod_frame
 
+    monkeypatch.chdir(tmp_path)
     for _, text, m in BLOCKS:
         if m.get("what") == "toml":
             raw = raw_workflow("quickstart")
             raw.update(tomllib.loads(text))
+            if "datafile" in raw:
+                rod_frame(raw["datafile"]["path"], cells=3)
             spec_from_dict(raw)
 
 
@@ -161,3 +185,21 @@ def test_readme_workflows_table_lists_every_workflow():
     table = table[:table.index("\n\n", table.index("|---|"))]
     listed = set(re.findall(r"^\| `([a-z0-9_]+)` \|", table, re.MULTILINE))
     assert listed == {p.stem for p in (ROOT / "workflows").glob("*.toml")}
+
+
+def test_readme_command_times_come_from_bench_results():
+    """Every time quoted beside a README command is in bench/results/readme.json (bench/bench_readme.py),
+    measured there (the whole command) or predicted by plan, within 25 % (50 % where it says "~")."""
+    import json
+
+    bench = json.loads((ROOT / "bench" / "results" / "readme.json").read_text())
+    rows = {(r["command"], r["quoted"]["text"]): r for r in bench["rows"]}
+    for _, text, _ in BLOCKS:
+        for quoted, command in quoted_times(text):
+            key = (command.split("#")[0].strip(), quoted["text"])
+            assert key in rows, f"no bench/results/readme.json row for {key}: run python bench/bench_readme.py"
+            row = rows[key]
+            assert row["seconds"] and row.get("exit", 0) == 0, row
+            slack = 0.5 if quoted["approximate"] else 0.25
+            assert abs(quoted["seconds"] / row["seconds"] - 1) <= slack, (key, round(row["seconds"], 1), row["how"])
+

