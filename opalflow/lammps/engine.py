@@ -167,6 +167,9 @@ class Preempted(Interrupted):
     was written at ``step`` where the run could, so a requeued job continues from it."""
 
 
+#: seconds of LAMMPS between the in-process run's returns to Python (progress, Ctrl-C, a scheduler's signal)
+CHUNK_S = 5.0
+
 #: set by a signal handler (:func:`request_stop`): the in-process run writes a restart and stops at the
 #: end of its current chunk
 _STOP: list[str] = []
@@ -239,10 +242,10 @@ def run_in_process(folder: Path, script: str, *, every: int, strain_per_step: fl
                    suffix: str | None = None, label: str = "") -> float:
     """Run ``script`` (text of in.lmp or resume.lmp) in ``folder`` with the LAMMPS module.
 
-    The final ``run N upto`` is split into chunks (multiples of ``every`` steps) so
-    that progress can be printed; the result is the same run.  Returns LAMMPS seconds.
-    A stop asked for by :func:`request_stop` (a scheduler's signal) writes ``restart.STEP.bin`` at the end
-    of the chunk and raises :class:`Preempted`.
+    The final ``run N upto`` is split into chunks of about :data:`CHUNK_S` seconds so that progress is
+    printed and Ctrl-C answered within seconds; the result is the same run.  Returns LAMMPS seconds.
+    A stop asked for by :func:`request_stop` (a scheduler's signal) runs on to the next whole output interval
+    (``every`` steps), writes ``restart.STEP.bin`` there and raises :class:`Preempted`.
     """
     t = time.perf_counter()
     folder = Path(folder).resolve()          # the session works inside it: progress.json needs the full path
@@ -252,22 +255,35 @@ def run_in_process(folder: Path, script: str, *, every: int, strain_per_step: fl
             if words[0] == "run" and "upto" in words:
                 target = int(words[1])
                 step = int(lmp.get_thermo("step"))
-                chunk = every * max(1, (target // 50) // every)
+                # chunks of about CHUNK_S seconds from the rate so far (the first 100 steps; at most 1/50 of the
+                # run): LAMMPS holds Ctrl-C and signals until a chunk ends
+                longest = max(every, target // 50)
+                chunk = min(every, 100)
                 progress = Progress(target, step, label, folder=folder)
                 first = True
                 while step < target:
-                    nxt = min(target, (step // chunk + 1) * chunk)
-                    try:       # LAMMPS holds Ctrl-C until the chunk ends (at most 1/50 of the run)
+                    nxt = min(target, step + chunk)
+                    t_chunk = time.perf_counter()
+                    try:
                         lmp.command(f"run {nxt} upto pre {'yes' if first else 'no'} post no")
                     except KeyboardInterrupt:
                         raise Interrupted(folder, int(lmp.get_thermo("step"))) from None
+                    rate = (nxt - step) / max(time.perf_counter() - t_chunk, 1e-6)
+                    chunk = int(min(max(1.0, rate * CHUNK_S), longest))
                     first = False
                     step = int(lmp.get_thermo("step"))
                     progress.update(step, step * strain_per_step)
                     if _STOP and step < target:
                         _STOP.clear()
-                        lmp.command(f"write_restart restart.{step}.bin")
-                        raise Preempted(folder, step)
+                        # a restart at a whole output interval: the resumed run's first curve row is then
+                        # one interval later, no row lost or written twice
+                        aligned = min(target, -(-step // every) * every)
+                        if aligned > step:
+                            lmp.command(f"run {aligned} upto pre no post no")
+                            step = aligned
+                        if step < target:
+                            lmp.command(f"write_restart restart.{step}.bin")
+                            raise Preempted(folder, step)
                 progress.update(step, step * strain_per_step, force=True)
             else:
                 lmp.command(cmd)
