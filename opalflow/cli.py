@@ -127,12 +127,14 @@ def cmd_regress(args) -> int:
     t = time.perf_counter()
     checks, out = regress.regress(args.names, out=args.out, fast=args.fast, update=args.why if args.update else None,
                                   say=lambda m: print(m, flush=True))
-    lines = regress.verdict_lines(checks, out, time.perf_counter() - t)
-    print("\n".join(lines))
-    failed = any(c.failed for c in checks)
+    failed = any(c.failed for c in checks) and not args.update
+    if args.update:
+        print(f"regress --update: {len({c.name for c in checks})} references rewritten in data/regression/ ({args.why})")
+    else:
+        print("\n".join(regress.verdict_lines(checks, out, time.perf_counter() - t)))
     if not failed and args.out is None:
         shutil.rmtree(out, ignore_errors=True)
-    return 1 if failed and not args.update else 0
+    return 1 if failed else 0
 
 
 def interrupted(args, exc: KeyboardInterrupt, terminated: bool = False) -> str:

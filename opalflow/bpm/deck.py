@@ -199,9 +199,8 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
 
     substrate = s.groups.get("substrate", np.zeros(s.n_particles, bool))
     if not substrate.any():
-        field = "datafile.substrate" if spec.kind == "datafile" else "substrate.layers"
-        raise SpecError(field, getattr(getattr(spec, field.split(".")[0], None), field.split(".")[1], 0),
-                        "the compression needs fixed substrate particles")
+        # (a data file's scene names datafile.substrate itself when its choice selects no particle)
+        raise SpecError("substrate.layers", 0, "the compression needs a fixed substrate (layers >= 1)")
     top = float(np.max(s.positions[:, 2] + s.diameters / 2))
     base = float(np.max(s.positions[substrate, 2] + s.diameters[substrate] / 2))
     height = top - base
