@@ -168,7 +168,7 @@ def test_a_damaged_job_summary_is_run_again(tmp_path, damage):
     assert jobs_mod.finished(job, tmp_path) is None
     again = run_jobs([job], tmp_path, LOCAL1, say=lambda m: None)["a20"]
     assert again["youngs_modulus_GPa"] == pytest.approx(first["youngs_modulus_GPa"], rel=1e-9)
-    assert jobs_mod.finished(job, tmp_path)["strength_MPa"] == pytest.approx(first["strength_MPa"], rel=1e-9)
+    assert jobs_mod.finished(job, tmp_path)["peak_stress_MPa"] == pytest.approx(first["peak_stress_MPa"], rel=1e-9)
 
 
 def test_a_failed_job_does_not_end_the_sweep(tmp_path):
