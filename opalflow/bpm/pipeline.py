@@ -73,6 +73,11 @@ def prepare(spec: BpmWorkflow, out: Path, progress=None) -> CompressionDeck:
     return deck
 
 
+def dynamic_steps(spec: BpmWorkflow, deck: CompressionDeck) -> int:
+    """Time steps a dynamic run makes: the deck's, twice with the rate check's half-speed twin."""
+    return deck.steps * (2 if spec.compression.check_rate else 1)
+
+
 def cost_facts(spec: BpmWorkflow) -> dict:
     """What :mod:`opalflow.runs.plan` prices a run by: its method and solver, particles, bonds, (dynamic)
     steps, and the seconds the structure and deck took to build here.  Writes nothing."""
@@ -89,7 +94,7 @@ def cost_facts(spec: BpmWorkflow) -> dict:
         solver = spec.compression.solver
         facts["solver"] = ("amg" if s.n_bonds <= AMG_MAX_BONDS else "block-amg") if solver == "auto" else solver
     else:
-        facts["steps"] = deck.steps * (2 if spec.compression.check_rate else 1)   # the half-speed twin
+        facts["steps"] = dynamic_steps(spec, deck)
     return facts
 
 
@@ -106,8 +111,8 @@ def long_run_estimate(spec: BpmWorkflow, deck: CompressionDeck, ranks: int = 1) 
         law = laws()
     except SpecError:              # no cost laws measured: nothing to say
         return ""
-    facts = {"method": "dynamic", "n_bonds": deck.structure.n_bonds, "steps": deck.steps * (
-        2 if spec.compression.check_rate else 1), "bond_model": spec.bonds.model, "build_s": 0.0}
+    facts = {"method": "dynamic", "n_bonds": deck.structure.n_bonds, "steps": dynamic_steps(spec, deck),
+             "bond_model": spec.bonds.model, "build_s": 0.0}
     wall = predict(facts, law, ranks)["wall_s"]
     if wall < LONG_RUN_S:
         return ""
@@ -165,20 +170,24 @@ def execute(out: Path, *, np_: int = 1, resume: bool = False, label: str = "", s
                           suffix=suffix, label=label)
 
 
+def restart_files(out: Path) -> list[tuple[int, Path]]:
+    """(step, path) of the folder's ``restart.STEP.bin`` files, newest first."""
+    return sorted(((int(p.name.split(".")[1]), p) for p in Path(out).glob("restart.*.bin")
+                   if p.name.split(".")[1].isdigit()), reverse=True)
+
+
 def resumable(out: Path) -> bool:
     """Whether ``--resume`` can go on in ``out``: a restart file (dynamic) or the quasi-static state."""
     from opalflow.bpm.quasistatic_run import STATE
 
-    return any(p.name.split(".")[1].isdigit() for p in Path(out).glob("restart.*.bin")) or (Path(out) / STATE).exists()
+    return bool(restart_files(out)) or (Path(out) / STATE).exists()
 
 
 def newest_readable_restart(out: Path) -> int | None:
     """Step of the newest restart file LAMMPS can read; newer ones that it cannot (a run killed while
     writing one) are renamed ``restart.N.damaged`` so that ``read_restart restart.*.bin`` skips them
     (LAMMPS's wildcard matches any name that holds ``restart.N.bin``)."""
-    files = sorted(((int(p.name.split(".")[1]), p) for p in out.glob("restart.*.bin")
-                    if p.name.split(".")[1].isdigit()), reverse=True)
-    for step, path in files:
+    for step, path in restart_files(out):
         try:
             with session(out, log="restart_probe.log") as lmp:
                 lmp.command(f"read_restart {path.name}")

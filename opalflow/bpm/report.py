@@ -69,12 +69,17 @@ def why(key: str, error: float, diameter_nm: float) -> str:
     return ""
 
 
+def stress_area(info: dict) -> str:
+    """The area the stress is taken on, and which: the box across periodic sides, the footprint across open."""
+    return (f"{info['area_nm2']:.4g} nm^2 ("
+            f"{'the box' if info['periodic'][0] else 'the particles footprint: open sides'})")
+
+
 def sample_lines(info: dict) -> list[str]:
     """What the static and quasi-static reports say of the sample: the data file read (where one was) and the
     area the stress is taken on."""
     lines = [f"Data file: {info['source']}.", ""] if info.get("source") else []
-    return lines + [f"Stress on {info['area_nm2']:.4g} nm^2: "
-                    f"{'the box' if info['periodic'][0] else 'the particles footprint (open sides)'}.", ""]
+    return lines + [f"Stress on {stress_area(info)}.", ""]
 
 
 def _inputs(info: dict, summary: dict) -> list[str]:
@@ -85,8 +90,7 @@ def _inputs(info: dict, summary: dict) -> list[str]:
     structure = info.get("structure", {})
     rows = [("scene", f"{spec['kind']}: {spec.get('description') or spec['name']}"),
             ("sample", f"{box[0]:.0f} x {box[1]:.0f} nm (x, y; sides {sides}), {info['height_nm']:.0f} nm high above "
-                       f"the fixed substrate; stress on {info['area_nm2']:.4g} nm^2 ("
-                       f"{'the box' if info['periodic'][0] else 'the particles footprint: open sides'})"),
+                       f"the fixed substrate; stress on {stress_area(info)}"),
             ("particles", f"{info['n_particles']}, mean diameter d = {info['mean_diameter_nm']:.3g} nm"),
             ("bonds", f"{info['n_bonds']} ({info['n_bonds'] / max(1, info['n_particles']):.1f} per particle, the paper's "
                       f"measure; coordination {2 * info['n_bonds'] / max(1, info['n_particles']):.1f}), "

@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from opalflow.bpm.bonds import bond_types_by_material
+from opalflow.bpm.deck import particle_material
 from opalflow.bpm.scene import Scene
 from opalflow.datafile.spec import SUBSTRATE, DatafileWorkflow
 from opalflow.lammps.datafile import read_data
@@ -70,26 +71,25 @@ def read_scene(spec: DatafileWorkflow, progress=None) -> Structure:
     if spec.material not in kept:
         raise SpecError("datafile.materials", d.materials, f"no free particle is of the workflow's material "
                         f"{spec.material!r}")
-    file_names = [names[t - 1] for t in s.types]
     type_names = kept + ["substrate"]
-    s.types = np.where(fixed, len(type_names), [type_names.index(n) + 1 if n in kept else len(type_names)
-                                                 for n in file_names]).astype(np.int32)
+    per_file_type = np.array([type_names.index(n) + 1 if n in kept else len(type_names) for n in names], np.int32)
+    s.types = np.where(fixed, len(type_names), per_file_type[s.types - 1]).astype(np.int32)
     s.type_names = type_names
     s.groups["substrate"] = fixed
     others = [m for m in kept if m != spec.material]
     if len(others) > 1:
         raise SpecError("datafile.materials", d.materials, "at most one material besides the matrix")
     source = d.density_source()
+    want = np.array([material(particle_material(n, spec.material), spec.materials)["density_kg_m3"]
+                     for n in type_names])
     if source == "material":
-        s.densities = np.array([material(n if n != "substrate" else spec.material, spec.materials)["density_kg_m3"]
-                                for n in [type_names[t - 1] for t in s.types]]) / KG_M3_PER_AG_NM3
+        s.densities = want[s.types - 1] / KG_M3_PER_AG_NM3
     else:
         for t, n in enumerate(type_names, 1):
-            want = material(n if n != "substrate" else spec.material, spec.materials)["density_kg_m3"]
             got = float(np.median(s.densities[s.types == t])) * KG_M3_PER_AG_NM3
-            if not want / DENSITY_FACTOR <= got <= want * DENSITY_FACTOR:
+            if not want[t - 1] / DENSITY_FACTOR <= got <= want[t - 1] * DENSITY_FACTOR:
                 raise SpecError("datafile.density", d.density, f"the file's densities of type {n} ({got:.4g} kg/m^3 in "
-                                f"nano units) are not within {DENSITY_FACTOR:g}x of {n}'s {want:g} kg/m^3: use "
+                                f"nano units) are not within {DENSITY_FACTOR:g}x of {n}'s {want[t - 1]:g} kg/m^3: use "
                                 "\"material\" to take the material's")
     coat = np.isin(s.types, [type_names.index(m) + 1 for m in others])
     s.bond_types = bond_types_by_material(s.bonds, coat)
