@@ -50,6 +50,9 @@ def cmd_build(args) -> int:
 
 def cmd_run(args) -> int:
     from opalflow.lammps.engine import EngineError
+    from opalflow.runs.record import command_run
+
+    command_run(args.out)
 
     try:
         summary = api.run(args.workflow, args.out, set=args.set, np=args.np, resume=args.resume, suffix=args.suffix,

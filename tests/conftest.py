@@ -1,3 +1,5 @@
+import os
+import tempfile
 import textwrap
 
 import numpy as np
@@ -8,6 +10,11 @@ from opalflow import registry
 from opalflow.opal.scene import build_opal
 from opalflow.resources import WORKFLOWS
 from opalflow.registry import load_spec
+
+
+# the structure cache of the whole session in a folder of its own (not the user's ~/.cache): tests that build
+# one scene twice reuse it, as a user's reruns do; subprocesses (the CLI, jobs) inherit it
+os.environ["OPALFLOW_CACHE"] = tempfile.mkdtemp(prefix="opalflow-cache-")
 
 
 @pytest.fixture(scope="session")

@@ -26,14 +26,14 @@ are held still (they carry nothing).
 
 Re-solves (measured in bench/bench_quasistatic.py, kept: ``auto``):
 
-- ``direct``: K_ff factorised once (sparse Cholesky, cholespy/CHOLMOD); each broken bond removes its 12 x 12
+- ``direct``: K_ff factorised once (sparse Cholesky, :class:`opalflow.bpm.static.Factor`); each broken bond removes its 12 x 12
   block, a rank <= 6 change, applied by the Sherman-Morrison-Woodbury formula on the old factor; the
   factor is renewed when the updates have cost as much time as it did, and when particles come loose;
 - ``amg``: the smoothed-aggregation AMG of the intact network as the preconditioner of CG on the damaged
   one, warm-started from the last solution (measured 20-70 iterations per event: the load a broken bond
   carried spreads through the whole sample); slower per event than ``direct`` (5-10x at 15 k-56 k dofs) but
   the only one that fits large samples;
-- ``auto``: ``direct`` up to DIRECT_MAX_DOFS free degrees of freedom (the factor's fill grows fast in
+- ``auto``: ``direct`` up to DIRECT_MAX_DOFS free degrees of freedom (the static solver's bound; the factor's fill grows fast in
   3D), ``amg`` above.
 """
 from __future__ import annotations
@@ -46,13 +46,10 @@ import numpy as np
 import scipy.sparse as sp
 
 from opalflow.bpm.spec import RESOLVERS
-from opalflow.bpm.static import amg_hierarchy, bond_blocks, pcg, rigid_body_modes
+from opalflow.bpm.static import DIRECT_MAX_DOFS, Factor, amg_hierarchy, block_matrix, bond_blocks, pcg, rigid_body_modes
 from opalflow.bpm.stiffness import BondNetwork
 from opalflow.spec import InputError
 
-#: ``resolver = "auto"``: the factor up to this many free dofs (measured: 0.2 s at 11 k, 7 s at 56 k; at 1.1 M no
-#: factor after 17 min and 15 GiB; bench/results/quasistatic_*.json), AMG above
-DIRECT_MAX_DOFS = 100_000
 
 
 @dataclass
@@ -84,20 +81,9 @@ class StiffnessMatrix:
     diagonal block and each bond's two off-diagonal ones, at known places, so that a broken bond's 12 x 12
     block is subtracted in place (no coordinate list: the paper-scale memory is the blocks alone)."""
 
-    def __init__(self, net: BondNetwork, chunk: int = 500_000):
+    def __init__(self, net: BondNetwork):
         self.net = net
-        n, m = net.n_particles, len(net.L)
-        rows = np.concatenate([np.arange(n), net.i, net.j])
-        cols = np.concatenate([np.arange(n), net.j, net.i])
-        order = np.lexsort((cols, rows))
-        self.pos = np.empty(n + 2 * m, np.int64)
-        self.pos[order] = np.arange(n + 2 * m)
-        data = np.zeros((n + 2 * m, 6, 6))
-        for start in range(0, m, chunk):
-            sel = np.arange(start, min(start + chunk, m))
-            self._add(data, sel, bond_blocks(net.part(slice(start, start + len(sel)))), 1.0)
-        indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=n))])
-        self.K = sp.bsr_matrix((data, cols[order].astype(np.int32), indptr), shape=(6 * n, 6 * n))
+        self.K, self.pos = block_matrix(net)
 
     def _add(self, data: np.ndarray, bonds: np.ndarray, blocks: np.ndarray, sign: float) -> None:
         n, m = self.net.n_particles, len(self.net.L)
@@ -141,17 +127,12 @@ class DirectResolver:
         self._factor(free)
 
     def _factor(self, free: np.ndarray) -> None:
-        import cholespy
-
         t = time.perf_counter()
         self.free = free.copy()
         self.index = np.full(free.size, -1)
         nf = int(free.sum())
         self.index[free] = np.arange(nf)
-        A = self.km.free_part(free).tocoo()
-        A.eliminate_zeros()
-        self.chol = cholespy.CholeskySolverD(nf, A.row.astype(np.int32), A.col.astype(np.int32), A.data,
-                                             cholespy.MatrixType.COO)
+        self.factor = Factor(self.km.free_part(free))
         cap = int(max(6, min(3000, self.memory_bytes / 8 / max(nf, 1))))
         self.W = np.zeros((nf, cap))
         self.Uidx = np.zeros((cap, 12), np.int64)
@@ -163,10 +144,7 @@ class DirectResolver:
         self.factor_s, self.update_s = time.perf_counter() - t, 0.0
 
     def _inverse(self, b: np.ndarray) -> np.ndarray:
-        b = np.ascontiguousarray(b)
-        x = np.zeros_like(b)
-        self.chol.solve(b, x)
-        return x
+        return self.factor.solve(b)
 
     def _columns(self, bonds: np.ndarray):
         """The Woodbury columns of the removed bonds: (index rows, value rows, 1 / eigenvalues)."""

@@ -47,7 +47,7 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
         if not (out / STATE).exists():
             raise SpecError("--resume", str(out), f"no {STATE} in the folder (the run saved none yet): run it anew")
         state = json.loads((out / STATE).read_text())
-    s = scene_of(spec).build(spec, say)
+    s = scene_of(spec).structure(spec, say)
     loading = LOADINGS[c.loading]
     deck, net, info, record = network_run(spec, s, out, t0, launcher="in-process (quasi-static)",
                                           resume=STATE if resume else "")
@@ -91,7 +91,6 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
                     f"bonds broken)",
     }
     summary["reference"] = reference_errors(summary, info["references"])
-    summary["wall_s"] = time.perf_counter() - t0
     record.sessions[-1].last_step = got["events"]
 
     def files(stage):
@@ -104,7 +103,8 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
             for tag, (_, snap) in zip(("peak", "end"), frames):
                 _write_dump(stage(f"fracture.{tag}.dump"), data, snap)
 
-    summary = finish(out, summary, lambda: _report(spec, info, summary, res, loading), files=files, record=record)
+    summary = finish(out, summary, lambda: _report(spec, info, summary, res, loading), files=files, record=record,
+                     started=t0)
     (out / STATE).unlink(missing_ok=True)
     return summary
 

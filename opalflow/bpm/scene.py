@@ -1,11 +1,26 @@
-"""The scene interface: what a bonded-particle scene gives the compression pipeline."""
+"""The scene interface: what a bonded-particle scene gives the compression pipeline, and the structure
+cache that spares a rerun the build."""
 from __future__ import annotations
 
+import hashlib
+import json
+import os
+import pickle
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
 
 from opalflow import registry
+from opalflow.store import atomic_path
 from opalflow.structure import Structure
+
+#: sections of a workflow that no scene's build reads (the deck's and the run's): a new value reuses the
+#: cached structure
+NOT_BUILT_FROM = ("name", "description", "compression", "contacts")
+#: the cache's size bound (GiB): the least recently used structures go first
+CACHE_MAX_GIB = float(os.environ.get("OPALFLOW_CACHE_MAX_GIB", "4"))
 
 
 @dataclass(frozen=True)
@@ -18,12 +33,83 @@ class Scene:
         summary (``n_particles`` and ``n_bonds`` when not given).
     run_keys : the keys of ``statistics`` that every run summary carries as well.
     describe : one line about the structure from its statistics, said by ``build``.
+    cached : whether :meth:`structure` keeps what ``build`` made (not for a scene that only reads a file).
     """
 
     build: Callable[..., Structure]
     statistics: Callable[[Structure], dict] | None = None
     run_keys: tuple[str, ...] = ()
     describe: Callable[[dict], str] | None = None
+    cached: bool = True
+
+    def structure(self, spec, progress=None) -> Structure:
+        """``build(spec, progress)``, or the structure it made before for the same build inputs (the spec
+        without NOT_BUILT_FROM, and opalflow's source: a changed generator never reuses an old structure),
+        from the cache folder (``$OPALFLOW_CACHE``, default ``~/.cache/opalflow``; ``OPALFLOW_CACHE=off``:
+        none).  A rerun with a new compression setting, or a study's second method on the same sample,
+        does not rebuild the packing."""
+        folder = cache_folder()
+        if not self.cached or folder is None:
+            return self.build(spec, progress)
+        path = folder / f"{build_key(spec)}.pkl"
+        try:
+            with open(path, "rb") as f:
+                s = pickle.load(f)
+            os.utime(path)                       # recently used
+            if progress:
+                progress(f"structure: {s.n_particles} particles, {s.n_bonds} bonds from the cache ({path}; "
+                         f"built in {s.meta.get('build_s', 0.0):.1f} s); OPALFLOW_CACHE=off rebuilds")
+            return s
+        except (OSError, EOFError, pickle.UnpicklingError, AttributeError, ValueError):
+            pass
+        t = time.perf_counter()
+        s = self.build(spec, progress)
+        s.meta["build_s"] = time.perf_counter() - t
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            with atomic_path(path, f"{path.name}.{os.getpid()}.tmp") as tmp, open(tmp, "wb") as f:
+                pickle.dump(s, f, protocol=pickle.HIGHEST_PROTOCOL)
+            _evict(folder)
+        except OSError:         # a read-only or full disk costs the next run a build, nothing else
+            pass
+        return s
+
+
+def cache_folder() -> Path | None:
+    where = os.environ.get("OPALFLOW_CACHE", "")
+    if where.lower() in ("off", "0", "no", "none"):
+        return None
+    if where:
+        return Path(where)
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "opalflow" / "structures"
+
+
+@lru_cache(maxsize=1)
+def _source_hash() -> str:
+    """A hash of opalflow's Python source and data (materials): what a structure is built by."""
+    root = Path(__file__).resolve().parents[1]
+    h = hashlib.sha256()
+    for p in sorted(root.rglob("*.py")) + sorted((root.parent / "data").glob("*.toml")):
+        h.update(p.name.encode())
+        h.update(p.read_bytes())
+    return h.hexdigest()
+
+
+def build_key(spec) -> str:
+    """The cache key of ``spec``'s structure: its build inputs and opalflow's source."""
+    inputs = {k: v for k, v in spec.to_dict().items() if k not in NOT_BUILT_FROM}
+    text = json.dumps(inputs, sort_keys=True, default=str) + _source_hash()
+    return hashlib.sha256(text.encode()).hexdigest()[:32]
+
+
+def _evict(folder: Path) -> None:
+    """Remove the least recently used structures beyond CACHE_MAX_GIB."""
+    files = sorted(folder.glob("*.pkl"), key=lambda p: p.stat().st_mtime, reverse=True)
+    total = 0
+    for p in files:
+        total += p.stat().st_size
+        if total > CACHE_MAX_GIB * 2**30:
+            p.unlink(missing_ok=True)
 
 
 def scene_of(spec) -> Scene:

@@ -57,7 +57,7 @@ class ContactsSpec:
 #: the event-driven fracture of the linear network, opalflow.bpm.quasistatic (E and strength at zero rate)
 METHODS = ("dynamic", "static", "quasistatic")
 #: solvers of the static method (opalflow.bpm.static.SOLVERS)
-STATIC_SOLVERS = ("auto", "amg", "block-amg", "cg", "cg-jax")
+STATIC_SOLVERS = ("auto", "direct", "amg", "block-amg", "cg", "cg-jax")
 #: re-solves of the quasistatic method (opalflow.bpm.quasistatic.RESOLVERS)
 RESOLVERS = ("auto", "direct", "amg")
 

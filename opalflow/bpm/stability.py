@@ -167,7 +167,7 @@ def check_workflow(spec: BpmWorkflow, out: Path, *, say=print, steps: int = 3000
     ``steps`` steps or up to ``strain`` and, with ``bisect``, the largest stable time step beside the
     estimate; writes stability.json and stability.md into ``out``."""
     t0 = time.perf_counter()
-    s = scene_of(spec).build(spec, say)
+    s = scene_of(spec).structure(spec, say)
     deck = compression_deck(spec, s)
     if strain:
         steps = steps_to_strain(deck, strain, timestep_factor)

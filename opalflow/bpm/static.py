@@ -27,6 +27,7 @@ Solvers (measured in bench/bench_static.py):
 from __future__ import annotations
 
 import math
+import os
 import resource
 import time
 from dataclasses import dataclass, field
@@ -38,9 +39,17 @@ from opalflow.bpm.stiffness import BondNetwork
 from opalflow.spec import InputError
 
 
-#: ``solver = "auto"``: the assembled AMG up to this many bonds (fastest there; 5.4 GiB at 0.87 M bonds),
+#: ``solver = "auto"``: the direct factor up to this many dofs, the assembled AMG up to AMG_MAX_BONDS bonds,
 #: block-amg above (12.7 GiB for the paper's 17.5 M bonds); bench/results/static_quickstart.json
+DIRECT_MAX_DOFS = 300_000
 AMG_MAX_BONDS = 500_000
+
+
+def auto_solver(net: BondNetwork) -> str:
+    """``solver = "auto"``: the fastest design that fits at the network's size (measured, see above)."""
+    if 6 * net.n_particles <= DIRECT_MAX_DOFS:
+        return "direct"
+    return "amg" if len(net.L) <= AMG_MAX_BONDS else "block-amg"
 
 
 class LooseParticlesError(InputError):
@@ -76,15 +85,7 @@ def bond_blocks(net: BondNetwork) -> np.ndarray:
 
 def assemble(net: BondNetwork):
     """K as a scipy CSR matrix (6 N x 6 N)."""
-    import scipy.sparse as sp
-
-    blocks = bond_blocks(net)
-    dof = lambda p: (6 * p[:, None] + np.arange(6)[None]).reshape(-1, 6)  # noqa: E731
-    idx = np.concatenate([dof(net.i), dof(net.j)], axis=1)               # (M, 12)
-    rows = np.broadcast_to(idx[:, :, None], blocks.shape).ravel()
-    cols = np.broadcast_to(idx[:, None, :], blocks.shape).ravel()
-    size = 6 * net.n_particles
-    return sp.csr_matrix((blocks.ravel(), (rows, cols)), shape=(size, size))
+    return block_matrix(net)[0].tocsr()
 
 
 def clusters(net: BondNetwork) -> np.ndarray:
@@ -138,7 +139,7 @@ def solve_compression(net: BondNetwork, positions: np.ndarray, fixed: np.ndarray
     if solver not in SOLVERS:
         raise InputError(f"compression.solver = {solver!r}: must be one of {', '.join(SOLVERS)}")
     if solver == "auto":
-        solver = "amg" if len(net.L) <= AMG_MAX_BONDS else "block-amg"
+        solver = auto_solver(net)
     loose = loose_particles(net, fixed)
     if loose.any() and not drop_loose:
         raise LooseParticlesError(loose_message(int(loose.sum())))
@@ -153,7 +154,7 @@ def solve_compression(net: BondNetwork, positions: np.ndarray, fixed: np.ndarray
     delta = strain * height
     x_p[top & ~fixed & ~loose, 2] = -sense * delta
     free = ~prescribed.ravel()
-    rhs = -net.matvec(x_p.ravel())[free]
+    rhs = np.where(free, -net.matvec(x_p.ravel()), 0.0)
     history: list[float] = []
     b_norm = float(np.linalg.norm(rhs))
     clock = {"first": 0.0, "said": 0.0}
@@ -178,12 +179,8 @@ def solve_compression(net: BondNetwork, positions: np.ndarray, fixed: np.ndarray
             left = f", ~{max(0.0, math.log(r / rtol) / per_it / rate):.0f} s left"
         say(f"static solve: iteration {k}, relative residual {r:.2e} (target {rtol:g}), {rate:.2f} it/s{left}")
 
-    run = {"amg": _solve_amg, "block-amg": _solve_block_amg, "cg": _solve_cg, "cg-jax": _solve_cg_jax}[solver]
-    args = (net, free, rhs, positions) if "amg" in solver else (net, free, rhs)
-    x_f, iterations, setup = run(*args, rtol, maxiter, progress)
-    x = x_p.ravel().copy()
-    x[free] = x_f
-    x = x.reshape(n, 6)
+    x_f, iterations, setup = _solve(solver, net, free, rhs, positions, rtol, maxiter, progress)
+    x = (x_p.ravel() + np.where(free, x_f, 0.0)).reshape(n, 6)
     reaction = net.matvec(x.ravel()).reshape(n, 6)           # K x: the force the supports apply
     force_top = -sense * float(np.sum(reaction[top & ~fixed & ~loose, 2]))    # > 0 in the loading's sense
     stress = force_top / area
@@ -227,7 +224,7 @@ def solve_tensor(net: BondNetwork, positions: np.ndarray, volume: float, *, solv
     if solver not in SOLVERS:
         raise InputError(f"compression.solver = {solver!r}: must be one of {', '.join(SOLVERS)}")
     if solver == "auto":
-        solver = "amg" if len(net.L) <= AMG_MAX_BONDS else "block-amg"
+        solver = auto_solver(net)
     t0 = time.perf_counter()
     n = net.n_particles
     label = clusters(net)
@@ -244,19 +241,15 @@ def solve_tensor(net: BondNetwork, positions: np.ndarray, volume: float, *, solv
     zero = np.zeros((n, 3))
     C = np.zeros((6, 6))
     iterations, worst = [], 0.0
-    run = {"amg": _solve_amg, "block-amg": _solve_block_amg, "cg": _solve_cg, "cg-jax": _solve_cg_jax}[solver]
     for k, (a, b) in enumerate(VOIGT):
         E = np.zeros((3, 3))
         E[a, b] = E[b, a] = 1.0 if a == b else 0.5
         stretch = R @ E
         f, tau = net.forces(zero, zero, stretch)
-        rhs = np.hstack([f, tau]).ravel()[free]
+        rhs = np.where(free, np.hstack([f, tau]).ravel(), 0.0)
         say(f"static tensor: loading {k + 1} of 6 ({'xx yy zz yz xz xy'.split()[k]})")
-        args = (net, free, rhs, positions) if "amg" in solver else (net, free, rhs)
-        x_f, its, _ = run(*args, rtol, maxiter, lambda i, r: None)
-        x = np.zeros(6 * n)
-        x[free] = x_f
-        x = x.reshape(n, 6)
+        x_f, its, _ = _solve(solver, net, free, rhs, positions, rtol, maxiter, lambda i, r: None)
+        x = np.where(free, x_f, 0.0).reshape(n, 6)
         f2, tau2 = net.forces(x[:, :3], x[:, 3:], stretch)
         worst = max(worst, float(np.linalg.norm(np.hstack([f2, tau2]).ravel()[free])) / max(np.linalg.norm(rhs), 1e-300))
         F = net.bond_forces(x[:, :3], x[:, 3:], stretch)
@@ -285,17 +278,111 @@ def amg_hierarchy(K, B):
         np.random.set_state(state)
 
 
-def _solve_amg(net, free, rhs, positions, rtol, maxiter, progress):
-    """K assembled on the free dofs; smoothed-aggregation AMG (rigid-body modes as near-null space), one
-    V-cycle per CG iteration."""
+def _solve(solver: str, net, free, b, positions, rtol, maxiter, progress):
+    """K_ff x = b by ``solver`` (``free``: the free dofs, bool (6 N,); ``b`` full, zero on prescribed dofs):
+    (x full, iterations, set-up seconds), under the threads that suit it (:func:`solver_threads`)."""
+    from threadpoolctl import threadpool_limits
 
+    run = {"direct": _solve_direct, "amg": _solve_amg, "block-amg": _solve_block_amg, "cg": _solve_cg,
+           "cg-jax": _solve_cg_jax}[solver]
+    with threadpool_limits(limits=solver_threads(solver)):
+        return run(net, free, b, positions, rtol, maxiter, progress)
+
+
+def thread_budget() -> int:
+    """The threads this process may use: the smallest thread count of its loaded BLAS and OpenMP libraries
+    (the CPUs it may run on, or less where a job set a limit: opalflow.runs.jobs.run_job)."""
+    import scipy.linalg  # noqa: F401 - numpy's and scipy's BLAS loaded: their limit is the job's
+    from threadpoolctl import threadpool_info
+
+    counts = [lib["num_threads"] for lib in threadpool_info() if lib.get("num_threads")]
+    return max(1, min(counts, default=len(os.sched_getaffinity(0))))
+
+
+def solver_threads(solver: str) -> int:
+    """BLAS/OpenMP threads for ``solver``: the iterative ones run sparse products and vector sums that are
+    bound by memory, not arithmetic, and lose 3-6x to thread contention on a loaded machine (measured,
+    bench/results/static_threads.json): one thread; the direct factor (dense supernodes, BLAS 3) gains
+    from every thread it is given (x1.8 at 140 k dofs on 2 cores): the whole budget."""
+    return thread_budget() if solver == "direct" else 1
+
+
+class Factor:
+    """A sparse Cholesky (LL^T) factor of a symmetric positive definite K: MKL PARDISO (pypardiso; METIS
+    nested-dissection ordering, supernodes with BLAS 3, the threads of :func:`thread_budget`).  Measured on the
+    quickstart's network at 140 k dofs: factor 4.1 s on 2 cores where CHOLMOD through cholespy (no METIS,
+    simplicial) took 96 s (bench/results/static_quickstart.json).  ``solve`` takes one right-hand side (n,) or
+    several (n, k)."""
+
+    def __init__(self, K):
+        import scipy.sparse as sp
+        from threadpoolctl import threadpool_limits
+
+        pypardiso = _pardiso()
+        K = K.tocsr()
+        K.sum_duplicates()
+        rows = np.repeat(np.arange(K.shape[0], dtype=np.int32), np.diff(K.indptr))
+        # the upper triangle without the zeros (decoupled prescribed dofs, the blocks' structural zeros: half
+        # of the stored entries), straight from the sorted rows (scipy's triu goes through coordinates: 10x)
+        keep = (K.indices >= rows) & (K.data != 0)
+        indptr = np.concatenate([[0], np.cumsum(np.bincount(rows[keep], minlength=K.shape[0]))])
+        self.U = sp.csr_matrix((K.data[keep], K.indices[keep], indptr), shape=K.shape)
+        self.U.has_sorted_indices = True
+        self.size = self.U.shape[0]
+        self.pardiso = pypardiso.PyPardisoSolver(mtype=2)          # real symmetric positive definite
+        self.pardiso.size_limit_storage = 0                          # remember the matrix by its hash
+        self.threads = thread_budget()
+        with threadpool_limits(limits=self.threads):
+            self.pardiso.factorize(self.U)
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        from threadpoolctl import threadpool_limits
+
+        with threadpool_limits(limits=self.threads):
+            return self.pardiso.solve(self.U, np.asarray(b, float))
+
+    def __del__(self):
+        try:
+            self.pardiso.free_memory(everything=True)
+        except Exception:       # interpreter shutdown: MKL may be gone already
+            pass
+
+
+def _pardiso():
+    """pypardiso, told where the mkl wheel put libmkl_rt (else it searches all of sys.prefix, 0.3 s a solver)."""
+    import glob
+    import sys
+
+    found = sorted(glob.glob(os.path.join(sys.prefix, "lib", "libmkl_rt.so*")), key=len)
+    if found:
+        os.environ.setdefault("PYPARDISO_MKL_RT", found[0])
+    import pypardiso
+
+    return pypardiso
+
+
+def _solve_direct(net, free, b, positions, rtol, maxiter, progress):
+    """K (prescribed dofs decoupled) factorised (:class:`Factor`) and solved once: no iterations, a
+    residual at round-off (checked by the caller)."""
     t = time.perf_counter()
-    K = assemble(net)[free][:, free].tocsr()
-    B = rigid_body_modes(positions)[free]
-    ml = amg_hierarchy(K, B)
-    vcycle = ml.aspreconditioner(cycle="V")
+    factor = Factor(block_matrix(net, free)[0])
     setup = time.perf_counter() - t
-    x, iterations = pcg(lambda v: K @ v, vcycle.matvec, rhs, rtol, maxiter, progress)
+    x = factor.solve(b)
+    progress(1, 0.0)
+    return x, 1, setup
+
+
+def _solve_amg(net, free, b, positions, rtol, maxiter, progress):
+    """K on all dofs in 6 x 6 blocks, prescribed dofs decoupled (:func:`block_matrix`); smoothed-aggregation
+    AMG that aggregates particles (the blocks), the six rigid-body modes (zero on prescribed dofs) as
+    near-null space; one V-cycle per CG iteration."""
+    t = time.perf_counter()
+    K = block_matrix(net, free)[0]
+    K.sum_duplicates()
+    B = np.where(free[:, None], rigid_body_modes(positions), 0.0)
+    vcycle = amg_hierarchy(K, B).aspreconditioner(cycle="V")
+    setup = time.perf_counter() - t
+    x, iterations = pcg(lambda v: K @ v, vcycle.matvec, b, rtol, maxiter, progress)
     return x, iterations, setup
 
 
@@ -370,48 +457,65 @@ def _jacobi_inverse(blocks: np.ndarray, free: np.ndarray) -> np.ndarray:
     return np.linalg.inv(blocks)
 
 
-def translational_matrix(net: BondNetwork, free_u: np.ndarray, dtype=np.float32, chunk: int = 1_000_000):
-    """K_uu, the translation-translation part of K, as a 3 x 3 block sparse (BSR) matrix for the
-    preconditioner: the bonds' A = a_r n n^T + a_s P off the diagonal (-A) and summed on it; prescribed
-    dofs (``free_u`` False, (N, 3)) decoupled with their diagonal kept.  (N + 2 M) blocks of 9 numbers in
-    ``dtype`` (single precision by default: a preconditioner needs no more, and the paper's sample then
-    fits in memory), written straight into row order (a counting sort), without a coordinate list."""
+def block_layout(net: BondNetwork):
+    """Where the blocks of K lie in a block sparse row (BSR) matrix of one block per particle pair:
+    (indptr, indices, pos), ``pos`` the storage slot of each particle's diagonal block (first N), each bond's
+    (i, j) block (next M) and its (j, i) block (last M), rows and columns in order (a canonical matrix)."""
+    n, m = net.n_particles, len(net.L)
+    rows = np.concatenate([np.arange(n), net.i, net.j])
+    cols = np.concatenate([np.arange(n), net.j, net.i])
+    order = np.lexsort((cols, rows))
+    pos = np.empty(n + 2 * m, np.int64)
+    pos[order] = np.arange(n + 2 * m)
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=n))])
+    return indptr, cols[order].astype(np.int32), pos
+
+
+def pair_blocks(net: BondNetwork, sel=slice(None), size: int = 6):
+    """The blocks of the bonds in ``sel``: (K_ii, K_jj, K_ij, K_ji), each (m, size, size), the 6 x 6 blocks of
+    :func:`bond_blocks` (``size`` 3: their translational parts, A and -A)."""
+    A, C, R, B = _bond_parts(net, sel)
+    if size == 3:
+        return A, A, -A, -A
+    RB, RmB = R + B, R - B
+    two = lambda a, b, c, d: np.concatenate([np.concatenate([a, b], 2), np.concatenate([c, d], 2)], 1)  # noqa: E731
+    return two(A, C, -C, RB), two(A, -C, C, RB), two(-A, C, C, RmB), two(-A, -C, -C, RmB)
+
+
+def block_matrix(net: BondNetwork, free=None, *, size: int = 6, dtype=np.float64, chunk: int = 1_000_000):
+    """K as a BSR matrix of ``size`` x ``size`` blocks (6: all of K; 3: K_uu, its translational part, what
+    the block-amg preconditioner needs), written straight into its slots (:func:`block_layout`; no
+    coordinate list: the paper-scale memory is the blocks alone).  ``free`` (N, size) bool: the prescribed
+    dofs are decoupled, their diagonal kept (K x = b with b zero there gives x zero there: the boundary
+    conditions without slicing, the block structure intact for AMG and the factor)."""
     import scipy.sparse as sp
 
     n, m = net.n_particles, len(net.L)
-    rows = np.concatenate([np.arange(n), net.i, net.j])
-    counts = np.bincount(rows, minlength=n)
-    indptr = np.concatenate([[0], np.cumsum(counts)])
-    order = np.argsort(rows, kind="stable")
-    del rows
-    pos = np.empty(n + 2 * m, np.int64)
-    pos[order] = np.arange(n + 2 * m)
-    cols = np.empty(n + 2 * m, np.int32)
-    cols[pos[:n]] = np.arange(n)
-    cols[pos[n:n + m]] = net.j
-    cols[pos[n + m:]] = net.i
-    del order
-    data = np.zeros((n + 2 * m, 3, 3), dtype)
-    diag = np.zeros((n, 3, 3))
-    fu = free_u.astype(float)
+    indptr, cols, pos = block_layout(net)
+    data = np.zeros((n + 2 * m, size, size), dtype)
+    diag = np.zeros((n, size, size))
+    fu = None if free is None else free.reshape(n, size).astype(float)
     for start in range(0, m, chunk):
-        sel = slice(start, start + chunk)
+        sel = slice(start, min(start + chunk, m))
         i, j = net.i[sel], net.j[sel]
-        A = _bond_parts(net, sel)[0]
-        for a in range(3):
-            for b in range(3):
-                diag[:, a, b] += np.bincount(i, A[:, a, b], n) + np.bincount(j, A[:, a, b], n)
-        idx = np.arange(start, start + len(i))
-        data[pos[n + idx]] = -A * fu[i][:, :, None] * fu[j][:, None, :]
-        data[pos[n + m + idx]] = -A * fu[j][:, :, None] * fu[i][:, None, :]
-    kept = diag[:, np.arange(3), np.arange(3)].copy()
-    diag *= fu[:, :, None] * fu[:, None, :]
-    diag[:, np.arange(3), np.arange(3)] += np.where(free_u, 0.0, kept)
+        Kii, Kjj, Kij, Kji = pair_blocks(net, sel, size)
+        for a in range(size):
+            for b in range(size):
+                diag[:, a, b] += np.bincount(i, Kii[:, a, b], n) + np.bincount(j, Kjj[:, a, b], n)
+        if fu is not None:
+            Kij = Kij * fu[i][:, :, None] * fu[j][:, None, :]
+            Kji = Kji * fu[j][:, :, None] * fu[i][:, None, :]
+        data[pos[n + sel.start:n + sel.stop]] = Kij
+        data[pos[n + m + sel.start:n + m + sel.stop]] = Kji
+    if fu is not None:
+        kept = diag[:, np.arange(size), np.arange(size)].copy()
+        diag *= fu[:, :, None] * fu[:, None, :]
+        # (a particle without bonds has nothing to keep: 1 there)
+        diag[:, np.arange(size), np.arange(size)] += np.where(fu > 0, 0.0, np.where(kept != 0, kept, 1.0))
     data[pos[:n]] = diag
-    del pos
-    K = sp.bsr_matrix((data, cols, indptr), shape=(3 * n, 3 * n))
-    K.sort_indices()
-    return K
+    K = sp.bsr_matrix((data, cols, indptr), shape=(size * n, size * n))
+    K.sum_duplicates()          # two bonds between one pair (periodic images of a small box)
+    return K, pos
 
 
 def _operator(net: BondNetwork, free: np.ndarray, use_jax: bool, chunk: int = 1 << 21):
@@ -463,13 +567,7 @@ def _operator(net: BondNetwork, free: np.ndarray, use_jax: bool, chunk: int = 1 
     return matvec, jnp.dot, jnp.asarray
 
 
-def _full(free: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    b = np.zeros(free.size)
-    b[free] = rhs
-    return b
-
-
-def _solve_cg(net, free, rhs, rtol, maxiter, progress, use_jax=False):
+def _solve_cg(net, free, rhs, positions, rtol, maxiter, progress, use_jax=False):
     """Matrix-free PCG with the 6 x 6 block-Jacobi preconditioner (numpy, or the operator in JAX)."""
     t = time.perf_counter()
     n = net.n_particles
@@ -484,17 +582,17 @@ def _solve_cg(net, free, rhs, rtol, maxiter, progress, use_jax=False):
         import jax
 
         precondition = jax.jit(precondition)
-    b = array(_full(free, rhs))
+    b = array(rhs)
     matvec(b)
     precondition(b)
     setup = time.perf_counter() - t
     x, iterations = pcg(matvec, precondition, b, rtol, maxiter, progress, dot=dot)
-    return np.asarray(x)[free], iterations, setup
+    return np.asarray(x), iterations, setup
 
 
-def _solve_cg_jax(net, free, rhs, rtol, maxiter, progress):
+def _solve_cg_jax(net, free, rhs, positions, rtol, maxiter, progress):
     """The block-Jacobi PCG with the operator jit-compiled by JAX (float64; a GPU where JAX has one)."""
-    return _solve_cg(net, free, rhs, rtol, maxiter, progress, use_jax=True)
+    return _solve_cg(net, free, rhs, positions, rtol, maxiter, progress, use_jax=True)
 
 
 def _solve_block_amg(net, free, rhs, positions, rtol, maxiter, progress):
@@ -507,7 +605,8 @@ def _solve_block_amg(net, free, rhs, positions, rtol, maxiter, progress):
     n = net.n_particles
     matvec, dot, array = _operator(net, free, True)
     mask = free.reshape(n, 6)
-    Kuu = translational_matrix(net, mask[:, :3])
+    Kuu = block_matrix(net, mask[:, :3], size=3, dtype=np.float32)[0]
+    Kuu.sum_duplicates()
     B = rigid_body_modes(positions).reshape(n, 6, 6)[:, :3, :].reshape(3 * n, 6).astype(Kuu.dtype)
     ml = amg_hierarchy(Kuu, B)
     vcycle = ml.aspreconditioner(cycle="V")
@@ -521,8 +620,8 @@ def _solve_block_amg(net, free, rhs, positions, rtol, maxiter, progress):
         z[:, 3:] = np.einsum("nij,nj->ni", inv_rot, v[:, 3:])
         return array(maskf * z.ravel())
 
-    b = array(_full(free, rhs))
+    b = array(rhs)
     matvec(b)
     setup = time.perf_counter() - t
     x, iterations = pcg(matvec, precondition, b, rtol, maxiter, progress, dot=dot)
-    return np.asarray(x)[free], iterations, setup
+    return np.asarray(x), iterations, setup

@@ -90,7 +90,7 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
     """Build the scene, solve the compression, write the results (see the module docstring)."""
     t0 = time.perf_counter()
     c = spec.compression
-    s = scene_of(spec).build(spec, say)
+    s = scene_of(spec).structure(spec, say)
     if np.all(s.periodic):
         return run_tensor(spec, s, out, t0, say)
     deck, net, info, _ = network_run(spec, s, out, t0, launcher="in-process (static solve)")
@@ -128,14 +128,13 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
                     f"{res.residual:.1e}, {res.seconds:.1f} s)",
     }
     summary["reference"] = reference_errors(summary, info["references"])
-    summary["wall_s"] = time.perf_counter() - t0
 
     def files(stage):
         _write_h5(stage("results.h5"), data, res, sigma_unit, strain_unit, snapshots, summary)
         _plots(stage, data, res, snapshots, strain_unit, c.snapshot_strains)
 
     sides = "periodic" if s.periodic[0] else "open"       # the structure's, whatever section set it
-    return finish(out, summary, _report(spec, info, summary, res, sides), files=files)
+    return finish(out, summary, lambda: _report(spec, info, summary, res, sides), files=files, started=t0)
 
 
 def _record(spec: BpmWorkflow, info: dict) -> RunRecord:
@@ -237,7 +236,6 @@ def run_tensor(spec: BpmWorkflow, s, out: Path, t0: float, say=print) -> dict:
                     f"(static, periodic, {res.solver}: {sum(res.iterations)} iterations, {res.seconds:.1f} s)",
     }
     summary["reference"] = reference_errors(summary, info["references"])
-    summary["wall_s"] = time.perf_counter() - t0
     names = [f"{'xyz'[a]}{'xyz'[b]}" for a, b in VOIGT]
     lines = [f"# {spec.name}: static stiffness tensor", "",
              f"{s.n_particles} particles, {s.n_bonds} bonds, periodic in x, y and z; six unit macroscopic strains "
@@ -253,4 +251,5 @@ def run_tensor(spec: BpmWorkflow, s, out: Path, t0: float, say=print) -> dict:
               f"{res.residual:.1e}; {res.seconds:.1f} s, peak memory {res.peak_memory_MiB:.0f} MiB."]
     voigt = ["xx", "yy", "zz", "yz", "xz", "xy"]
     tensor = h5_bytes(lambda h: put(h, "stiffness_tensor_GPa", C, "GPa", voigt, rows=voigt), method="static")
-    return finish(out, summary, "\n".join(lines), files=lambda stage: stage("results.h5").write_bytes(tensor))
+    return finish(out, summary, "\n".join(lines), files=lambda stage: stage("results.h5").write_bytes(tensor),
+                  started=t0)

@@ -205,14 +205,33 @@ def refuse_finished(folder: str | os.PathLike) -> None:
                         "folder or remove it first")
 
 
+#: the command line's run: its folder and when the process started (time.perf_counter's clock)
+_COMMAND: dict = {}
+
+
+def command_run(folder: str | os.PathLike) -> None:
+    """The command line runs into ``folder``: that run's wall time counts from the process's start
+    (Python's start and the imports are part of what the user waits for)."""
+    age = 0.0
+    try:       # /proc/self/stat field 22: the start in clock ticks after boot; /proc/uptime: now
+        start = int(Path("/proc/self/stat").read_text().rsplit(")", 1)[1].split()[19]) / os.sysconf("SC_CLK_TCK")
+        age = max(0.0, float(Path("/proc/uptime").read_text().split()[0]) - start)
+    except (OSError, ValueError, IndexError):
+        pass
+    _COMMAND.update(folder=Path(folder).resolve(), started=time.perf_counter() - age)
+
+
 def finish(folder: str | os.PathLike, summary: dict, report: str | Callable[[], str], *,
-           files: Callable[[Callable[[str], Path]], None] | None = None, record: RunRecord | None = None) -> dict:
+           files: Callable[[Callable[[str], Path]], None] | None = None, record: RunRecord | None = None,
+           started: float | None = None) -> dict:
     """Write a run's results all or none and mark it finished; returns the summary as written.
 
     ``files(stage)`` writes the other result files (results.h5, plots) to ``stage(name)``; report.md (``report``
     or, when it is a function, what it returns after ``files``) and then summary.json (the mark of a
     finished run) are staged last.  Keys that ``build`` wrote into
-    summary.json (structure statistics) and the new summary lacks are kept.
+    summary.json (structure statistics) and the new summary lacks are kept.  ``started``
+    (``time.perf_counter()`` when the run began): ``wall_s`` is set after the files, so it covers the
+    analysis and the writing too (and, for the command line's run, everything since the process started).
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -220,6 +239,10 @@ def finish(folder: str | os.PathLike, summary: dict, report: str | Callable[[], 
     with staged_files(folder) as stage:
         if files is not None:
             files(stage)
+        if started is not None:
+            if _COMMAND.get("folder") == folder.resolve():
+                started = min(started, _COMMAND["started"])
+            summary["wall_s"] = time.perf_counter() - started
         if before is not None and before.get("state") == "built":
             summary = {**{k: v for k, v in before.items() if k not in ("state", "headline", "timings_s")},
                        **summary, **({"build_timings_s": before["timings_s"]} if "timings_s" in before else {})}
