@@ -63,6 +63,8 @@ def test_every_solver_gives_the_same_modulus():
         other = solve_compression(*args, solver=solver, say=lambda m: None)
         assert other.modulus_MPa == pytest.approx(amg.modulus_MPa, rel=1e-6), solver
         assert other.residual < 1.01e-6 and other.iterations > amg.iterations, solver
+    direct = solve_compression(*args, solver="direct", say=lambda m: None)      # the factor: exact to round-off
+    assert direct.modulus_MPa == pytest.approx(amg.modulus_MPa, rel=1e-6) and direct.residual < 1e-12
     assert amg.residual < 1.01e-6
     # linear: half the strain, half the stress, the same modulus
     half = solve_compression(*args, strain=5e-5, solver="amg", say=lambda m: None)
@@ -194,3 +196,19 @@ def test_stiffness_tensor_of_a_disordered_periodic_network():
     # the affine tensor: the same loadings without relaxation (iterations capped at zero)
     affine = solve_tensor(net, data.positions, volume, solver="cg", maxiter=0, say=lambda m: None).C_GPa
     assert np.linalg.eigvalsh(affine - C).min() > -1e-9 * C.max() and np.trace(affine - C) > 1e-3 * np.trace(C)
+
+
+def test_jax_path_runs_on_the_default_device():
+    """cg-jax keeps the operator, the preconditioner and the CG vectors as JAX arrays on JAX's default
+    device: the same code runs on a GPU where JAX has one (this machine: the CPU; bench/results says where a GPU
+    figure was measured)."""
+    import jax
+
+    from opalflow.bpm.static import _operator
+
+    _, _, net = scene("opal_quick", SMALL_OPAL)
+    free = np.ones(6 * net.n_particles, bool)
+    matvec, dot, array = _operator(net, free, True)
+    y = matvec(array(np.ones(free.size)))
+    assert isinstance(y, jax.Array) and y.devices() == {jax.devices()[0]}
+    assert isinstance(dot(y, y), jax.Array)

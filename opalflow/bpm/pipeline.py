@@ -81,7 +81,7 @@ def dynamic_steps(spec: BpmWorkflow, deck: CompressionDeck) -> int:
 def cost_facts(spec: BpmWorkflow) -> dict:
     """What :mod:`opalflow.runs.plan` prices a run by: its method and solver, particles, bonds, (dynamic)
     steps, and the seconds the structure and deck took to build here.  Writes nothing."""
-    from opalflow.bpm.static import AMG_MAX_BONDS
+    from opalflow.bpm.static import auto_solver
 
     t = time.perf_counter()
     s = scene_of(spec).structure(spec)
@@ -92,7 +92,7 @@ def cost_facts(spec: BpmWorkflow) -> dict:
         facts["solver"] = "amg"
     elif spec.compression.method == "static":
         solver = spec.compression.solver
-        facts["solver"] = ("amg" if s.n_bonds <= AMG_MAX_BONDS else "block-amg") if solver == "auto" else solver
+        facts["solver"] = auto_solver(s.n_particles, s.n_bonds) if solver == "auto" else solver
     else:
         facts["steps"] = dynamic_steps(spec, deck)
     return facts

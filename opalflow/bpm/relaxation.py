@@ -29,8 +29,10 @@ KEPT = ("system", "groups", "bonds", "integration")
 
 
 def relaxation_deck(deck: CompressionDeck, *, steps: int, damping: float = 1.0, strain: float = 1e-4,
-                    every: int = 100) -> str:
-    """The relaxation input script for ``deck`` (see the module docstring); it reads ``data.lmp``."""
+                    every: int = 100, target_MPa: float | None = None, tolerance: float = 1e-3) -> str:
+    """The relaxation input script for ``deck`` (see the module docstring); it reads ``data.lmp``.  With
+    ``target_MPa`` (the answer, known) the run stops (``fix halt``) at the first sample within ``tolerance``
+    of it: the step count a user who knew the answer would choose."""
     parts = re.split(r"(?m)^(?=# --- )", deck.in_lmp)
     kept = [p for p in parts if any(p.startswith(f"# --- {b}:") for b in KEPT)]
     if len(kept) != len(KEPT):
@@ -48,7 +50,11 @@ def relaxation_deck(deck: CompressionDeck, *, steps: int, damping: float = 1.0, 
     else:
         hold, force = "fix             hold top setforce NULL NULL 0.0", "f_hold[3]"
     sense = deck.loading_sense
+    halt = "# (no stop before the last step)"
+    if target_MPa is not None:
+        halt = (f"variable        relax_error equal abs(v_modulus_MPa/{num(target_MPa)}-1)\n"
+                f"fix             stop all halt {num(every)} v_relax_error < {num(tolerance)} error continue")
     return f"# opalflow: damped relaxation to the static modulus ({deck.loading})\n" + text + render(
         "relax", dz=num(-sense * strain * deck.height_nm), hold=hold, gamma=num(gamma),
         gamma_spin=num(gamma * 0.4 * radius**2), force_z=f"{'-' if sense < 0 else ''}{force}",
-        area_strain=num(deck.area_nm2 * strain), every=num(every), steps=num(steps))
+        area_strain=num(deck.area_nm2 * strain), every=num(every), steps=num(steps), halt=halt)

@@ -41,15 +41,15 @@ from opalflow.spec import InputError
 
 #: ``solver = "auto"``: the direct factor up to this many dofs, the assembled AMG up to AMG_MAX_BONDS bonds,
 #: block-amg above (12.7 GiB for the paper's 17.5 M bonds); bench/results/static_quickstart.json
-DIRECT_MAX_DOFS = 300_000
+DIRECT_MAX_DOFS = 100_000
 AMG_MAX_BONDS = 500_000
 
 
-def auto_solver(net: BondNetwork) -> str:
+def auto_solver(n_particles: int, n_bonds: int) -> str:
     """``solver = "auto"``: the fastest design that fits at the network's size (measured, see above)."""
-    if 6 * net.n_particles <= DIRECT_MAX_DOFS:
+    if 6 * n_particles <= DIRECT_MAX_DOFS:
         return "direct"
-    return "amg" if len(net.L) <= AMG_MAX_BONDS else "block-amg"
+    return "amg" if n_bonds <= AMG_MAX_BONDS else "block-amg"
 
 
 class LooseParticlesError(InputError):
@@ -139,7 +139,7 @@ def solve_compression(net: BondNetwork, positions: np.ndarray, fixed: np.ndarray
     if solver not in SOLVERS:
         raise InputError(f"compression.solver = {solver!r}: must be one of {', '.join(SOLVERS)}")
     if solver == "auto":
-        solver = auto_solver(net)
+        solver = auto_solver(net.n_particles, len(net.L))
     loose = loose_particles(net, fixed)
     if loose.any() and not drop_loose:
         raise LooseParticlesError(loose_message(int(loose.sum())))
@@ -179,7 +179,11 @@ def solve_compression(net: BondNetwork, positions: np.ndarray, fixed: np.ndarray
             left = f", ~{max(0.0, math.log(r / rtol) / per_it / rate):.0f} s left"
         say(f"static solve: iteration {k}, relative residual {r:.2e} (target {rtol:g}), {rate:.2f} it/s{left}")
 
-    x_f, iterations, setup = _solve(solver, net, free, rhs, positions, rtol, maxiter, progress)
+    prepared = Prepared(solver, net, free, positions)
+    setup = prepared.setup_seconds
+    if solver == "direct":
+        say(f"static solve: factorised in {setup:.1f} s ({prepared.threads} threads)")
+    x_f, iterations = prepared.solve(rhs, rtol, maxiter, progress)
     x = (x_p.ravel() + np.where(free, x_f, 0.0)).reshape(n, 6)
     reaction = net.matvec(x.ravel()).reshape(n, 6)           # K x: the force the supports apply
     force_top = -sense * float(np.sum(reaction[top & ~fixed & ~loose, 2]))    # > 0 in the loading's sense
@@ -224,7 +228,7 @@ def solve_tensor(net: BondNetwork, positions: np.ndarray, volume: float, *, solv
     if solver not in SOLVERS:
         raise InputError(f"compression.solver = {solver!r}: must be one of {', '.join(SOLVERS)}")
     if solver == "auto":
-        solver = auto_solver(net)
+        solver = auto_solver(net.n_particles, len(net.L))
     t0 = time.perf_counter()
     n = net.n_particles
     label = clusters(net)
@@ -241,6 +245,7 @@ def solve_tensor(net: BondNetwork, positions: np.ndarray, volume: float, *, solv
     zero = np.zeros((n, 3))
     C = np.zeros((6, 6))
     iterations, worst = [], 0.0
+    prepared = Prepared(solver, net, free, positions)      # one set-up (matrix, AMG or factor), six loadings
     for k, (a, b) in enumerate(VOIGT):
         E = np.zeros((3, 3))
         E[a, b] = E[b, a] = 1.0 if a == b else 0.5
@@ -248,7 +253,7 @@ def solve_tensor(net: BondNetwork, positions: np.ndarray, volume: float, *, solv
         f, tau = net.forces(zero, zero, stretch)
         rhs = np.where(free, np.hstack([f, tau]).ravel(), 0.0)
         say(f"static tensor: loading {k + 1} of 6 ({'xx yy zz yz xz xy'.split()[k]})")
-        x_f, its, _ = _solve(solver, net, free, rhs, positions, rtol, maxiter, lambda i, r: None)
+        x_f, its = prepared.solve(rhs, rtol, maxiter, lambda i, r: None)
         x = np.where(free, x_f, 0.0).reshape(n, 6)
         f2, tau2 = net.forces(x[:, :3], x[:, 3:], stretch)
         worst = max(worst, float(np.linalg.norm(np.hstack([f2, tau2]).ravel()[free])) / max(np.linalg.norm(rhs), 1e-300))
@@ -264,7 +269,11 @@ def solve_tensor(net: BondNetwork, positions: np.ndarray, volume: float, *, solv
 
 def amg_hierarchy(K, B):
     """Smoothed-aggregation AMG of ``K`` with near-null space ``B`` (pyamg; Jacobi-smoothed prolongation,
-    omega 4/3).  pyamg starts its spectral-radius estimates from numpy's global random generator: it is
+    omega 4/3; the rigid-body modes taken as they are: pyamg's default of improving them by four Gauss-Seidel
+    sweeps each costs 40 % of the set-up and saves no iteration; one forward Gauss-Seidel sweep before and one
+    backward after the coarse correction (a symmetric V-cycle, as CG needs) instead of two symmetric ones:
+    10-40 % more iterations at half the cost each; measured at 140 k dofs, amg 5.3 -> 4.7 s, block-amg
+    9.0 -> 7.4 s).  pyamg starts its spectral-radius estimates from numpy's global random generator: it is
     seeded here (and restored after), so the same matrix gives the same hierarchy, and the same solve to
     the last digit, in any process (a local pool, a Dask worker, a SLURM task)."""
     import pyamg
@@ -273,20 +282,35 @@ def amg_hierarchy(K, B):
     np.random.seed(20240901)
     try:
         return pyamg.smoothed_aggregation_solver(K, B=B, strength=("symmetric", {"theta": 0.0}), max_coarse=500,
-                                                 smooth=("jacobi", {"omega": 4.0 / 3.0}))
+                                                 smooth=("jacobi", {"omega": 4.0 / 3.0}), improve_candidates=None,
+                                                 presmoother=("block_gauss_seidel", {"sweep": "forward"}),
+                                                 postsmoother=("block_gauss_seidel", {"sweep": "backward"}))
     finally:
         np.random.set_state(state)
 
 
-def _solve(solver: str, net, free, b, positions, rtol, maxiter, progress):
-    """K_ff x = b by ``solver`` (``free``: the free dofs, bool (6 N,); ``b`` full, zero on prescribed dofs):
-    (x full, iterations, set-up seconds), under the threads that suit it (:func:`solver_threads`)."""
-    from threadpoolctl import threadpool_limits
+class Prepared:
+    """``solver`` set up once for the network with free dofs ``free`` (bool (6 N,)): the assembled matrix,
+    the AMG hierarchy or the factor, reused by every loading of the sample (the stiffness tensor's six).
+    ``solve(b, rtol, maxiter, progress)`` -> (x, iterations) for ``b`` full, zero on prescribed dofs; both run
+    under the threads that suit the solver (:func:`solver_threads`)."""
 
-    run = {"direct": _solve_direct, "amg": _solve_amg, "block-amg": _solve_block_amg, "cg": _solve_cg,
-           "cg-jax": _solve_cg_jax}[solver]
-    with threadpool_limits(limits=solver_threads(solver)):
-        return run(net, free, b, positions, rtol, maxiter, progress)
+    def __init__(self, solver: str, net: BondNetwork, free: np.ndarray, positions: np.ndarray):
+        from threadpoolctl import threadpool_limits
+
+        t = time.perf_counter()
+        self.threads = solver_threads(solver)
+        prepare = {"direct": _prepare_direct, "amg": _prepare_amg, "block-amg": _prepare_block_amg,
+                   "cg": _prepare_cg, "cg-jax": _prepare_cg_jax}[solver]
+        with threadpool_limits(limits=self.threads):
+            self._solve = prepare(net, free, positions)
+        self.setup_seconds = time.perf_counter() - t
+
+    def solve(self, b: np.ndarray, rtol: float, maxiter: int, progress) -> tuple[np.ndarray, int]:
+        from threadpoolctl import threadpool_limits
+
+        with threadpool_limits(limits=self.threads):
+            return self._solve(b, rtol, maxiter, progress)
 
 
 def thread_budget() -> int:
@@ -361,29 +385,22 @@ def _pardiso():
     return pypardiso
 
 
-def _solve_direct(net, free, b, positions, rtol, maxiter, progress):
-    """K (prescribed dofs decoupled) factorised (:class:`Factor`) and solved once: no iterations, a
-    residual at round-off (checked by the caller)."""
-    t = time.perf_counter()
+def _prepare_direct(net, free, positions):
+    """K (prescribed dofs decoupled) factorised (:class:`Factor`); each solve one pair of triangular solves:
+    no iterations, a residual at round-off (checked by the caller)."""
     factor = Factor(block_matrix(net, free)[0])
-    setup = time.perf_counter() - t
-    x = factor.solve(b)
-    progress(1, 0.0)
-    return x, 1, setup
+    return lambda b, rtol, maxiter, progress: (factor.solve(b), 1)
 
 
-def _solve_amg(net, free, b, positions, rtol, maxiter, progress):
+def _prepare_amg(net, free, positions):
     """K on all dofs in 6 x 6 blocks, prescribed dofs decoupled (:func:`block_matrix`); smoothed-aggregation
     AMG that aggregates particles (the blocks), the six rigid-body modes (zero on prescribed dofs) as
     near-null space; one V-cycle per CG iteration."""
-    t = time.perf_counter()
     K = block_matrix(net, free)[0]
     K.sum_duplicates()
     B = np.where(free[:, None], rigid_body_modes(positions), 0.0)
     vcycle = amg_hierarchy(K, B).aspreconditioner(cycle="V")
-    setup = time.perf_counter() - t
-    x, iterations = pcg(lambda v: K @ v, vcycle.matvec, b, rtol, maxiter, progress)
-    return x, iterations, setup
+    return lambda b, rtol, maxiter, progress: pcg(lambda v: K @ v, vcycle.matvec, b, rtol, maxiter, progress)
 
 
 def pcg(matvec, precondition, b, rtol: float, maxiter: int, progress, dot=np.dot):
@@ -567,9 +584,8 @@ def _operator(net: BondNetwork, free: np.ndarray, use_jax: bool, chunk: int = 1 
     return matvec, jnp.dot, jnp.asarray
 
 
-def _solve_cg(net, free, rhs, positions, rtol, maxiter, progress, use_jax=False):
+def _prepare_cg(net, free, positions, use_jax=False):
     """Matrix-free PCG with the 6 x 6 block-Jacobi preconditioner (numpy, or the operator in JAX)."""
-    t = time.perf_counter()
     n = net.n_particles
     matvec, dot, array = _operator(net, free, use_jax)
     inv = array(_jacobi_inverse(diagonal_blocks(net), free))
@@ -582,34 +598,33 @@ def _solve_cg(net, free, rhs, positions, rtol, maxiter, progress, use_jax=False)
         import jax
 
         precondition = jax.jit(precondition)
-    b = array(rhs)
-    matvec(b)
-    precondition(b)
-    setup = time.perf_counter() - t
-    x, iterations = pcg(matvec, precondition, b, rtol, maxiter, progress, dot=dot)
-    return np.asarray(x), iterations, setup
+    probe = array(np.zeros(free.size))
+    matvec(probe)                 # compiled here (JAX): the set-up, not the first iteration
+    precondition(probe)
+
+    def solve(b, rtol, maxiter, progress):
+        x, iterations = pcg(matvec, precondition, array(b), rtol, maxiter, progress, dot=dot)
+        return np.asarray(x), iterations
+    return solve
 
 
-def _solve_cg_jax(net, free, rhs, positions, rtol, maxiter, progress):
+def _prepare_cg_jax(net, free, positions):
     """The block-Jacobi PCG with the operator jit-compiled by JAX (float64; a GPU where JAX has one)."""
-    return _solve_cg(net, free, rhs, positions, rtol, maxiter, progress, use_jax=True)
+    return _prepare_cg(net, free, positions, use_jax=True)
 
 
-def _solve_block_amg(net, free, rhs, positions, rtol, maxiter, progress):
+def _prepare_block_amg(net, free, positions):
     """Matrix-free PCG (the JAX operator) preconditioned by smoothed-aggregation AMG on K_uu, the
     translations (assembled as 3 x 3 blocks, translations and rigid rotations as near-null space, one
     V-cycle), and 3 x 3 block Jacobi on the rotations: the long waves that make K ill-conditioned are
     translational, and K_uu is a quarter of K (the paper's sample fits in memory)."""
-
-    t = time.perf_counter()
     n = net.n_particles
     matvec, dot, array = _operator(net, free, True)
     mask = free.reshape(n, 6)
     Kuu = block_matrix(net, mask[:, :3], size=3, dtype=np.float32)[0]
     Kuu.sum_duplicates()
     B = rigid_body_modes(positions).reshape(n, 6, 6)[:, :3, :].reshape(3 * n, 6).astype(Kuu.dtype)
-    ml = amg_hierarchy(Kuu, B)
-    vcycle = ml.aspreconditioner(cycle="V")
+    vcycle = amg_hierarchy(Kuu, B).aspreconditioner(cycle="V")
     inv_rot = _jacobi_inverse(diagonal_blocks(net)[:, 3:, 3:], mask[:, 3:].ravel())
     maskf = free.astype(float)
 
@@ -620,8 +635,9 @@ def _solve_block_amg(net, free, rhs, positions, rtol, maxiter, progress):
         z[:, 3:] = np.einsum("nij,nj->ni", inv_rot, v[:, 3:])
         return array(maskf * z.ravel())
 
-    b = array(rhs)
-    matvec(b)
-    setup = time.perf_counter() - t
-    x, iterations = pcg(matvec, precondition, b, rtol, maxiter, progress, dot=dot)
-    return np.asarray(x), iterations, setup
+    matvec(array(np.zeros(free.size)))          # compiled here: the set-up
+
+    def solve(b, rtol, maxiter, progress):
+        x, iterations = pcg(matvec, precondition, array(b), rtol, maxiter, progress, dot=dot)
+        return np.asarray(x), iterations
+    return solve

@@ -62,16 +62,23 @@ def network_run(spec: BpmWorkflow, s, out: Path, t0: float, *, launcher: str, re
     data.lmp and the run record, begun (``resume``: the state file a session continues from).  Returns
     (deck, network, info, record)."""
     c = spec.compression
+    timings = {"structure": time.perf_counter() - t0}
     deck = compression_deck(spec, s)
     build_s = time.perf_counter() - t0
+    timings["deck"] = build_s - timings["structure"]
     data = deck.structure
+    t = time.perf_counter()
     net = stiffness_network(data, deck.coefficients)
     loose = loose_particles(net, data.groups["substrate"])
+    timings["network"] = time.perf_counter() - t
     if loose.any() and not c.drop_loose:     # refused before anything is written
         raise LooseParticlesError(loose_message(int(loose.sum())))
     out.mkdir(parents=True, exist_ok=True)
+    t = time.perf_counter()
     write_data(out / "data.lmp", data, title=f"opalflow {__version__} {spec.name} ({c.method})")
-    info = {"workflow": spec.name, "method": c.method, "spec": spec.to_dict(), "opalflow_version": __version__,
+    timings["data_file"] = time.perf_counter() - t
+    info = {"timings_s": timings, "workflow": spec.name, "method": c.method, "spec": spec.to_dict(),
+            "opalflow_version": __version__,
             "type_names": data.type_names, "n_particles": s.n_particles, "n_bonds": s.n_bonds,
             "solid_fraction": solid_fraction(s), "build_s": build_s, "references": spec.references(),
             "height_nm": deck.height_nm, "area_nm2": deck.area_nm2, "top_layer_particles": int(deck.top_layer.sum()),
@@ -102,6 +109,7 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
                             strain=STRAIN, solver=c.solver, drop_loose=c.drop_loose,
                             clamp_top=LOADINGS[c.loading].glued, sense=LOADINGS[c.loading].sense, say=say)
     E_GPa = res.modulus_MPa / 1e3
+    t = time.perf_counter()
     volumes = data.particle_volumes()
     sigma_unit = particle_stress(net, res.u, res.theta, volumes) / STRAIN       # per unit strain
     strain_unit = bond_strain(net, res.u) / STRAIN
@@ -118,6 +126,10 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
         "solver": res.solver, "iterations": res.iterations, "relative_residual": res.residual,
         "setup_s": res.setup_seconds, "solve_s": res.seconds - res.setup_seconds,
         "static_s": res.seconds, "peak_memory_MiB": res.peak_memory_MiB,
+        # where the time went: the run's steps (set-up: assembly and AMG or factor; analysis: particle stresses and
+        # bond strains; files: results.h5 and the plots), the whole in wall_s
+        "timings_s": {**info["timings_s"], "setup": res.setup_seconds, "solve": res.seconds - res.setup_seconds,
+                      "analysis": time.perf_counter() - t},
         "build_s": build_s, "complete": True, "loose_particles_left_out": res.loose,
         "stress_by_material": {f"{e:.4f}": v["by_material"] for e, v in snapshots.items()},
         "bond_strain_per_strain": {"mean": float(strain_unit.mean()), "std": float(strain_unit.std()),
@@ -130,8 +142,10 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
     summary["reference"] = reference_errors(summary, info["references"])
 
     def files(stage):
+        t = time.perf_counter()
         _write_h5(stage("results.h5"), data, res, sigma_unit, strain_unit, snapshots, summary)
         _plots(stage, data, res, snapshots, strain_unit, c.snapshot_strains)
+        summary["timings_s"]["files"] = time.perf_counter() - t
 
     sides = "periodic" if s.periodic[0] else "open"       # the structure's, whatever section set it
     return finish(out, summary, lambda: _report(spec, info, summary, res, sides), files=files, started=t0)
