@@ -42,7 +42,7 @@ def relaxation_deck(deck: CompressionDeck, *, steps: int, damping: float = 1.0, 
     text = re.sub(r"(?m)^(bond_style .*) break yes", r"\1 break no", text)
     s = deck.structure
     mobile = ~s.groups["substrate"]
-    masses = s.densities * np.pi / 6 * s.diameters**3
+    masses = s.densities * s.particle_volumes()
     gamma = damping * 2.0 * deck.omega1_per_ns * float(np.mean(masses[mobile]))
     radius = float(np.mean(s.diameters[mobile])) / 2
     if LOADINGS[deck.loading].glued:   # the glued layer is not integrated: it stays where it was put; its force is the sample's

@@ -78,9 +78,8 @@ class StaticResult:
 def bond_blocks(net: BondNetwork) -> np.ndarray:
     """The (M, 12, 12) stiffness block of each bond, dofs (u_i, theta_i, u_j, theta_j) (module
     opalflow.bpm.stiffness gives the forces this matrix reproduces)."""
-    A, C, R, B = _bond_parts(net, slice(None))
-    rows = [[A, C, -A, C], [-C, R + B, C, R - B], [-A, -C, A, -C], [-C, R - B, C, R + B]]
-    return np.concatenate([np.concatenate(r, axis=2) for r in rows], axis=1)
+    Kii, Kjj, Kij, Kji = pair_blocks(net)
+    return np.concatenate([np.concatenate([Kii, Kij], axis=2), np.concatenate([Kji, Kjj], axis=2)], axis=1)
 
 
 def assemble(net: BondNetwork):
@@ -449,20 +448,22 @@ def _bond_parts(net: BondNetwork, sel: slice):
 
 
 def diagonal_blocks(net: BondNetwork, chunk: int = 1_000_000) -> np.ndarray:
-    """The 6 x 6 diagonal blocks of K, (N, 6, 6): [[A, +-C], [-+C, R + B]] summed over each particle's
-    bonds (+C for particle i, -C for j; see bond_blocks), in chunks of bonds to bound the memory."""
-    n = net.n_particles
-    out = np.zeros((n, 6, 6))
+    """The 6 x 6 diagonal blocks of K, (N, 6, 6): K_ii and K_jj of :func:`pair_blocks` summed over each
+    particle's bonds, in chunks of bonds to bound the memory."""
+    out = np.zeros((net.n_particles, 6, 6))
     for start in range(0, len(net.L), chunk):
         sel = slice(start, start + chunk)
-        A, C, R, B = _bond_parts(net, sel)
-        RB = R + B
-        for who, sign in ((net.i[sel], 1.0), (net.j[sel], -1.0)):
-            block = np.concatenate([np.concatenate([A, sign * C], 2), np.concatenate([-sign * C, RB], 2)], 1)
-            for a in range(6):
-                for b in range(6):
-                    out[:, a, b] += np.bincount(who, block[:, a, b], n)
+        Kii, Kjj = pair_blocks(net, sel)[:2]
+        _add_diagonal(out, net.i[sel], net.j[sel], Kii, Kjj)
     return out
+
+
+def _add_diagonal(out: np.ndarray, i: np.ndarray, j: np.ndarray, Kii: np.ndarray, Kjj: np.ndarray) -> None:
+    """Add each bond's K_ii to particle i's diagonal block and K_jj to j's (``out`` (N, k, k))."""
+    n, k = out.shape[0], out.shape[1]
+    for a in range(k):
+        for b in range(k):
+            out[:, a, b] += np.bincount(i, Kii[:, a, b], n) + np.bincount(j, Kjj[:, a, b], n)
 
 
 def _jacobi_inverse(blocks: np.ndarray, free: np.ndarray) -> np.ndarray:
@@ -516,9 +517,7 @@ def block_matrix(net: BondNetwork, free=None, *, size: int = 6, dtype=np.float64
         sel = slice(start, min(start + chunk, m))
         i, j = net.i[sel], net.j[sel]
         Kii, Kjj, Kij, Kji = pair_blocks(net, sel, size)
-        for a in range(size):
-            for b in range(size):
-                diag[:, a, b] += np.bincount(i, Kii[:, a, b], n) + np.bincount(j, Kjj[:, a, b], n)
+        _add_diagonal(diag, i, j, Kii, Kjj)
         if fu is not None:
             Kij = Kij * fu[i][:, :, None] * fu[j][:, None, :]
             Kji = Kji * fu[j][:, :, None] * fu[i][:, None, :]
