@@ -1,14 +1,15 @@
-"""Benchmark of the aerogel aggregation (opalflow/aerogel/aggregation.py): cost against N, and the fractal
-dimension (both methods of opalflow/aerogel/fractal.py) against solid fraction, DLCA and RLCA.
+"""Benchmark of the aerogel aggregation (opalflow/aerogel/aggregation.py) and its fractal dimension
+(opalflow/aerogel/fractal.py) where the literature measures it.
 
-    python bench/bench_aerogel.py [--sizes 5000 20000 100000] [--fractions 0.01 0.02 0.05 0.1]
-                                  [--fractal-n 10000] [--seeds 1 2] [--rlca 0.01 0.02] [--sticking 0.01]
+    python bench/bench_aerogel.py designs      # fixed steps against free-distance jumps: cost at 0.002, D at 0.01
+    python bench/bench_aerogel.py dilute       # 100 000 spheres at 0.002: D by R_g(N) of the dilute clusters
+    python bench/bench_aerogel.py gel          # 30 000 spheres at 0.01: D by g(r) and S(q) of the gel
+    python bench/bench_aerogel.py crossover    # the correlation length at four concentrations, its exponent
+    python bench/bench_aerogel.py rlca         # RLCA (sticking 0.01) by the same methods
+    python bench/bench_aerogel.py report       # bench/results/aerogel.md from bench/results/aerogel.json
 
-Timing rows (DLCA at solid fraction 0.05, d = 10 +- 1 nm): particles, moves, seconds, moves/s, and the
-slope of log(seconds) against log(N); the issue's must is 20 000 particles in under 5 minutes, its goal
-100 000.  Run it on a quiet machine (the seconds are wall time).  Fractal rows: D and its 95 % interval
-from the mass-radius relation and from R_g(N), per seed, with the fitted ranges.  Results:
-bench/results/aerogel.json and bench/results/aerogel.md.
+Each part adds its rows to bench/results/aerogel.json (the machine and the date with them); run them on a
+quiet machine (the seconds are wall time).  Spheres of 10 +- 1 nm (Gaussian), DLCA unless said.
 """
 from __future__ import annotations
 
@@ -23,77 +24,118 @@ from pathlib import Path
 import numpy as np
 
 from opalflow.aerogel.aggregation import aggregate, box_edge, gaussian_diameters
-from opalflow.aerogel.fractal import mass_radius, radius_of_gyration
+from opalflow.aerogel.run import fractal_fits
 
 HERE = Path(__file__).resolve().parent
+RESULTS = HERE / "results" / "aerogel.json"
 
 
-def one(n: int, phi: float, seed: int, p: float = 1.0):
+def one(n: int, phi: float, seed: int, *, stepping: str = "jump", p: float = 1.0):
     d = gaussian_diameters(n, 10.0, 1.0, np.random.default_rng(seed))
-    return aggregate(d, box_edge(d, phi), seed=seed, sticking_probability=p)
+    return aggregate(d, box_edge(d, phi), seed=seed, stepping=stepping, sticking_probability=p)
+
+
+def fits_row(agg, seed: int) -> dict:
+    """Every D of an aggregate, with its interval, range and note; the crossover mass and length."""
+    fits = fractal_fits(agg, seed)
+    row = {m: {"D": f.D, "ci95": list(f.ci95), "range": list(f.range), "points": f.points, "note": f.note}
+           for m, (f, _) in fits.items()}
+    row["crossover_mass"] = fits["R_g(N)"][1]["crossover_mass"]
+    row["correlation_length_nm"] = fits["g(r)"][1]["xi_nm"]
+    return row
+
+
+def case(n, phi, seed, **kw) -> dict:
+    t = time.perf_counter()
+    agg = one(n, phi, seed, **kw)
+    s = time.perf_counter() - t
+    row = {"particles": n, "solid_fraction": phi, "seed": seed, "stepping": kw.get("stepping", "jump"),
+           "sticking": kw.get("p", 1.0), "seconds": s, "moves": agg.moves, "jumps": agg.jumps, **fits_row(agg, seed)}
+    print(json.dumps({k: (v if not isinstance(v, dict) else round(v["D"], 3)) for k, v in row.items()}), flush=True)
+    return row
+
+
+def designs(a) -> dict:
+    one(300, 0.05, 1, stepping="fixed")
+    one(300, 0.05, 1)                               # numba: compile (or load the cache) outside the timings
+    cost = []
+    for n in a.sizes:
+        for stepping in ("fixed", "jump"):
+            t = time.perf_counter()
+            agg = one(n, 0.002, 1, stepping=stepping)
+            cost.append({"particles": n, "solid_fraction": 0.002, "stepping": stepping, "seconds": time.perf_counter() - t,
+                         "moves": agg.moves, "jumps": agg.jumps})
+            print(cost[-1], flush=True)
+    same = [case(a.n_compare, 0.01, seed, stepping=stepping) for seed in a.seeds for stepping in ("fixed", "jump")]
+    return {"cost_0.002": cost, "compare_0.01": same}
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sizes", type=int, nargs="*", default=[5000, 20000, 100000])
-    ap.add_argument("--fractions", type=float, nargs="*", default=[0.01, 0.02, 0.05, 0.1])
-    ap.add_argument("--fractal-n", type=int, default=10000)
+    ap.add_argument("part", choices=["designs", "dilute", "gel", "crossover", "rlca", "report"])
+    ap.add_argument("--sizes", type=int, nargs="*", default=[2000, 4000])
+    ap.add_argument("--n-compare", type=int, default=10000)
     ap.add_argument("--seeds", type=int, nargs="*", default=[1, 2])
-    ap.add_argument("--rlca", type=float, nargs="*", default=[0.01, 0.02], help="solid fractions of the RLCA rows")
-    ap.add_argument("--sticking", type=float, default=0.01)
+    ap.add_argument("--fractions", type=float, nargs="*", default=[0.0025, 0.005, 0.01, 0.02])
     a = ap.parse_args()
-    one(200, 0.05, 1)                                   # numba: compile (or load the cache) outside the timings
-    timing = []
-    for n in a.sizes:
-        t = time.perf_counter()
-        agg = one(n, 0.05, 1)
-        s = time.perf_counter() - t
-        timing.append({"particles": n, "solid_fraction": 0.05, "moves": agg.moves, "seconds": s,
-                       "moves_per_s": agg.moves / s})
-        print(f"DLCA N = {n}: {s:.1f} s, {agg.moves} moves ({agg.moves / s:,.0f}/s)", flush=True)
-    slope = float(np.polyfit(np.log([r["particles"] for r in timing]), np.log([r["seconds"] for r in timing]), 1)[0]) \
-        if len(timing) > 1 else math.nan
-    fractal = []
-    cases = [("dlca", f, 1.0) for f in a.fractions] + [("rlca", f, a.sticking) for f in a.rlca]
-    for algo, phi, p in cases:
-        for seed in a.seeds:
-            t = time.perf_counter()
-            agg = one(a.fractal_n, phi, seed, p)
-            row = {"algorithm": algo, "solid_fraction": phi, "sticking_probability": p, "seed": seed,
-                   "particles": a.fractal_n, "seconds": time.perf_counter() - t}
-            for key, (fit, _) in (("mass_radius", mass_radius(agg, seed=seed)), ("rg", radius_of_gyration(agg))):
-                row[key] = fit.as_dict()
-            fractal.append(row)
-            print(f"{algo} phi = {phi} seed {seed}: D = {row['mass_radius']['D']:.3f} (mass-radius), "
-                  f"{row['rg']['D']:.3f} (R_g(N)), {row['seconds']:.0f} s", flush=True)
-    path = HERE / "results" / "aerogel.json"
-    old = json.loads(path.read_text()) if path.exists() else {}
-    # a run with no sizes (or no fractions) keeps the other part of the previous results
-    result = {"machine": platform.processor() or platform.machine(), "cpus": os.cpu_count(),
-              "timing": timing or old.get("timing", []),
-              "time_exponent": slope if timing else old.get("time_exponent", math.nan),
-              "fractal": fractal or old.get("fractal", [])}
-    path.write_text(json.dumps(result, indent=2) + "\n")
-    (HERE / "results" / "aerogel.md").write_text(markdown(result))
+    data = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
+    if a.part != "report":
+        if a.part == "designs":
+            rows = designs(a)
+        elif a.part == "dilute":
+            rows = [case(100_000, 0.002, seed) for seed in a.seeds]
+        elif a.part == "gel":
+            rows = [case(30_000, 0.01, seed) for seed in a.seeds]
+        elif a.part == "crossover":
+            rows = [case(30_000, phi, seed) for phi in a.fractions for seed in a.seeds]
+        else:
+            rows = [case(20_000, 0.002, seed, p=0.01) for seed in a.seeds] + \
+                   [case(30_000, 0.01, seed, p=0.01) for seed in a.seeds]
+        data[a.part] = {"rows": rows, "machine": {"host": platform.node(), "cpus": os.cpu_count(),
+                                                  "python": platform.python_version(), "date": time.strftime("%Y-%m-%d")}}
+        RESULTS.write_text(json.dumps(data, indent=1, default=float))
+    report(data)
 
 
-def markdown(r: dict) -> str:
-    lines = ["# Aggregation benchmark (bench/bench_aerogel.py)", "",
-             "| particles | solid fraction | moves | seconds | moves/s |", "|---|---|---|---|---|"]
-    lines += [f"| {t['particles']} | {t['solid_fraction']} | {t['moves']} | {t['seconds']:.1f} | {t['moves_per_s']:,.0f} |"
-              for t in r["timing"]]
-    lines += ["", f"Time ~ N^{r['time_exponent']:.2f}.", "",
-              "| algorithm | solid fraction | seed | D mass-radius [95 %] (range, nm) | D R_g(N) [95 %] (range, N) | seconds |",
-              "|---|---|---|---|---|---|"]
+def _d(row, method):
+    f = row[method]
+    return "-" if not math.isfinite(f["D"]) else f"{f['D']:.3f} [{f['ci95'][0]:.3f}, {f['ci95'][1]:.3f}]"
 
-    def cell(f):
-        if not math.isfinite(f["D"]):
-            return "- (" + f["note"] + ")"
-        return f"{f['D']:.3f} [{f['ci95'][0]:.3f}, {f['ci95'][1]:.3f}] ({f['range'][0]:.3g}-{f['range'][1]:.3g})"
 
-    lines += [f"| {f['algorithm']} | {f['solid_fraction']} | {f['seed']} | {cell(f['mass_radius'])} | {cell(f['rg'])} | "
-              f"{f['seconds']:.0f} |" for f in r["fractal"]]
-    return "\n".join(lines) + "\n"
+def report(data: dict) -> None:
+    """bench/results/aerogel.md: every table of the parts run so far."""
+    out = ["# Aerogel aggregation and fractal dimension (bench/bench_aerogel.py)", ""]
+    head = ("| particles | solid fraction | seed | stepping | sticking | s | R_g(N) (dilute) | g(r) | S(q) | mass-radius "
+            "| crossover mass | xi (nm) |")
+    line = "|---" * 12 + "|"
+
+    def rows(rs):
+        return [f"| {r['particles']} | {r['solid_fraction']:g} | {r['seed']} | {r['stepping']} | {r['sticking']:g} | "
+                f"{r['seconds']:.1f} | {_d(r, 'R_g(N)')} | {_d(r, 'g(r)')} | {_d(r, 'S(q)')} | {_d(r, 'mass-radius')} | "
+                f"{r['crossover_mass']:.4g} | {r['correlation_length_nm']:.4g} |" for r in rs]
+
+    if "designs" in data:
+        d = data["designs"]["rows"]
+        out += ["## Designs: fixed steps against free-distance jumps", "", "| particles | solid fraction | stepping | s | "
+                "moves | jumps |", "|---|---|---|---|---|---|"]
+        out += [f"| {r['particles']} | {r['solid_fraction']:g} | {r['stepping']} | {r['seconds']:.1f} | {r['moves']} | "
+                f"{r['jumps']} |" for r in d["cost_0.002"]]
+        out += ["", "The same D at 0.01:", "", head, line, *rows(d["compare_0.01"]), ""]
+    for part, title in (("dilute", "Dilute clusters: 100 000 spheres at 0.002"), ("gel", "The gel at 0.01"),
+                        ("crossover", "Correlation length against concentration"), ("rlca", "RLCA, sticking 0.01")):
+        if part not in data:
+            continue
+        out += [f"## {title}", "", head, line, *rows(data[part]["rows"]), ""]
+        if part == "crossover":
+            rs = data[part]["rows"]
+            ok = [r for r in rs if math.isfinite(r["correlation_length_nm"])]
+            if len({r["solid_fraction"] for r in ok}) >= 2:
+                k, c = np.polyfit(np.log([r["solid_fraction"] for r in ok]), np.log([r["correlation_length_nm"] for r in ok]), 1)
+                data[part]["exponent"] = float(k)
+                out += [f"xi ~ phi^k: k = {k:.3f} (expected -1/(3 - D_f): -0.833 for D_f = 1.8); xi = "
+                        f"{math.exp(c):.4g} nm x phi^k.", ""]
+    (HERE / "results" / "aerogel.md").write_text("\n".join(out) + "\n")
+    print("\n".join(out))
 
 
 if __name__ == "__main__":

@@ -97,11 +97,11 @@ def test_dlca_fractal_dimension_from_rg_of_mergers():
     """Off-lattice DLCA at low solid fraction: D_f about 1.75-1.85 (Hasmy et al. 1994); a small run is
     allowed [1.6, 2.1]; RLCA is more compact than DLCA at the same fraction (Lin et al. 1989: 2.0-2.1)."""
     spec = load_spec(WORKFLOWS / "aerogel_dlca.toml", ["aggregate.particles=3000", "aggregate.solid_fraction=0.02"])
-    fit, _ = radius_of_gyration(make_aggregate(spec.aggregate))
+    fit, _ = radius_of_gyration(make_aggregate(spec.aggregate, spec.bonds.cutoff_factor)[0])
     assert 1.6 < fit.D < 2.1 and fit.ci95[0] < fit.D < fit.ci95[1]
     spec = load_spec(WORKFLOWS / "aerogel_dlca.toml", ["aggregate.particles=3000", "aggregate.solid_fraction=0.02",
                                                      'aggregate.algorithm="rlca"', "aggregate.sticking_probability=0.01"])
-    assert radius_of_gyration(make_aggregate(spec.aggregate))[0].D > fit.D
+    assert radius_of_gyration(make_aggregate(spec.aggregate, spec.bonds.cutoff_factor)[0])[0].D > fit.D
 
 
 def test_aggregation_workflow_outputs_and_same_bytes(tmp_path):
@@ -134,7 +134,7 @@ def test_slab_build_is_byte_identical(tmp_path):
 
 def test_slab_is_cut_at_z_and_every_sphere_hangs_on_the_substrate():
     spec = small_spec()
-    agg = make_aggregate(spec.aggregate)
+    agg = make_aggregate(spec.aggregate, spec.bonds.cutoff_factor)[0]
     s = slab(agg, spec.bonds.cutoff_factor, "silica")
     assert not s.periodic[2] and s.periodic[0] and s.periodic[1]
     dz = np.abs(np.diff(s.positions[s.bonds][:, :, 2], axis=1))
@@ -200,7 +200,7 @@ def test_contact_bond_is_a_central_spring_and_linear_contacts_are_hooke():
 
 
 def small_structure(spec):
-    agg = make_aggregate(spec.aggregate)
+    agg = make_aggregate(spec.aggregate, spec.bonds.cutoff_factor)[0]
     return slab(agg, spec.bonds.cutoff_factor, spec.material)
 
 
@@ -257,7 +257,7 @@ def test_aggregation_progress_says_time_left_that_is_not_zero():
     lines = []
     spec = load_workflow("aerogel_dlca", {"aggregate.particles": 3000})
     t0 = time.perf_counter()
-    make_aggregate(spec.aggregate, progress=lines.append)
+    make_aggregate(spec.aggregate, spec.bonds.cutoff_factor, progress=lines.append)
     wall = time.perf_counter() - t0
     said = [float(x.split("up to about ")[1].split()[0]) for x in lines if "up to about" in x]
     assert len(lines) <= wall / PROGRESS_S + 1 and all(s > 0 for s in said), lines

@@ -79,6 +79,8 @@ class Aggregate:
     clusters_left: int
     wall_s: float
     placement: str
+    stepping: str = "fixed"
+    jumps: int = 0               # free-distance jumps (stepping "jump")
 
     @property
     def solid_fraction(self) -> float:
@@ -100,10 +102,17 @@ def box_edge(diameters: np.ndarray, solid_fraction: float) -> float:
     return float((np.sum(np.pi / 6 * diameters**3) / solid_fraction) ** (1 / 3))
 
 
-def cells_per_edge(box: float, diameters: np.ndarray, step: float) -> int:
-    """Cells per cube edge: cells no smaller than step + the largest diameter (0 if fewer than 3 fit)."""
-    n = int(box // (step + float(diameters.max())))
+def cells_per_edge(box: float, diameters: np.ndarray, step: float, edge: float = 0.0) -> int:
+    """Cells per cube edge: cells no smaller than step + the largest diameter, nor than ``edge`` (0 if fewer
+    than 3 fit)."""
+    n = int(box // max(step + float(diameters.max()), edge))
     return n if n >= 3 else 0
+
+
+def jump_cell_edge(diameters: np.ndarray, solid_fraction: float) -> float:
+    """The cell edge of the jump stepping: the volume per sphere (one sphere per cell on average), so that
+    a scan of 27 cells meets ~27 spheres while a lone cluster may jump up to an edge less a diameter."""
+    return float((np.mean(np.pi / 6 * diameters**3) / solid_fraction) ** (1 / 3))
 
 
 # ----------------------------------------------------------------------------- numba kernels
@@ -198,13 +207,301 @@ def _place_random(r, box, nc, head, nxt, prv, cell_of, pos, max_tries):
 
 
 @njit(cache=True)
+def _direction(u):
+    """A uniformly random unit vector into u (three normal draws, redrawn if degenerate)."""
+    norm = 0.0
+    while norm < 1e-12:
+        for k in range(3):
+            u[k] = np.random.normal(0.0, 1.0)
+        norm = math.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
+    for k in range(3):
+        u[k] /= norm
+
+
+@njit(cache=True)
+def _scan(c, u, ell, pos, r, box, nc, head, nxt, cell_of, cl, chead, cnext, w, hit):
+    """The first contact of cluster c moving by up to ``ell`` along u with a sphere of another cluster, among
+    the 27 cells around each of its spheres: returns (t, smallest surface gap met), hit = [i, j] (-1 if none)."""
+    tmin = ell
+    gap = math.inf
+    hit[0] = -1
+    hit[1] = -1
+    i = chead[c]
+    while i >= 0:
+        for cc in _neighbour_cells(cell_of[i], nc):
+            j = head[cc]
+            while j >= 0:
+                if cl[j] != c:
+                    b = 0.0
+                    ww = 0.0
+                    for k in range(3):
+                        w[k] = _min_image(pos[i, k] - pos[j, k], box)
+                        b += w[k] * u[k]
+                        ww += w[k] * w[k]
+                    s = r[i] + r[j]
+                    gap = min(gap, math.sqrt(ww) - s)
+                    if b < 0.0:           # approaching: the first root of |w + t u| = r_i + r_j
+                        disc = b * b - (ww - s * s)
+                        if disc > 0.0:
+                            t = -b - math.sqrt(disc)
+                            if t < tmin:
+                                tmin = max(t, 0.0)
+                                hit[0] = i
+                                hit[1] = j
+                j = nxt[j]
+        i = cnext[i]
+    return tmin, gap
+
+
+@njit(cache=True)
+def _translate(c, t, u, n, pos, upos, box, nc, head, nxt, prv, cell_of, chead, cnext, csum, csq):
+    """Move cluster c by t u (cell lists, unwrapped coordinates and the R_g sums kept up to date)."""
+    i = chead[c]
+    while i >= 0:
+        for k in range(3):
+            upos[i, k] += t * u[k]
+            x = pos[i, k] + t * u[k]
+            x -= box * math.floor(x / box)
+            if x >= box:
+                x = 0.0
+            pos[i, k] = x
+        cnew = _cell(pos[i], box, nc)
+        if cnew != cell_of[i]:
+            _remove(i, head, nxt, prv, cell_of)
+            _insert(i, cnew, head, nxt, prv, cell_of)
+        i = cnext[i]
+    dot = 0.0
+    for k in range(3):
+        dot += u[k] * csum[c, k]
+    csq[c] += 2.0 * t * dot + n * t * t
+    for k in range(3):
+        csum[c, k] += n * t * u[k]
+
+
+@njit(cache=True)
+def _merge(c, hit_i, hit_j, pos, upos, box, cl, chead, cnext, ctail, csize, csum, csq, active, where, state,
+           rec_i, rec_j, rec_n, rec_rg2, arrival, w):
+    """Merge the clusters of the contact hit_i (of the mover c) - hit_j: the smaller into the larger, shifted
+    by the box vector that makes the contact a direct one in unwrapped coordinates; returns the survivor."""
+    c2 = cl[hit_j]
+    if csize[c] >= csize[c2]:
+        a, bb, ia, ib = c, c2, hit_i, hit_j
+    else:
+        a, bb, ia, ib = c2, c, hit_j, hit_i
+    for k in range(3):
+        w[k] = upos[ia, k] + _min_image(pos[ib, k] - pos[ia, k], box) - upos[ib, k]
+    nb = csize[bb]
+    dot = 0.0
+    for k in range(3):
+        dot += w[k] * csum[bb, k]
+    csq[bb] += 2.0 * dot + nb * (w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
+    for k in range(3):
+        csum[bb, k] += nb * w[k]
+    i = chead[bb]
+    while i >= 0:
+        cl[i] = a
+        for k in range(3):
+            upos[i, k] += w[k]
+        i = cnext[i]
+    cnext[ctail[a]] = chead[bb]
+    ctail[a] = ctail[bb]
+    csize[a] += nb
+    csq[a] += csq[bb]
+    for k in range(3):
+        csum[a, k] += csum[bb, k]
+    na = state[0]
+    kb = where[bb]
+    last = active[na - 1]
+    active[kb] = last
+    where[last] = kb
+    state[0] = na - 1
+    m = state[3]
+    rec_i[m] = hit_i
+    rec_j[m] = hit_j
+    nn = csize[a]
+    rec_n[m] = nn
+    rg2 = csq[a] / nn
+    for k in range(3):
+        rg2 -= (csum[a, k] / nn) ** 2
+    rec_rg2[m] = max(rg2, 0.0)
+    state[3] = m + 1
+    i = chead[bb]          # the merged-in spheres (now at the end of a's list) arrive now
+    while i >= 0:
+        arrival[i] = m
+        i = cnext[i]
+    return a
+
+
+@njit(cache=True)
+def _rotated(b, ib, ia, cvec, axis, theta, k, upos, out):
+    """Where sphere k of cluster b sits relative to the centre of sphere ia once b is turned by theta about
+    the axis through that centre (Rodrigues' formula), b touching ia with its sphere ib along cvec."""
+    ct, st = math.cos(theta), math.sin(theta)
+    v0 = cvec[0] + upos[k, 0] - upos[ib, 0]
+    v1 = cvec[1] + upos[k, 1] - upos[ib, 1]
+    v2 = cvec[2] + upos[k, 2] - upos[ib, 2]
+    dot = axis[0] * v0 + axis[1] * v1 + axis[2] * v2
+    out[0] = v0 * ct + (axis[1] * v2 - axis[2] * v1) * st + axis[0] * dot * (1 - ct)
+    out[1] = v1 * ct + (axis[2] * v0 - axis[0] * v2) * st + axis[1] * dot * (1 - ct)
+    out[2] = v2 * ct + (axis[0] * v1 - axis[1] * v0) * st + axis[2] * dot * (1 - ct)
+
+
+@njit(cache=True)
+def _overlap(b, ib, ia, cvec, axis, theta, pos, upos, r, box, nc, head, nxt, cl, chead, cnext, hit):
+    """Does cluster b, turned by theta about the centre of ia, overlap a sphere of another cluster?  The first
+    overlapping pair goes to hit = [k of b, j]."""
+    rel = np.empty(3)
+    x = np.empty(3)
+    k = chead[b]
+    while k >= 0:
+        _rotated(b, ib, ia, cvec, axis, theta, k, upos, rel)
+        for q in range(3):
+            x[q] = pos[ia, q] + rel[q]
+            x[q] -= box * math.floor(x[q] / box)
+            if x[q] >= box:
+                x[q] = 0.0
+        for cc in _neighbour_cells(_cell(x, box, nc), nc):
+            j = head[cc]
+            while j >= 0:
+                if cl[j] != b and not (k == ib and j == ia):
+                    d2 = 0.0
+                    for q in range(3):
+                        dq = _min_image(x[q] - pos[j, q], box)
+                        d2 += dq * dq
+                    s = r[k] + r[j]
+                    if d2 < s * s:
+                        hit[0] = k
+                        hit[1] = j
+                        return True
+                j = nxt[j]
+        k = cnext[k]
+    return False
+
+
+@njit(cache=True)
+def _restructure(c, hit_i, hit_j, pos, upos, r, box, nc, head, nxt, prv, cell_of, cl, chead, cnext, csize, csum,
+                 csq, d_mean, hit):
+    """Turn the smaller of the two clusters meeting at (hit_i of the mover c, hit_j) about the centre of the
+    other's contact sphere, about a random axis perpendicular to the contact, until a second sphere touches
+    (Meakin and Jullien's restructuring, J. Chem. Phys. 89, 246, 1988; for a single sphere it is the
+    dangling-bond deflection of Ma, Jullien and Scherer, Phys. Rev. E 65, 041403, 2002).  Angular steps move
+    no sphere by more than d_mean / 4, the contact angle is bisected; no contact within a turn: unchanged.
+    hit = [k, j] of the second contact (-1 if none)."""
+    hit[0] = -1
+    hit[1] = -1
+    c2 = cl[hit_j]
+    if csize[c] <= csize[c2]:
+        b, ib, ia = c, hit_i, hit_j
+    else:
+        b, ib, ia = c2, hit_j, hit_i
+    cvec = np.empty(3)
+    for q in range(3):
+        cvec[q] = _min_image(pos[ib, q] - pos[ia, q], box)
+    cn = math.sqrt(cvec[0] ** 2 + cvec[1] ** 2 + cvec[2] ** 2)
+    reach = 0.0
+    k = chead[b]
+    while k >= 0:
+        d2 = 0.0
+        for q in range(3):
+            d2 += (cvec[q] + upos[k, q] - upos[ib, q]) ** 2
+        reach = max(reach, math.sqrt(d2))
+        k = cnext[k]
+    axis = np.empty(3)
+    norm = 0.0
+    while norm < 1e-9:
+        _direction(axis)
+        dot = (axis[0] * cvec[0] + axis[1] * cvec[1] + axis[2] * cvec[2]) / cn
+        for q in range(3):
+            axis[q] -= dot * cvec[q] / cn
+        norm = math.sqrt(axis[0] ** 2 + axis[1] ** 2 + axis[2] ** 2)
+    for q in range(3):
+        axis[q] /= norm
+    dth = min(0.25 * d_mean / reach, 0.5)
+    turn = 2.0 * math.pi
+    lo, hi = 0.0, -1.0
+    trial = np.empty(2, np.int64)
+    th = dth
+    while lo < turn:
+        th = min(lo + dth, turn)
+        if _overlap(b, ib, ia, cvec, axis, th, pos, upos, r, box, nc, head, nxt, cl, chead, cnext, trial):
+            hi = th
+            hit[0] = trial[0]
+            hit[1] = trial[1]
+            break
+        lo = th
+    if hi < 0.0:
+        return
+    for _ in range(48):
+        mid = 0.5 * (lo + hi)
+        if _overlap(b, ib, ia, cvec, axis, mid, pos, upos, r, box, nc, head, nxt, cl, chead, cnext, trial):
+            hi = mid
+            hit[0] = trial[0]
+            hit[1] = trial[1]
+        else:
+            lo = mid
+    # turn b by lo: positions, unwrapped positions, cells and the R_g sums
+    rel = np.empty(3)
+    new = np.empty((csize[b], 3))
+    m = 0
+    k = chead[b]
+    while k >= 0:
+        _rotated(b, ib, ia, cvec, axis, lo, k, upos, rel)
+        for q in range(3):
+            new[m, q] = rel[q]
+        m += 1
+        k = cnext[k]
+    base = np.empty(3)
+    for q in range(3):
+        base[q] = upos[ib, q] - cvec[q]        # the centre of ia in b's unwrapped frame
+    for q in range(3):
+        csum[b, q] = 0.0
+    csq[b] = 0.0
+    m = 0
+    k = chead[b]
+    while k >= 0:
+        for q in range(3):
+            upos[k, q] = base[q] + new[m, q]
+            x = pos[ia, q] + new[m, q]
+            x -= box * math.floor(x / box)
+            if x >= box:
+                x = 0.0
+            pos[k, q] = x
+            csum[b, q] += upos[k, q]
+            csq[b] += upos[k, q] * upos[k, q]
+        cnew = _cell(pos[k], box, nc)
+        if cnew != cell_of[k]:
+            _remove(k, head, nxt, prv, cell_of)
+            _insert(k, cnew, head, nxt, prv, cell_of)
+        m += 1
+        k = cnext[k]
+
+
+@njit(cache=True)
+def _stick(c, hit_i, hit_j, restructure, d_mean, pos, upos, r, box, nc, head, nxt, prv, cell_of, cl, chead, cnext,
+           ctail, csize, csum, csq, active, where, state, rec_i, rec_j, rec_n, rec_rg2, arrival, w):
+    """The mover c sticks at (hit_i, hit_j): restructured first when asked (a second contact: a loop, or a
+    third cluster that then joins too); returns the surviving cluster."""
+    second = np.full(2, -1, np.int64)
+    if restructure:
+        _restructure(c, hit_i, hit_j, pos, upos, r, box, nc, head, nxt, prv, cell_of, cl, chead, cnext, csize, csum,
+                     csq, d_mean, second)
+    a = _merge(c, hit_i, hit_j, pos, upos, box, cl, chead, cnext, ctail, csize, csum, csq, active, where, state,
+               rec_i, rec_j, rec_n, rec_rg2, arrival, w)
+    if second[0] >= 0 and cl[second[0]] != cl[second[1]]:
+        a = _merge(cl[second[0]], second[0], second[1], pos, upos, box, cl, chead, cnext, ctail, csize, csum, csq,
+                   active, where, state, rec_i, rec_j, rec_n, rec_rg2, arrival, w)
+    return a
+
+
+@njit(cache=True)
 def _aggregate(pos, upos, r, box, nc, head, nxt, prv, cell_of, cl, chead, cnext, ctail, csize, csum, csq,
                active, where, state, step0, alpha, p_stick, max_moves, min_left, rec_i, rec_j, rec_n, rec_rg2,
-               arrival):
-    """Up to ``max_moves`` moves, until ``min_left`` (>= 1) clusters are left; state = [clusters left, moves,
-    collisions, mergers]."""
+               arrival, restructure, d_mean):
+    """Fixed steps: up to ``max_moves`` moves, until ``min_left`` (>= 1) clusters are left; state = [clusters
+    left, moves, collisions, mergers, jumps]."""
     u = np.empty(3)
     w = np.empty(3)
+    hit = np.empty(2, np.int64)
     for _ in range(max_moves):
         na = state[0]
         if na <= min_left:
@@ -212,116 +509,108 @@ def _aggregate(pos, upos, r, box, nc, head, nxt, prv, cell_of, cl, chead, cnext,
         c = active[np.random.randint(0, na)]
         n = csize[c]
         ell = step0 * n ** (0.5 * alpha)
-        norm = 0.0
-        while norm < 1e-12:
-            for k in range(3):
-                u[k] = np.random.normal(0.0, 1.0)
-            norm = math.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
-        for k in range(3):
-            u[k] /= norm
-        tmin = ell
-        hit_i = -1
-        hit_j = -1
-        i = chead[c]
-        while i >= 0:
-            for cc in _neighbour_cells(cell_of[i], nc):
-                j = head[cc]
-                while j >= 0:
-                    if cl[j] != c:
-                        b = 0.0
-                        ww = 0.0
-                        for k in range(3):
-                            w[k] = _min_image(pos[i, k] - pos[j, k], box)
-                            b += w[k] * u[k]
-                            ww += w[k] * w[k]
-                        if b < 0.0:           # approaching: the first root of |w + t u| = r_i + r_j
-                            s = r[i] + r[j]
-                            disc = b * b - (ww - s * s)
-                            if disc > 0.0:
-                                t = -b - math.sqrt(disc)
-                                if t < tmin:
-                                    tmin = max(t, 0.0)
-                                    hit_i = i
-                                    hit_j = j
-                    j = nxt[j]
-            i = cnext[i]
+        _direction(u)
+        tmin, gap = _scan(c, u, ell, pos, r, box, nc, head, nxt, cell_of, cl, chead, cnext, w, hit)
         t = tmin
-        if hit_i >= 0:
-            t = max(tmin - BACKOFF * (r[hit_i] + r[hit_j]), 0.0)
+        if hit[0] >= 0:
+            t = max(tmin - BACKOFF * (r[hit[0]] + r[hit[1]]), 0.0)
         if t > 0.0:
-            i = chead[c]
-            while i >= 0:
-                for k in range(3):
-                    upos[i, k] += t * u[k]
-                    x = pos[i, k] + t * u[k]
-                    x -= box * math.floor(x / box)
-                    if x >= box:
-                        x = 0.0
-                    pos[i, k] = x
-                cnew = _cell(pos[i], box, nc)
-                if cnew != cell_of[i]:
-                    _remove(i, head, nxt, prv, cell_of)
-                    _insert(i, cnew, head, nxt, prv, cell_of)
-                i = cnext[i]
-            dot = 0.0
-            for k in range(3):
-                dot += u[k] * csum[c, k]
-            csq[c] += 2.0 * t * dot + n * t * t
-            for k in range(3):
-                csum[c, k] += n * t * u[k]
+            _translate(c, t, u, n, pos, upos, box, nc, head, nxt, prv, cell_of, chead, cnext, csum, csq)
         state[1] += 1
-        if hit_i < 0:
+        if hit[0] < 0:
             continue
         state[2] += 1
         if p_stick < 1.0 and np.random.random() >= p_stick:
             continue
-        # merge: the smaller cluster (b) into the larger (a), shifted by the box vector that makes
-        # the contact i-j a direct one in unwrapped coordinates
-        c2 = cl[hit_j]
-        if csize[c] >= csize[c2]:
-            a, bb, ia, ib = c, c2, hit_i, hit_j
-        else:
-            a, bb, ia, ib = c2, c, hit_j, hit_i
-        for k in range(3):
-            w[k] = upos[ia, k] + _min_image(pos[ib, k] - pos[ia, k], box) - upos[ib, k]
-        nb = csize[bb]
-        dot = 0.0
-        for k in range(3):
-            dot += w[k] * csum[bb, k]
-        csq[bb] += 2.0 * dot + nb * (w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
-        for k in range(3):
-            csum[bb, k] += nb * w[k]
-        i = chead[bb]
-        while i >= 0:
-            cl[i] = a
-            for k in range(3):
-                upos[i, k] += w[k]
-            i = cnext[i]
-        cnext[ctail[a]] = chead[bb]
-        ctail[a] = ctail[bb]
-        csize[a] += nb
-        csq[a] += csq[bb]
-        for k in range(3):
-            csum[a, k] += csum[bb, k]
-        kb = where[bb]
-        last = active[na - 1]
-        active[kb] = last
-        where[last] = kb
-        state[0] = na - 1
-        m = state[3]
-        rec_i[m] = hit_i
-        rec_j[m] = hit_j
-        nn = csize[a]
-        rec_n[m] = nn
-        rg2 = csq[a] / nn
-        for k in range(3):
-            rg2 -= (csum[a, k] / nn) ** 2
-        rec_rg2[m] = max(rg2, 0.0)
-        state[3] = m + 1
-        i = chead[bb]          # the merged-in spheres (now at the end of a's list) arrive now
-        while i >= 0:
-            arrival[i] = m
-            i = cnext[i]
+        _stick(c, hit[0], hit[1], restructure, d_mean, pos, upos, r, box, nc, head, nxt, prv, cell_of, cl, chead,
+               cnext, ctail, csize, csum, csq, active, where, state, rec_i, rec_j, rec_n, rec_rg2, arrival, w)
+    return state
+
+
+@njit(cache=True)
+def _heap_push(key, val, hk, hv, size):
+    """Push (key, val) on the binary min-heap hk/hv of ``size`` entries; returns the new size."""
+    k = size
+    hk[k] = key
+    hv[k] = val
+    while k > 0:
+        p = (k - 1) // 2
+        if hk[p] <= hk[k]:
+            break
+        hk[p], hk[k] = hk[k], hk[p]
+        hv[p], hv[k] = hv[k], hv[p]
+        k = p
+    return size + 1
+
+
+@njit(cache=True)
+def _heap_pop(hk, hv, size):
+    """Remove the smallest entry (read it from hk[0], hv[0] first); returns the new size."""
+    size -= 1
+    hk[0] = hk[size]
+    hv[0] = hv[size]
+    k = 0
+    while True:
+        a, b, m = 2 * k + 1, 2 * k + 2, k
+        if a < size and hk[a] < hk[m]:
+            m = a
+        if b < size and hk[b] < hk[m]:
+            m = b
+        if m == k:
+            break
+        hk[m], hk[k] = hk[k], hk[m]
+        hv[m], hv[k] = hv[k], hv[m]
+        k = m
+    return size
+
+
+@njit(cache=True)
+def _aggregate_jumps(pos, upos, r, box, nc, cell_edge, d_max, head, nxt, prv, cell_of, cl, chead, cnext, ctail,
+                     csize, csum, csq, active, where, state, step0, alpha, p_stick, jump_min, max_moves, min_left,
+                     rec_i, rec_j, rec_n, rec_rg2, arrival, clock, hk, hv, hsize, restructure, d_mean):
+    """Free-distance jumps (see ``aggregate``): each cluster has its own clock (in its own moves); the cluster
+    whose clock is behind moves next (a heap, stale entries skipped), a move adds an exponential time of mean 1
+    (a Poisson clock per cluster: uniform picking in continuous time), a jump of R adds (R / ell)^2.
+    hsize = [entries]; state as ``_aggregate``."""
+    u = np.empty(3)
+    w = np.empty(3)
+    hit = np.empty(2, np.int64)
+    for _ in range(max_moves):
+        if state[0] <= min_left:
+            break
+        key = hk[0]
+        c = hv[0]
+        hsize[0] = _heap_pop(hk, hv, hsize[0])
+        if cl[chead[c]] != c or key != clock[c]:
+            continue                          # merged away, or an old entry of a cluster since moved
+        n = csize[c]
+        ell = step0 * n ** (0.5 * alpha)
+        _direction(u)
+        tmin, gap = _scan(c, u, ell, pos, r, box, nc, head, nxt, cell_of, cl, chead, cnext, w, hit)
+        free = min(gap, cell_edge - d_max)    # spheres beyond the 27 cells are at least this far
+        if free - ell >= jump_min * ell:      # far from everything: to the sphere of radius free - ell at once
+            jump = free - ell
+            _translate(c, jump, u, n, pos, upos, box, nc, head, nxt, prv, cell_of, chead, cnext, csum, csq)
+            clock[c] += (jump / ell) ** 2     # mean exit time of the walk from that sphere, in moves
+            state[4] += 1
+            hsize[0] = _heap_push(clock[c], c, hk, hv, hsize[0])
+            continue
+        t = tmin
+        if hit[0] >= 0:
+            t = max(tmin - BACKOFF * (r[hit[0]] + r[hit[1]]), 0.0)
+        if t > 0.0:
+            _translate(c, t, u, n, pos, upos, box, nc, head, nxt, prv, cell_of, chead, cnext, csum, csq)
+        state[1] += 1
+        clock[c] -= math.log(1.0 - np.random.random())
+        if hit[0] >= 0:
+            state[2] += 1
+            if p_stick >= 1.0 or np.random.random() < p_stick:
+                a = _stick(c, hit[0], hit[1], restructure, d_mean, pos, upos, r, box, nc, head, nxt, prv, cell_of, cl,
+                           chead, cnext, ctail, csize, csum, csq, active, where, state, rec_i, rec_j, rec_n, rec_rg2,
+                           arrival, w)
+                clock[a] = clock[c]
+                c = a
+        hsize[0] = _heap_push(clock[c], c, hk, hv, hsize[0])
     return state
 
 
@@ -339,9 +628,15 @@ def place_grid(r: np.ndarray, box: float, rng: np.random.Generator) -> np.ndarra
 
 
 def aggregate(diameters: np.ndarray, box: float, *, seed: int, step_fraction: float = 0.5,
-              mobility_exponent: float = -0.5, sticking_probability: float = 1.0, progress=None,
-              chunk_moves: int = 20_000, random_placement_max: float = 0.3) -> Aggregate:
+              mobility_exponent: float = -0.5, sticking_probability: float = 1.0, stepping: str = "fixed",
+              jump_min: float = 4.0, restructure: bool = False, progress=None, chunk_moves: int = 20_000,
+              random_placement_max: float = 0.3) -> Aggregate:
     """Aggregate spheres of these diameters in a periodic cube of edge ``box`` (see the module docstring).
+
+    stepping : "fixed" (every move one step) or "jump" (free-distance jumps when the free distance exceeds
+        ``jump_min`` + 1 steps; see the module docstring).
+    restructure : at every sticking contact the smaller cluster turns about it until a second contact
+        (``_restructure``): a loop per merger.
 
     progress : ``progress(clusters_left, n, moves, moves_per_s, eta_s)`` between chunks of moves.
     """
@@ -349,7 +644,9 @@ def aggregate(diameters: np.ndarray, box: float, *, seed: int, step_fraction: fl
     n = len(diameters)
     r = 0.5 * np.asarray(diameters, float)
     step0 = step_fraction * float(np.mean(diameters))
-    nc = cells_per_edge(box, diameters, step0)
+    phi = float(np.sum(np.pi / 6 * diameters**3) / box**3)
+    jumps = stepping == "jump"
+    nc = cells_per_edge(box, diameters, step0, jump_cell_edge(diameters, phi) if jumps else 0.0)
     if nc == 0:
         raise ValueError(f"box {box:.4g} nm is too small: fewer than 3 cells of {step0 + diameters.max():.4g} nm")
     rng = np.random.default_rng(seed)
@@ -359,7 +656,6 @@ def aggregate(diameters: np.ndarray, box: float, *, seed: int, step_fraction: fl
     prv = np.full(n, -1, np.int64)
     cell_of = np.zeros(n, np.int64)
     pos = np.zeros((n, 3))
-    phi = float(np.sum(np.pi / 6 * diameters**3) / box**3)
     placement = "random sequential addition"
     if phi <= random_placement_max:
         placed = _place_random(r, box, nc, head, nxt, prv, cell_of, pos, 100_000)
@@ -380,21 +676,33 @@ def aggregate(diameters: np.ndarray, box: float, *, seed: int, step_fraction: fl
     csq = np.einsum("ij,ij->i", pos, pos)
     active = np.arange(n, dtype=np.int64)
     where = np.arange(n, dtype=np.int64)
-    state = np.array([n, 0, 0, 0], np.int64)
+    state = np.array([n, 0, 0, 0, 0], np.int64)
     rec_i = np.zeros(max(n - 1, 1), np.int64)
     rec_j = np.zeros_like(rec_i)
     rec_n = np.zeros_like(rec_i)
     rec_rg2 = np.zeros(len(rec_i))
     arrival = np.full(n, -1, np.int64)
+    clock = -np.log1p(-rng.random(n)) if jumps else np.zeros(n)   # each cluster's first move (Poisson clocks)
+    hk, hv = np.empty(n + 1), np.empty(n + 1, np.int64)
+    hsize = np.zeros(1, np.int64)
+    if jumps:
+        for c in range(n):
+            hsize[0] = _heap_push(clock[c], c, hk, hv, hsize[0])
     t_start = time.perf_counter()
     history: list[tuple[float, int]] = []
     said_at = -PROGRESS_S
     while state[0] > 1:
         t_chunk = time.perf_counter()
-        _aggregate(pos, upos, r, box, nc, head, nxt, prv, cell_of, cl, chead, cnext, ctail, csize, csum, csq,
-                   active, where, state, step0, mobility_exponent, sticking_probability, chunk_moves,
-                   max(1, state[0] // 2),      # a chunk at most halves the clusters: the last ones are slow
-                   rec_i, rec_j, rec_n, rec_rg2, arrival)
+        min_left = max(1, state[0] // 2)       # a chunk at most halves the clusters: the last ones are slow
+        if jumps:
+            _aggregate_jumps(pos, upos, r, box, nc, box / nc, float(diameters.max()), head, nxt, prv, cell_of, cl,
+                             chead, cnext, ctail, csize, csum, csq, active, where, state, step0, mobility_exponent,
+                             sticking_probability, jump_min, chunk_moves, min_left, rec_i, rec_j, rec_n, rec_rg2,
+                             arrival, clock, hk, hv, hsize, restructure, float(np.mean(diameters)))
+        else:
+            _aggregate(pos, upos, r, box, nc, head, nxt, prv, cell_of, cl, chead, cnext, ctail, csize, csum, csq,
+                       active, where, state, step0, mobility_exponent, sticking_probability, chunk_moves, min_left,
+                       rec_i, rec_j, rec_n, rec_rg2, arrival, restructure, float(np.mean(diameters)))
         # about one progress line every PROGRESS_S seconds (the moves do not depend on the chunking)
         grow = PROGRESS_S / max(time.perf_counter() - t_chunk, 1e-3)
         chunk_moves = int(np.clip(chunk_moves * min(grow, 2.0), 1000, 10**8))
@@ -407,4 +715,5 @@ def aggregate(diameters: np.ndarray, box: float, *, seed: int, step_fraction: fl
     return Aggregate(positions=pos, diameters=np.asarray(diameters, float), box=float(box), cluster=cl,
                      arrival=arrival, contacts=np.stack([rec_i[:m], rec_j[:m]], -1), merger_size=rec_n[:m].copy(),
                      merger_rg=np.sqrt(rec_rg2[:m]), moves=int(state[1]), collisions=int(state[2]),
-                     clusters_left=int(state[0]), wall_s=time.perf_counter() - t0, placement=placement)
+                     clusters_left=int(state[0]), wall_s=time.perf_counter() - t0, placement=placement,
+                     stepping=stepping, jumps=int(state[4]))

@@ -14,7 +14,9 @@ from pathlib import Path
 import numpy as np
 
 from opalflow.aerogel.aggregation import Aggregate
-from opalflow.aerogel.fractal import FractalFit, mass_radius, plot_fractal, radius_of_gyration
+from opalflow.aerogel.fractal import (FractalFit, mass_radius, pair_correlation, plot_fractal, radius_of_gyration,
+                                     structure_factor)
+from opalflow.aerogel.loops import loop_statistics
 from opalflow.aerogel.scene import coordination, make_aggregate, periodic_structure
 from opalflow.aerogel.spec import AggregationWorkflow
 from opalflow.lammps.datafile import write_data
@@ -63,50 +65,75 @@ def plot_network(agg: Aggregate, z: np.ndarray, path) -> None:
 
 
 def _fit_line(f: FractalFit) -> str:
+    unit = {"mass-radius": " nm", "g(r)": " nm", "S(q)": " 1/nm"}.get(f.method, "")
     if not math.isfinite(f.D):
-        return f"| {f.method} | - | - | {f.range[0]:.4g}-{f.range[1]:.4g} | {f.points} | {f.note} |"
-    unit = " nm" if f.method == "mass-radius" else ""
+        return f"| {f.method} | - | - | {f.range[0]:.4g}-{f.range[1]:.4g}{unit} | {f.points} | {f.note} |"
     return (f"| {f.method} | {f.D:.3f} | [{f.ci95[0]:.3f}, {f.ci95[1]:.3f}] | {f.range[0]:.4g}-{f.range[1]:.4g}{unit} "
             f"| {f.points} | {f.note} |")
+
+
+def fractal_fits(agg: Aggregate, seed: int) -> dict:
+    """Every estimate of D_f of an aggregate: method -> (FractalFit, curve)."""
+    fits = {}
+    for method in (mass_radius, radius_of_gyration, pair_correlation):
+        fit, curve = method(agg, seed=seed) if method is not radius_of_gyration else method(agg)
+        fits[fit.method] = (fit, curve)
+    fits["S(q)"] = structure_factor(agg, fits["g(r)"][1]["xi_nm"])
+    return fits
 
 
 def run_aggregation(spec: AggregationWorkflow, out: Path, say=print) -> dict:
     start = time.perf_counter()
     a = spec.aggregate
     say(f"{spec.name}: {a.algorithm.upper()} of {a.particles} spheres (d = {a.diameter_nm:g} +- {a.diameter_std_nm:g} "
-        f"nm) at solid fraction {a.solid_fraction:g}")
-    agg = make_aggregate(a, progress=say)
-    say(f"aggregated in {agg.wall_s:.1f} s: {agg.moves} moves, {agg.collisions} contacts, {len(agg.contacts)} mergers")
-    s = periodic_structure(agg, spec.bonds.cutoff_factor, spec.material)
+        f"nm) at solid fraction {a.solid_fraction:g}, {a.stepping} stepping, loops: {a.loops}")
+    agg, cutoff, done = make_aggregate(a, spec.bonds.cutoff_factor, progress=say)
+    say(f"aggregated in {agg.wall_s:.1f} s: {agg.moves} moves, {agg.jumps} jumps, {agg.collisions} contacts, "
+        f"{len(agg.contacts)} mergers")
+    s = periodic_structure(agg, cutoff, spec.material)
     z = coordination(s.n_particles, s.bonds)
-    mr, mr_curve = mass_radius(agg, seed=a.seed)
-    rg, rg_curve = radius_of_gyration(agg)
+    loops = loop_statistics(s.n_particles, s.bonds)
+    fits = fractal_fits(agg, a.seed)
     lit, source = LITERATURE[a.algorithm]
     summary = {
         "workflow": spec.name, "opalflow_version": __version__, "algorithm": a.algorithm,
         "n_particles": s.n_particles, "n_bonds": s.n_bonds, "box_nm": agg.box, "solid_fraction": agg.solid_fraction,
-        "placement": agg.placement, "moves": agg.moves, "collisions": agg.collisions, "mergers": len(agg.contacts),
+        "placement": agg.placement, "stepping": agg.stepping, "moves": agg.moves, "jumps": agg.jumps,
+        "collisions": agg.collisions, "mergers": len(agg.contacts),
         "clusters_left": agg.clusters_left, "aggregation_s": agg.wall_s, "moves_per_s": agg.moves / max(agg.wall_s, 1e-9),
-        "mean_coordination": float(z.mean()), "loops": int(s.n_bonds - (s.n_particles - agg.clusters_left)),
-        "fractal_mass_radius": mr.as_dict(), "fractal_rg": rg.as_dict(),
+        "loop_model": done, "bond_cutoff": cutoff, **loops,
+        "crossover_mass": fits["R_g(N)"][1]["crossover_mass"], "correlation_length_nm": fits["g(r)"][1]["xi_nm"],
+        "fractal_mass_radius": fits["mass-radius"][0].as_dict(), "fractal_rg": fits["R_g(N)"][0].as_dict(),
+        "fractal_gr": fits["g(r)"][0].as_dict(), "fractal_sq": fits["S(q)"][0].as_dict(),
         "literature_D": {"value": lit, "source": source},
     }
-    d_text = " and ".join(f"{f.D:.2f} [{f.ci95[0]:.2f}, {f.ci95[1]:.2f}] ({f.method})" for f in (mr, rg)
-                          if math.isfinite(f.D)) or "no fit"
-    summary["headline"] = (f"D_f = {d_text}; literature {lit}; {s.n_particles} spheres, {s.n_bonds} bonds, "
-                           f"{agg.wall_s:.1f} s")
+    d_text = "; ".join(f"{f.D:.2f} [{f.ci95[0]:.2f}, {f.ci95[1]:.2f}] ({f.method})" for f, _ in fits.values()
+                       if math.isfinite(f.D)) or "no fit"
+    summary["headline"] = (f"D_f = {d_text}; literature {lit}; {s.n_particles} spheres, {s.n_bonds} bonds "
+                           f"({loops['loops_per_10k']:.0f} loops per 10 000), {agg.wall_s:.1f} s")
+    rotation = ("Clusters translate only (no rotational diffusion, which lowers D_f: Jungblut et al., Phys. Rev. E "
+                "2019).")
     report = [f"# {spec.name}: {a.algorithm.upper()} aggregate", "",
               f"{s.n_particles} spheres, d = {a.diameter_nm:g} +- {a.diameter_std_nm:g} nm (Gaussian), solid fraction "
-              f"{agg.solid_fraction:.4f} in a periodic cube of {agg.box:.4g} nm; {agg.placement}; "
-              f"{agg.moves} moves, {agg.collisions} contacts, {len(agg.contacts)} mergers in {agg.wall_s:.1f} s. "
-              f"Bonds at contacts (within {spec.bonds.cutoff_factor:g} of r_i + r_j): {s.n_bonds}, mean coordination "
-              f"{z.mean():.3f}, {summary['loops']} closing loops.", "",
+              f"{agg.solid_fraction:.4f} in a periodic cube of {agg.box:.4g} nm; {agg.placement}; {agg.stepping} "
+              f"stepping: {agg.moves} moves, {agg.jumps} free-distance jumps, {agg.collisions} contacts, "
+              f"{len(agg.contacts)} mergers in {agg.wall_s:.1f} s. {rotation}", "",
+              f"Network (loop model `{a.loops}`; bonds within {cutoff:g} x (r_i + r_j)): {s.n_bonds} bonds, mean "
+              f"coordination {z.mean():.3f}, {loops['dangling_fraction']:.1%} dangling spheres, {loops['loops']} "
+              f"independent loops ({loops['loops_per_10k']:.0f} per 10 000 spheres)"
+              + (f"; {done['deflected']} of {done['dangling_before']} dangling spheres deflected" if "deflected" in done
+                 else "") + ".", "",
               "| method | D_f | 95 % interval | fitted range | points | note |", "|---|---|---|---|---|---|",
-              _fit_line(mr), _fit_line(rg), "",
-              f"Literature ({a.algorithm.upper()}): {lit} ({source}). The intervals are regression intervals of "
-              "correlated points (lower bounds); seeds give the spread.", "",
+              *(_fit_line(f) for f, _ in fits.values()), "",
+              f"Literature ({a.algorithm.upper()}): {lit} ({source}); dilute DLCA by R_g(N): 1.78 +- 0.05 (Jullien, "
+              "Kolb and Botet 1984). R_g(N) measures the dilute clusters (up to a third of the crossover mass, "
+              "where a cluster's own solid fraction falls to the box's); g(r) and S(q) the gel up to half its "
+              "correlation length. The intervals are regression intervals of correlated points (lower bounds); "
+              "seeds give the spread.", "",
               "![fractal dimension](fractal.png)", "", "![network](network.png)", "",
               "`aggregate.lmp`: the bonded network as an atom_style bpm/sphere data file (periodic in x, y, z)."]
+    mr_curve = fits["mass-radius"][1]
+
     def fill(h):
         for key, value, unit, cols in (
                 ("positions_nm", agg.positions, "nm", ["x", "y", "z"]), ("diameters_nm", agg.diameters, "nm", None),
@@ -114,15 +141,20 @@ def run_aggregation(spec: AggregationWorkflow, out: Path, say=print) -> dict:
                 ("bonds", s.bonds, "1", ["i", "j"]), ("merger_size", agg.merger_size, "1", None),
                 ("merger_rg_nm", agg.merger_rg, "nm", None), ("mass_radius/r_nm", mr_curve["r_nm"], "nm", None),
                 ("mass_radius/count", mr_curve["count"], "1", None),
-                ("mass_radius/background", mr_curve["background"], "1", None)):
+                ("mass_radius/background", mr_curve["background"], "1", None),
+                ("pair_correlation/r_nm", fits["g(r)"][1]["r_nm"], "nm", None),
+                ("pair_correlation/g", fits["g(r)"][1]["g"], "1", None),
+                ("structure_factor/q_per_nm", fits["S(q)"][1]["q_per_nm"], "1/nm", None),
+                ("structure_factor/S", fits["S(q)"][1]["S"], "1", None)):
             put(h, key, value, unit, cols)
     results = h5_bytes(fill, workflow=spec.name)
     out.mkdir(parents=True, exist_ok=True)
     summary["wall_s"] = time.perf_counter() - start
+
     def files(stage):
         write_data(stage("aggregate.lmp"), s, title=f"opalflow {__version__} {spec.name}")
         stage("results.h5").write_bytes(results)
-        plot_fractal((mr, mr_curve), (rg, rg_curve), stage("fractal.png"))
+        plot_fractal(fits, stage("fractal.png"))
         plot_network(agg, z, stage("network.png"))
 
     return finish(out, summary, "\n".join(report) + "\n", files=files)

@@ -23,26 +23,37 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from opalflow.aerogel.aggregation import Aggregate, aggregate, box_edge, gaussian_diameters
+from opalflow.aerogel.loops import bond_cutoff, deflect_dangling, loop_statistics, network_bonds, winding_rank
 from opalflow.aerogel.spec import RANDOM_PLACEMENT_MAX, AggregateSpec, AerogelWorkflow
-from opalflow.bpm.bonds import find_bonds
 from opalflow.bpm.scene import Scene
 from opalflow.materials import material
+from opalflow.spec import SpecError
 from opalflow.structure import Structure, quantize
 from opalflow.units import density_to_nano
 
 
-def make_aggregate(a: AggregateSpec, progress=None) -> Aggregate:
-    """The aggregate of an ``[aggregate]`` section (seeded: the same section gives the same spheres)."""
+def make_aggregate(a: AggregateSpec, cutoff_factor: float, progress=None) -> tuple[Aggregate, float, dict]:
+    """The aggregate of an ``[aggregate]`` section (seeded: the same section gives the same spheres) with its
+    loop model applied, the bond cutoff (multiple of r_i + r_j) of its network, and what the model did."""
     d = gaussian_diameters(a.particles, a.diameter_nm, a.diameter_std_nm, np.random.default_rng(a.seed))
 
     def said(left, n, moves, rate, eta):
         eta_txt = "time left not known yet" if math.isnan(eta) else f"up to about {eta:.0f} s left"
         progress(f"  aggregation: {left} clusters of {n} spheres left, {moves} moves ({rate:,.0f}/s), {eta_txt}")
 
-    return aggregate(d, box_edge(d, a.solid_fraction), seed=a.seed, step_fraction=a.step_fraction,
-                     mobility_exponent=a.mobility_exponent,
-                     sticking_probability=a.sticking_probability if a.algorithm == "rlca" else 1.0,
-                     progress=said if progress else None, random_placement_max=RANDOM_PLACEMENT_MAX)
+    agg = aggregate(d, box_edge(d, a.solid_fraction), seed=a.seed, step_fraction=a.step_fraction,
+                    mobility_exponent=a.mobility_exponent,
+                    sticking_probability=a.sticking_probability if a.algorithm == "rlca" else 1.0,
+                    stepping=a.stepping, restructure=a.loops == "restructuring", progress=said if progress else None,
+                    random_placement_max=RANDOM_PLACEMENT_MAX)
+    done = {"model": a.loops}
+    if a.loops == "deflection":
+        agg, counts = deflect_dangling(agg, cutoff_factor)
+        done.update(counts)
+        if progress:
+            progress(f"  loops: {counts['deflected']} of {counts['dangling_before']} dangling spheres deflected to a "
+                     f"second contact ({counts['left_dangling']} had none within reach)")
+    return agg, bond_cutoff(a.loops, cutoff_factor, a.neck_gap), done
 
 
 def coordination(n: int, bonds: np.ndarray) -> np.ndarray:
@@ -50,18 +61,18 @@ def coordination(n: int, bonds: np.ndarray) -> np.ndarray:
     return np.bincount(bonds.ravel(), minlength=n)
 
 
-def periodic_structure(agg: Aggregate, cutoff_factor: float, material_name: str, overrides=None) -> Structure:
-    """The whole aggregate bonded at its contacts, periodic in x, y and z (no substrate)."""
+def periodic_structure(agg: Aggregate, cutoff: float, material_name: str, overrides=None) -> Structure:
+    """The whole aggregate bonded within ``cutoff`` x (r_i + r_j), periodic in x, y and z (no substrate)."""
     box = np.full(3, agg.box)
-    periodic = np.ones(3, bool)
-    x = quantize(agg.positions, box, periodic)
-    bonds = find_bonds(x, agg.diameters, box, periodic, cutoff_factor)
+    x, bonds = network_bonds(agg, cutoff)
     rho = density_to_nano(material(material_name, overrides)["density_kg_m3"])
     return Structure(positions=x, diameters=agg.diameters.copy(), types=np.ones(len(x), np.int32),
-                     densities=np.full(len(x), rho), box_lo=np.zeros(3), box_hi=box, periodic=periodic,
+                     densities=np.full(len(x), rho), box_lo=np.zeros(3), box_hi=box, periodic=np.ones(3, bool),
                      bonds=bonds, bond_types=np.ones(len(bonds), np.int32), type_names=[material_name],
                      bond_type_names=[material_name],
-                     meta={"solid_fraction": agg.solid_fraction})
+                     meta={"solid_fraction": agg.solid_fraction, "aggregate_solid_fraction": agg.solid_fraction,
+                           "dropped_unattached": 0, "cut_bonds": 0, "box_nm": agg.box,
+                           "aggregation_s": agg.wall_s, "aggregation_moves": agg.moves})
 
 
 #: candidate heights of the cut plane (fractions of the cube edge)
@@ -78,12 +89,11 @@ def _attached(z: np.ndarray, bonds: np.ndarray, box: float, d_mean: float) -> np
     return np.isin(label, np.unique(label[z < d_mean]))
 
 
-def slab(agg: Aggregate, cutoff_factor: float, material_name: str, overrides=None) -> Structure:
+def slab(agg: Aggregate, cutoff: float, material_name: str, overrides=None) -> Structure:
     """The aggregate cut open at the best of CUTS heights, its bottom layer fixed, free pieces left out and
     the box in z opened by half the height on both sides (see the module docstring)."""
     box = np.full(3, agg.box)
-    x = quantize(agg.positions, box, np.ones(3, bool))
-    whole = find_bonds(x, agg.diameters, box, np.ones(3, bool), cutoff_factor)
+    x, whole = network_bonds(agg, cutoff)
     d_mean = float(np.mean(agg.diameters))
     counts = [int(_attached(np.mod(x[:, 2] - k * agg.box / CUTS, agg.box), whole, agg.box, d_mean).sum())
               for k in range(CUTS)]
@@ -113,30 +123,49 @@ def slab(agg: Aggregate, cutoff_factor: float, material_name: str, overrides=Non
 
 
 def build_aerogel(spec: AerogelWorkflow, progress=None) -> Structure:
-    agg = make_aggregate(spec.aggregate, progress)
-    return slab(agg, spec.bonds.cutoff_factor, spec.material, spec.materials)
+    """The slab (or with ``sample.periodic_z`` the periodic cube) of the spec's aggregate and loop model."""
+    agg, cutoff, done = make_aggregate(spec.aggregate, spec.bonds.cutoff_factor, progress)
+    if spec.sample.periodic_z:
+        s = periodic_structure(agg, cutoff, spec.material, spec.materials)
+        wraps = winding_rank(s.positions, s.bonds, agg.box)
+        if wraps < 3:
+            raise SpecError("sample.periodic_z", True, f"this network wraps around the periodic cube in {wraps} of 3 "
+                            "directions (off-lattice cluster aggregation joins rigid clusters at contacts, so the "
+                            "gel is a finite piece interleaved with its own images): it has no stiffness as a "
+                            "periodic solid; use the slab (sample.periodic_z = false)")
+    else:
+        s = slab(agg, cutoff, spec.material, spec.materials)
+    s.meta["loop_model"] = done
+    return s
 
 
 def statistics(s: Structure) -> dict:
     """Numbers about the slab for the build and run summaries."""
     n = s.n_particles
-    z = coordination(n, s.bonds)
     volume = float(s.meta["box_nm"]) ** 3        # the cube the aggregate filled (the z box has room around it)
     mass = float(np.sum(s.densities * s.particle_volumes()))
+    loops = loop_statistics(n, s.bonds)
     return {"n_particles": n, "n_bonds": s.n_bonds, "solid_fraction": s.meta["solid_fraction"],
             "aggregate_solid_fraction": s.meta["aggregate_solid_fraction"],
-            "density_kg_m3": mass / volume * 1e6, "mean_coordination": float(z.mean()),
-            "dangling_fraction": float(np.mean(z <= 1)), "dropped_unattached": s.meta["dropped_unattached"],
+            "density_kg_m3": mass / volume * 1e6, "mean_coordination": loops["mean_coordination"],
+            "dangling_fraction": loops["dangling_fraction"], "loops": loops["loops"],
+            "loops_per_10k": loops["loops_per_10k"], "loop_model": s.meta.get("loop_model", {"model": "none"}),
+            "sample": "cube" if s.periodic[2] else "slab", "dropped_unattached": s.meta["dropped_unattached"],
             "cut_bonds": s.meta["cut_bonds"], "aggregation_s": s.meta["aggregation_s"]}
 
 
 #: what each run summary carries of the statistics (the density study plots against them)
-RUN_KEYS = ("solid_fraction", "density_kg_m3", "mean_coordination", "dropped_unattached")
+RUN_KEYS = ("solid_fraction", "density_kg_m3", "mean_coordination", "loops_per_10k", "dropped_unattached")
 
 
 def _describe(st: dict) -> str:
+    if st["sample"] == "cube":
+        return (f"aerogel cube (periodic in x, y, z): {st['n_particles']} spheres, {st['n_bonds']} bonds (coordination "
+                f"{st['mean_coordination']:.2f}, {st['loops_per_10k']:.0f} loops per 10 000 spheres, loop model "
+                f"{st['loop_model']['model']}), solid fraction {st['solid_fraction']:.4f}")
     return (f"aerogel slab: {st['n_particles']} spheres, {st['n_bonds']} bonds (coordination "
-            f"{st['mean_coordination']:.2f}), solid fraction {st['solid_fraction']:.4f} "
+            f"{st['mean_coordination']:.2f}, {st['loops_per_10k']:.0f} loops per 10 000 spheres, loop model "
+            f"{st['loop_model']['model']}), solid fraction {st['solid_fraction']:.4f} "
             f"({st['dropped_unattached']} spheres left out: no bond path to the bottom after the cut)")
 
 

@@ -9,6 +9,12 @@ from opalflow.bpm.spec import BondsSpec, BoundarySpec, BpmWorkflow, CompressionS
 from opalflow.spec import WorkflowSpec, check
 
 ALGORITHMS = ("dlca", "rlca")
+#: how the clusters move: one step per move, or free-distance jumps (opalflow.aerogel.aggregation)
+STEPPINGS = ("fixed", "jump")
+#: how loops are closed in the network (opalflow.aerogel.loops)
+LOOP_MODELS = ("none", "deflection", "restructuring", "necks")
+#: the largest neck gap, as a fraction of the contact distance (a neck wider than half a sphere is a rod)
+NECK_GAP_MAX = 0.5
 #: the normal distribution below zero: at most this fraction of draws may be non-positive
 NONPOSITIVE_MAX = 0.01
 #: solid fractions above this are placed on a jittered grid (random addition jams near 0.38)
@@ -27,6 +33,9 @@ class AggregateSpec:
     sticking_probability: float = 1.0
     step_fraction: float = 0.5               # random-walk step of a single sphere, in mean diameters
     mobility_exponent: float = -0.5          # D ~ N^alpha (Meakin 1983)
+    stepping: str = "fixed"                  # fixed: a step per move; jump: free-distance jumps (dilute: fast)
+    loops: str = "none"                      # none (trees), deflection, restructuring, necks (opalflow/aerogel/loops.py)
+    neck_gap: float = 0.1                    # necks: bond pairs whose gap is below this x (r_i + r_j)
     seed: int = 1
 
     def box_estimate(self) -> tuple[float, float]:
@@ -57,6 +66,10 @@ class AggregateSpec:
               "must be in (0, 2] (mean diameters per step of a single sphere)")
         check(-2 <= self.mobility_exponent <= 0, "aggregate.mobility_exponent", self.mobility_exponent,
               "must be in [-2, 0] (D ~ N^alpha)")
+        check(self.stepping in STEPPINGS, "aggregate.stepping", self.stepping, f"must be one of {', '.join(STEPPINGS)}")
+        check(self.loops in LOOP_MODELS, "aggregate.loops", self.loops, f"must be one of {', '.join(LOOP_MODELS)}")
+        check(0 < self.neck_gap <= NECK_GAP_MAX, "aggregate.neck_gap", self.neck_gap,
+              f"must be in (0, {NECK_GAP_MAX}] (the gap a neck bridges, as a fraction of r_i + r_j)")
         check(0 <= self.seed < 2**31, "aggregate.seed", self.seed, "must be in [0, 2^31)")
         box, d_max = self.box_estimate()
         cell = self.step_fraction * self.diameter_nm + d_max
@@ -87,11 +100,20 @@ class AggregationWorkflow(WorkflowSpec):
 
 
 @dataclass
+class SampleSpec:
+    """What the aerogel workflow loads: the slab cut from the aggregate (compressed on its bottom layer), or
+    the periodic cube itself (``periodic_z``: no cut, no walls; the static 6 x 6 stiffness tensor)."""
+
+    periodic_z: bool = False
+
+
+@dataclass
 class AerogelWorkflow(BpmWorkflow):
     """A bonded aggregate (kind = "aerogel") cut to a slab and compressed between a fixed bottom layer and
-    a plate; sides periodic."""
+    a plate; sides periodic.  With ``sample.periodic_z`` the whole periodic cube instead (static tensor)."""
 
     aggregate: AggregateSpec = field(default_factory=AggregateSpec)
+    sample: SampleSpec = field(default_factory=SampleSpec)
     bonds: BondsSpec = field(default_factory=lambda: BondsSpec(cutoff_factor=1.001, length_bins=1))
     boundary: BoundarySpec = field(default_factory=BoundarySpec)
     compression: CompressionSpec = field(default_factory=lambda: CompressionSpec(loading="glued"))
@@ -101,5 +123,8 @@ class AerogelWorkflow(BpmWorkflow):
         self.aggregate.validate()
         check(self.boundary.sides == "periodic", "boundary.sides", self.boundary.sides,
               "must be \"periodic\" (the aggregate is periodic sideways; open sides would cut it free)")
+        if self.sample.periodic_z:
+            check(self.compression.method == "static", "sample.periodic_z", self.sample.periodic_z,
+                  "needs compression.method = \"static\" (the periodic cube has no walls to compress it between)")
         check(1.0 <= self.bonds.cutoff_factor <= 1.1, "bonds.cutoff_factor", self.bonds.cutoff_factor,
               "must be in [1.0, 1.1] (bonds at contacts: centre distance within this factor of the contact distance)")

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from opalflow.analysis import compression as mech
+from opalflow.analysis.elasticity import isotropic_average
 from opalflow.bpm.deck import bond_model, compression_deck
 from opalflow.bpm.loading import LOADINGS
 from opalflow.bpm.report import reference_errors, sample_lines
@@ -113,6 +114,9 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
     volumes = data.particle_volumes()
     sigma_unit = particle_stress(net, res.u, res.theta, volumes) / STRAIN       # per unit strain
     strain_unit = bond_strain(net, res.u) / STRAIN
+    parts = net.energy_parts(res.u, res.theta)
+    total = sum(parts.values())
+    energy_split = {k: v / total for k, v in parts.items()} if total > 0 else {}
     types = data.types
     snapshots = {}
     for e in c.snapshot_strains:
@@ -131,6 +135,8 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
         "timings_s": {**info["timings_s"], "setup": res.setup_seconds, "solve": res.seconds - res.setup_seconds,
                       "analysis": time.perf_counter() - t},
         "build_s": build_s, "complete": True, "loose_particles_left_out": res.loose,
+        # the bonds' strain energy by deformation mode (fractions; BondNetwork.energy_parts)
+        "energy_split": energy_split,
         "stress_by_material": {f"{e:.4f}": v["by_material"] for e, v in snapshots.items()},
         "bond_strain_per_strain": {"mean": float(strain_unit.mean()), "std": float(strain_unit.std()),
                                    "min": float(strain_unit.min()), "max": float(strain_unit.max())},
@@ -209,6 +215,9 @@ def _report(spec: BpmWorkflow, info: dict, summary: dict, res: StaticResult, sid
     ref = summary["reference"].get("youngs_modulus_specimen_GPa") or summary["reference"].get("youngs_modulus_GPa")
     lines.append(f"| Young's modulus (GPa) | {summary['youngs_modulus_GPa']:.4g} | "
                  + (f"{ref['value']:g} ({ref['source']}) | {100 * ref['error']:+.1f} % |" if ref else "- | - |"))
+    if summary.get("energy_split"):
+        lines += ["", "Strain energy of the bonds by mode: " + ", ".join(
+            f"{k} {100 * v:.1f} %" for k, v in summary["energy_split"].items()) + " (BondNetwork.energy_parts)."]
     lines += ["", f"Solver `{res.solver}`: {res.iterations} iterations to relative residual {res.residual:.1e}; "
               f"set-up {res.setup_seconds:.1f} s, iterations {res.seconds - res.setup_seconds:.1f} s, peak memory "
               f"{res.peak_memory_MiB:.0f} MiB; "
@@ -231,6 +240,7 @@ def run_tensor(spec: BpmWorkflow, s, out: Path, t0: float, say=print) -> dict:
     C = res.C_GPa
     S = np.linalg.inv(C)
     E = 1.0 / np.diag(S)[:3]
+    iso = isotropic_average(C)
     info = {"workflow": spec.name, "method": "static", "loading": "periodic", "spec": spec.to_dict(),
             "opalflow_version": __version__, "type_names": data.type_names, "n_particles": s.n_particles,
             "n_bonds": s.n_bonds, "solid_fraction": solid_fraction(s), "build_s": build_s,
@@ -243,6 +253,8 @@ def run_tensor(spec: BpmWorkflow, s, out: Path, t0: float, say=print) -> dict:
         "stiffness_tensor_GPa": C.tolist(), "voigt_order": "xx yy zz yz xz xy",
         "youngs_modulus_GPa": float(E[2]), "youngs_moduli_GPa": {"x": float(E[0]), "y": float(E[1]), "z": float(E[2])},
         "poisson_ratio_zx": float(-S[0, 2] / S[2, 2]), "bulk_modulus_GPa": float(1.0 / S[:3, :3].sum()),
+        "youngs_modulus_isotropic_GPa": iso["hill"]["E"], "poisson_ratio_isotropic": iso["hill"]["nu"],
+        "anisotropy_index": iso["anisotropy_index"], "isotropic_average_GPa": iso,
         "n_particles": s.n_particles, "n_bonds": s.n_bonds, "solver": res.solver, "iterations": res.iterations,
         "relative_residual": res.residual, "static_s": res.seconds, "peak_memory_MiB": res.peak_memory_MiB,
         "build_s": build_s, "complete": True, "loose_particles_left_out": res.loose, "opalflow_version": __version__,
@@ -258,7 +270,12 @@ def run_tensor(spec: BpmWorkflow, s, out: Path, t0: float, say=print) -> dict:
              "| | " + " | ".join(names) + " |", "|---|" + "---|" * 6]
     lines += [f"| {names[r]} | " + " | ".join(f"{C[r, k]:.4g}" for k in range(6)) + " |" for r in range(6)]
     lines += ["", f"Young's moduli x / y / z: {E[0]:.4g} / {E[1]:.4g} / {E[2]:.4g} GPa; Poisson ratio zx "
-              f"{summary['poisson_ratio_zx']:.4f}; bulk modulus (Reuss) {summary['bulk_modulus_GPa']:.4g} GPa.", ""]
+              f"{summary['poisson_ratio_zx']:.4f}; bulk modulus (Reuss) {summary['bulk_modulus_GPa']:.4g} GPa.", "",
+              "Isotropic averages (opalflow/analysis/elasticity.py: Voigt, Reuss, Hill; universal anisotropy index "
+              f"A^U = {iso['anisotropy_index']:.3g}, 0 for an isotropic tensor):", "",
+              "| average | K (GPa) | G (GPa) | E (GPa) | nu |", "|---|---|---|---|---|",
+              *(f"| {k} | {iso[k]['K']:.4g} | {iso[k]['G']:.4g} | {iso[k]['E']:.4g} | {iso[k]['nu']:.4f} |"
+                for k in ("voigt", "reuss", "hill")), ""]
     for k, r in summary["reference"].items():
         lines.append(f"Reference {k}: {r['value']:.6g} ({r['source']}); error {100 * r['error']:+.4f} %.")
     lines += ["", f"Solver `{res.solver}`: iterations per loading {res.iterations}, worst relative residual "

@@ -66,6 +66,22 @@ class BondNetwork:
         return (self.a_r[:, None] - self.a_s[:, None]) * n_du * n + self.a_s[:, None] * du \
             + (0.5 * self.a_s * self.L)[:, None] * np.cross(n, theta[i] + theta[j])
 
+    def energy_parts(self, u: np.ndarray, theta: np.ndarray, stretch: np.ndarray | None = None) -> dict:
+        """The strain energy of the bonds split by deformation mode (totals, in the network's units):
+        stretching 1/2 a_r (n . du)^2, shear 1/2 a_s |s|^2 with s = P du + L/2 n x (theta_i + theta_j) (the
+        shear force is a_s s and the shear torque L/2 n x a_s s), bending 1/2 kb |P dtheta|^2 and twisting
+        1/2 kt (n . dtheta)^2; they sum to 1/2 x^T K x (module docstring)."""
+        i, j, n = self.i, self.j, self.n
+        du = u[i] - u[j] if stretch is None else u[i] - u[j] + stretch
+        n_du = np.einsum("ij,ij->i", n, du)
+        shear = du - n_du[:, None] * n + (0.5 * self.L)[:, None] * np.cross(n, theta[i] + theta[j])
+        d_t = theta[i] - theta[j]
+        n_dt = np.einsum("ij,ij->i", n, d_t)
+        return {"stretching": float(0.5 * np.sum(self.a_r * n_du**2)),
+                "shear": float(0.5 * np.sum(self.a_s * np.einsum("ij,ij->i", shear, shear))),
+                "bending": float(0.5 * np.sum(self.bend * (np.einsum("ij,ij->i", d_t, d_t) - n_dt**2))),
+                "twisting": float(0.5 * np.sum(self.twist * n_dt**2))}
+
     def part(self, sel: slice) -> "BondNetwork":
         """The bonds in ``sel`` (views, no copies)."""
         return BondNetwork(self.n_particles, self.i[sel], self.j[sel], self.n[sel], self.L[sel], self.a_r[sel],

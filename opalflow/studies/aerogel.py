@@ -126,76 +126,125 @@ def _plot_models(curves: dict, path: Path) -> None:
     save_figure(fig, path)
 
 
-def aerogel_density(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
-    st = spec.study
-    jobs, keys = [], []
-    for f in st.solid_fractions:
-        for s in st.seeds:
-            common = [f"aggregate.solid_fraction={label_number(f)}", f"aggregate.seed={s}"]
-            jobs.append(Job(f"phi{label_number(f)}_s{s}_static", job_spec(spec, [*common, "compression.method=static"])))
-            if st.method == "dynamic":            # study.method = "static": E only, no strength
-                jobs.append(Job(f"phi{label_number(f)}_s{s}", job_spec(spec, common)))
-            keys.append((f, s))
-    res = sweep(spec, out, jobs, say)
-    runs = []
-    for f, s in keys:
-        a, b = f"phi{label_number(f)}_s{s}_static", f"phi{label_number(f)}_s{s}"
-        if a not in res:
-            continue
-        r = {"target_solid_fraction": f, "seed": s, "solid_fraction": res[a]["solid_fraction"],
-             "density_kg_m3": res[a]["density_kg_m3"], "E_kPa": res[a]["youngs_modulus_GPa"] * 1e6,
-             "E_dynamic_kPa": res[b]["youngs_modulus_GPa"] * 1e6 if b in res else None,
-             "strength_kPa": res[b]["strength_MPa"] * 1e3 if b in res else None,
-             "wall_s": res[a]["wall_s"] + (res[b]["wall_s"] if b in res else 0.0)}
-        runs.append(r)
-    rho = np.array([r["density_kg_m3"] for r in runs])
-    fits = {"E": fit_power_law(rho, [r["E_kPa"] for r in runs])}
+def _density_fits(runs: list[dict]) -> dict:
+    """E ~ rho^m (and sigma ~ rho^n where three dynamic runs have a strength) of one series."""
+    fits = {"E": fit_power_law([r["density_kg_m3"] for r in runs], [r["E_kPa"] for r in runs])}
     dyn = [r for r in runs if r["strength_kPa"]]
     if len(dyn) >= 3:
         fits["strength"] = fit_power_law([r["density_kg_m3"] for r in dyn], [r["strength_kPa"] for r in dyn])
+    return fits
+
+
+def _scatter(runs: list[dict]) -> float:
+    """The largest max / min of E between seeds at one solid fraction."""
+    worst = 1.0
+    for f in {r["target_solid_fraction"] for r in runs}:
+        e = [r["E_kPa"] for r in runs if r["target_solid_fraction"] == f and r["E_kPa"] > 0]
+        if len(e) >= 2:
+            worst = max(worst, max(e) / min(e))
+    return worst
+
+
+def aerogel_density(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
+    st = spec.study
+    many = len(st.loop_models) > 1
+    jobs, keys = [], []
+    for model in st.loop_models:
+        prefix = f"{model}_" if many else ""
+        for f in st.solid_fractions:
+            for s in st.seeds:
+                common = [f"aggregate.solid_fraction={label_number(f)}", f"aggregate.seed={s}"]
+                if many:
+                    common.append(f'aggregate.loops="{model}"')
+                name = f"{prefix}phi{label_number(f)}_s{s}"
+                jobs.append(Job(f"{name}_static", job_spec(spec, [*common, "compression.method=static"])))
+                if st.method == "dynamic":            # study.method = "static": E only, no strength
+                    jobs.append(Job(name, job_spec(spec, common)))
+                keys.append((model, f, s, name))
+    res = sweep(spec, out, jobs, say)
+    series: dict[str, list[dict]] = {m: [] for m in st.loop_models}
+    for model, f, s, name in keys:
+        a, b = f"{name}_static", name
+        if a not in res:
+            continue
+        r = {"loop_model": model, "target_solid_fraction": f, "seed": s, "solid_fraction": res[a]["solid_fraction"],
+             "density_kg_m3": res[a]["density_kg_m3"], "E_kPa": res[a]["youngs_modulus_GPa"] * 1e6,
+             "mean_coordination": res[a].get("mean_coordination"), "loops_per_10k": res[a].get("loops_per_10k"),
+             "energy_split": res[a].get("energy_split", {}),
+             "E_dynamic_kPa": res[b]["youngs_modulus_GPa"] * 1e6 if b in res else None,
+             "strength_kPa": res[b]["strength_MPa"] * 1e3 if b in res else None,
+             "wall_s": res[a]["wall_s"] + (res[b]["wall_s"] if b in res else 0.0)}
+        series[model].append(r)
     ref = literature()["density_scaling"]
-    m = fits["E"]
-    n_txt = (f", n = {fits['strength'].exponent:.2f} [{fits['strength'].exponent_ci[0]:.2f}, "
-             f"{fits['strength'].exponent_ci[1]:.2f}]" if "strength" in fits else "")
-    summary = {"runs": runs, "fits": {k: v.as_dict() for k, v in fits.items()}, "literature": ref,
-               "headline": (f"E ~ rho^m with m = {m.exponent:.2f} [{m.exponent_ci[0]:.2f}, {m.exponent_ci[1]:.2f}]"
-                            f"{n_txt}; Ma et al. m = {ref['m_dlca_beams']}, experiments {ref['m_experiment_low']}-"
-                            f"{ref['m_experiment_high']}")}
-    _plot_density(runs, fits, out / "density.png")
-    report = [f"Solid fractions {', '.join(map(str, st.solid_fractions))} x seeds {', '.join(map(str, st.seeds))}: "
-              "E from the static solver (the slab glued between its bottom layer and the wall, as the dynamic run), "
-              "strength from the dynamic run; density = the slab's after the cut.", "",
-              "| law | exponent | 95 % interval | prefactor | R^2 | reference |", "|---|---|---|---|---|---|",
-              f"| E = a rho^m (kPa) | {m.exponent:.3f} | [{m.exponent_ci[0]:.3f}, {m.exponent_ci[1]:.3f}] | "
-              f"{m.prefactor:.4g} | {m.r2:.4f} | m = {ref['m_dlca_beams']} ({ref['m_dlca_beams_source']}); "
-              f"{ref['m_experiment_low']}-{ref['m_experiment_high']} ({ref['m_experiment_source']}) |"]
-    if "strength" in fits:
-        f = fits["strength"]
-        report.append(f"| sigma = a rho^n (kPa) | {f.exponent:.3f} | [{f.exponent_ci[0]:.3f}, {f.exponent_ci[1]:.3f}] | "
-                      f"{f.prefactor:.4g} | {f.r2:.4f} | - |")
-    report += ["", "| target solid fraction | seed | solid fraction | density (kg/m^3) | E static (kPa) | "
-               "E dynamic (kPa) | strength (kPa) | wall (s) |", "|---|---|---|---|---|---|---|---|"]
-    report += [f"| {r['target_solid_fraction']:g} | {r['seed']} | {r['solid_fraction']:.4f} | {r['density_kg_m3']:.1f} | "
-               f"{r['E_kPa']:.4g} | {fmt_value(r['E_dynamic_kPa'], '.4g')} | {fmt_value(r['strength_kPa'], '.4g')} | "
-               f"{r['wall_s']:.0f} |" for r in runs]
+    models = {}
+    for model, runs in series.items():
+        if len({r["density_kg_m3"] for r in runs}) < 2:
+            continue
+        fits = _density_fits(runs)
+        split = {k: float(np.mean([r["energy_split"][k] for r in runs if r["energy_split"]]))
+                 for k in ("stretching", "shear", "bending", "twisting") if any(r["energy_split"] for r in runs)}
+        models[model] = {"runs": runs, "fits": {k: v.as_dict() for k, v in fits.items()}, "scatter_max_min": _scatter(runs),
+                         "mean_coordination": float(np.mean([r["mean_coordination"] or 0 for r in runs])),
+                         "loops_per_10k": float(np.mean([r["loops_per_10k"] or 0 for r in runs])), "energy_split": split}
+    first = models[next(iter(models))]
+    summary = {"runs": [r for m in models.values() for r in m["runs"]], "fits": first["fits"], "models": models,
+               "literature": ref}
+
+    def m_text(model):
+        f = models[model]["fits"]["E"]
+        return f"m = {f['exponent']:.2f} [{f['exponent_ci'][0]:.2f}, {f['exponent_ci'][1]:.2f}]"
+
+    n = first["fits"].get("strength")
+    n_txt = f", n = {n['exponent']:.2f} [{n['exponent_ci'][0]:.2f}, {n['exponent_ci'][1]:.2f}]" if n else ""
+    summary["headline"] = ("E ~ rho^m with " + "; ".join(f"{m_text(m)} ({m})" for m in models) + n_txt
+                           + f"; Ma et al. m = {ref['m_dlca_beams']}, experiments {ref['m_experiment_low']}-"
+                           f"{ref['m_experiment_high']}")
+    _plot_density(models, out / "density.png")
+    report = [f"Solid fractions {', '.join(map(str, st.solid_fractions))} x seeds {', '.join(map(str, st.seeds))} x "
+              f"loop models {', '.join(st.loop_models)}: E from the static solver (the slab glued between its bottom "
+              "layer and the wall, as the dynamic run), strength from the dynamic run; density = the slab's after "
+              "the cut.", "",
+              "| loop model | law | exponent | 95 % interval | prefactor | R^2 | E max/min between seeds | "
+              "coordination | loops per 10 000 | energy: bending / twisting / shear / stretching | reference |",
+              "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for model, m in models.items():
+        for law, f in m["fits"].items():
+            e = m["energy_split"]
+            report.append(
+                f"| {model} | {'E = a rho^m' if law == 'E' else 'sigma = a rho^n'} (kPa) | {f['exponent']:.3f} | "
+                f"[{f['exponent_ci'][0]:.3f}, {f['exponent_ci'][1]:.3f}] | {f['prefactor']:.4g} | {f['r2']:.4f} | "
+                f"{m['scatter_max_min']:.1f} | {m['mean_coordination']:.2f} | {m['loops_per_10k']:.0f} | "
+                + (" / ".join(f"{100 * e[k]:.0f} %" for k in ("bending", "twisting", "shear", "stretching")) if e
+                   else "-")
+                + (f" | m = {ref['m_dlca_beams']} ({ref['m_dlca_beams_source']}); {ref['m_experiment_low']}-"
+                   f"{ref['m_experiment_high']} ({ref['m_experiment_source']}) |" if law == "E" else " | - |"))
+    report += ["", "| loop model | target solid fraction | seed | solid fraction | density (kg/m^3) | E static (kPa) | "
+               "E dynamic (kPa) | strength (kPa) | wall (s) |", "|---|---|---|---|---|---|---|---|---|"]
+    report += [f"| {r['loop_model']} | {r['target_solid_fraction']:g} | {r['seed']} | {r['solid_fraction']:.4f} | "
+               f"{r['density_kg_m3']:.1f} | {r['E_kPa']:.4g} | {fmt_value(r['E_dynamic_kPa'], '.4g')} | "
+               f"{fmt_value(r['strength_kPa'], '.4g')} | {r['wall_s']:.0f} |" for r in summary["runs"]]
     report += ["", "![E and strength against density](density.png)"]
     return summary, report
 
 
-def _plot_density(runs, fits, path: Path) -> None:
-    fig, ax = new_figure(figsize=(6.4, 4.4))
-    rho = np.array([r["density_kg_m3"] for r in runs])
-    grid = np.geomspace(rho.min(), rho.max(), 50)
-    ax.loglog(rho, [r["E_kPa"] for r in runs], "o", color="C0", label="E (static), kPa")
-    f = fits["E"]
-    ax.loglog(grid, f.prefactor * grid**f.exponent, "-", color="C0", label=f"E ~ rho^{f.exponent:.2f}")
-    dyn = [r for r in runs if r["strength_kPa"]]
-    if "strength" in fits:
-        ax.loglog([r["density_kg_m3"] for r in dyn], [r["strength_kPa"] for r in dyn], "s", color="C3",
-                  label="strength (dynamic), kPa")
-        f = fits["strength"]
-        ax.loglog(grid, f.prefactor * grid**f.exponent, "--", color="C3", label=f"sigma ~ rho^{f.exponent:.2f}")
+def _plot_density(models: dict, path: Path) -> None:
+    """E (and strength) against density, one colour per loop model, each with its power-law fit."""
+    fig, ax = new_figure(figsize=(6.8, 4.6))
+    for k, (model, m) in enumerate(models.items()):
+        runs, fits = m["runs"], m["fits"]
+        rho = np.array([r["density_kg_m3"] for r in runs])
+        grid = np.geomspace(rho.min(), rho.max(), 50)
+        f = fits["E"]
+        ax.loglog(rho, [r["E_kPa"] for r in runs], "o", color=f"C{k}", ms=4, label=f"E (static), {model}")
+        ax.loglog(grid, f["prefactor"] * grid ** f["exponent"], "-", color=f"C{k}",
+                  label=f"{model}: m = {f['exponent']:.2f} [{f['exponent_ci'][0]:.2f}, {f['exponent_ci'][1]:.2f}]")
+        if "strength" in fits:
+            dyn = [r for r in runs if r["strength_kPa"]]
+            f = fits["strength"]
+            ax.loglog([r["density_kg_m3"] for r in dyn], [r["strength_kPa"] for r in dyn], "s", color=f"C{k}", mfc="none",
+                      label=f"strength (dynamic), {model}")
+            ax.loglog(grid, f["prefactor"] * grid ** f["exponent"], "--", color=f"C{k}", label=f"sigma ~ rho^{f['exponent']:.2f}")
     ax.set_xlabel("density (kg/m^3)")
     ax.set_ylabel("kPa")
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=7)
     save_figure(fig, path)

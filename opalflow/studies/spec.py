@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from opalflow.aerogel.spec import LOOP_MODELS
 from opalflow.bpm.spec import METHODS
 from opalflow.runs.spec import ExecutorSpec
 from opalflow.spec import WorkflowSpec, check, check_name
@@ -39,6 +40,7 @@ class StudySpec:
     cells: list[list[int]] = field(default_factory=lambda: [[1, 1], [2, 1], [2, 2]])
     # aerogel_density
     solid_fractions: list[float] = field(default_factory=lambda: [0.04, 0.05, 0.06, 0.08, 0.10])
+    loop_models: list[str] = field(default_factory=lambda: ["none"])     # aggregate.loops of each series
 
 
 @dataclass
@@ -79,5 +81,8 @@ class StudyWorkflow(WorkflowSpec):
               "study.seeds", st.seeds, "must be distinct seeds >= 0")
         check(len(st.solid_fractions) >= 2 and all(0 < f <= 0.5 for f in st.solid_fractions), "study.solid_fractions",
               st.solid_fractions, "must be at least two solid fractions in (0, 0.5]")
+        check(len(st.loop_models) >= 1 and all(m in LOOP_MODELS for m in st.loop_models)
+              and len(set(st.loop_models)) == len(st.loop_models), "study.loop_models", st.loop_models,
+              f"must be distinct loop models among {', '.join(LOOP_MODELS)}")
         check(len(st.cells) >= 1 and all(len(c) == 2 and min(c) >= 1 for c in st.cells), "study.cells",
               st.cells, "must be [cells_x, cells_y] pairs >= 1")
