@@ -6,7 +6,9 @@ structure cache (a new user's).  Commands of hours carry no time
 in the README (``python -m opalflow plan`` prices them before they are submitted).  tests/test_readme.py
 checks the README's quotes against this file.
 
-    python bench/bench_readme.py
+    python bench/bench_readme.py [--only TEXT ...]
+
+``--only``: run just the commands that contain one of these texts and keep the other rows of the file.
 """
 from __future__ import annotations
 
@@ -29,7 +31,11 @@ OUT = ROOT / "bench" / "results" / "readme.json"
 
 
 def main() -> None:
-    argparse.ArgumentParser(description=__doc__).parse_args()
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--only", nargs="*", default=[], help="run the commands containing one of these texts")
+    a = ap.parse_args()
+    before = json.loads(OUT.read_text()) if a.only and OUT.exists() else {"rows": [], "machine": {}}
+    old = before["rows"]
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         # a structure cache of this run's own, empty at the start: the times are a new user's, who has built
@@ -39,6 +45,10 @@ def main() -> None:
             for quoted, command in quoted_times(text):
                 cmd = commands(command)[0]
                 row = {"readme_line": line, "command": command.split("#")[0].strip(), "quoted": quoted}
+                if a.only and not any(t in row["command"] for t in a.only):
+                    kept = [r for r in old if r["command"] == row["command"]]
+                    rows += [{**kept[0], "readme_line": line, "quoted": quoted}] if kept else []
+                    continue
                 t = time.perf_counter()
                 proc = subprocess.run(cmd, cwd=tmp, capture_output=True, text=True, env=env)
                 row.update(how="measured: the whole command", seconds=time.perf_counter() - t, exit=proc.returncode)
@@ -47,6 +57,8 @@ def main() -> None:
                 rows.append(row)
     machine = {"host": platform.node(), "cpus": os.cpu_count(), "python": platform.python_version(),
                "load_1min": os.getloadavg()[0], "date": datetime.datetime.now().strftime("%Y-%m-%d %H:%M")}
+    if a.only:                 # the rows kept from the earlier run: its machine line
+        machine.update(only=a.only, kept_rows_machine=before["machine"])
     OUT.write_text(json.dumps({"machine": machine, "rows": rows}, indent=1) + "\n")
     print(f"wrote {OUT}")
 

@@ -254,21 +254,29 @@ def _scan(c, u, ell, pos, r, box, nc, head, nxt, cell_of, cl, chead, cnext, w, h
 
 
 @njit(cache=True)
+def _set_position(i, x, pos, box, nc, head, nxt, prv, cell_of):
+    """Sphere i to x, wrapped into [0, L), its cell-list entry kept up to date."""
+    for k in range(3):
+        v = x[k] - box * math.floor(x[k] / box)
+        if v >= box:
+            v = 0.0
+        pos[i, k] = v
+    cnew = _cell(pos[i], box, nc)
+    if cnew != cell_of[i]:
+        _remove(i, head, nxt, prv, cell_of)
+        _insert(i, cnew, head, nxt, prv, cell_of)
+
+
+@njit(cache=True)
 def _translate(c, t, u, n, pos, upos, box, nc, head, nxt, prv, cell_of, chead, cnext, csum, csq):
     """Move cluster c by t u (cell lists, unwrapped coordinates and the R_g sums kept up to date)."""
+    x = np.empty(3)
     i = chead[c]
     while i >= 0:
         for k in range(3):
             upos[i, k] += t * u[k]
-            x = pos[i, k] + t * u[k]
-            x -= box * math.floor(x / box)
-            if x >= box:
-                x = 0.0
-            pos[i, k] = x
-        cnew = _cell(pos[i], box, nc)
-        if cnew != cell_of[i]:
-            _remove(i, head, nxt, prv, cell_of)
-            _insert(i, cnew, head, nxt, prv, cell_of)
+            x[k] = pos[i, k] + t * u[k]
+        _set_position(i, x, pos, box, nc, head, nxt, prv, cell_of)
         i = cnext[i]
     dot = 0.0
     for k in range(3):
@@ -276,6 +284,16 @@ def _translate(c, t, u, n, pos, upos, box, nc, head, nxt, prv, cell_of, chead, c
     csq[c] += 2.0 * t * dot + n * t * t
     for k in range(3):
         csum[c, k] += n * t * u[k]
+
+
+@njit(cache=True)
+def _step(c, tmin, hit, u, n, r, pos, upos, box, nc, head, nxt, prv, cell_of, chead, cnext, csum, csq):
+    """Move cluster c by tmin along u, stopped BACKOFF of the contact distance short of a contact hit."""
+    t = tmin
+    if hit[0] >= 0:
+        t = max(tmin - BACKOFF * (r[hit[0]] + r[hit[1]]), 0.0)
+    if t > 0.0:
+        _translate(c, t, u, n, pos, upos, box, nc, head, nxt, prv, cell_of, chead, cnext, csum, csq)
 
 
 @njit(cache=True)
@@ -456,22 +474,16 @@ def _restructure(c, hit_i, hit_j, pos, upos, r, box, nc, head, nxt, prv, cell_of
     for q in range(3):
         csum[b, q] = 0.0
     csq[b] = 0.0
+    x = np.empty(3)
     m = 0
     k = chead[b]
     while k >= 0:
         for q in range(3):
             upos[k, q] = base[q] + new[m, q]
-            x = pos[ia, q] + new[m, q]
-            x -= box * math.floor(x / box)
-            if x >= box:
-                x = 0.0
-            pos[k, q] = x
+            x[q] = pos[ia, q] + new[m, q]
             csum[b, q] += upos[k, q]
             csq[b] += upos[k, q] * upos[k, q]
-        cnew = _cell(pos[k], box, nc)
-        if cnew != cell_of[k]:
-            _remove(k, head, nxt, prv, cell_of)
-            _insert(k, cnew, head, nxt, prv, cell_of)
+        _set_position(k, x, pos, box, nc, head, nxt, prv, cell_of)
         m += 1
         k = cnext[k]
 
@@ -511,11 +523,7 @@ def _aggregate(pos, upos, r, box, nc, head, nxt, prv, cell_of, cl, chead, cnext,
         ell = step0 * n ** (0.5 * alpha)
         _direction(u)
         tmin, gap = _scan(c, u, ell, pos, r, box, nc, head, nxt, cell_of, cl, chead, cnext, w, hit)
-        t = tmin
-        if hit[0] >= 0:
-            t = max(tmin - BACKOFF * (r[hit[0]] + r[hit[1]]), 0.0)
-        if t > 0.0:
-            _translate(c, t, u, n, pos, upos, box, nc, head, nxt, prv, cell_of, chead, cnext, csum, csq)
+        _step(c, tmin, hit, u, n, r, pos, upos, box, nc, head, nxt, prv, cell_of, chead, cnext, csum, csq)
         state[1] += 1
         if hit[0] < 0:
             continue
@@ -595,11 +603,7 @@ def _aggregate_jumps(pos, upos, r, box, nc, cell_edge, d_max, head, nxt, prv, ce
             state[4] += 1
             hsize[0] = _heap_push(clock[c], c, hk, hv, hsize[0])
             continue
-        t = tmin
-        if hit[0] >= 0:
-            t = max(tmin - BACKOFF * (r[hit[0]] + r[hit[1]]), 0.0)
-        if t > 0.0:
-            _translate(c, t, u, n, pos, upos, box, nc, head, nxt, prv, cell_of, chead, cnext, csum, csq)
+        _step(c, tmin, hit, u, n, r, pos, upos, box, nc, head, nxt, prv, cell_of, chead, cnext, csum, csq)
         state[1] += 1
         clock[c] -= math.log(1.0 - np.random.random())
         if hit[0] >= 0:

@@ -39,7 +39,7 @@ from numba import njit
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
-from opalflow.aerogel.aggregation import Aggregate, _cell, _insert, _min_image, _neighbour_cells, _remove
+from opalflow.aerogel.aggregation import Aggregate, _cell, _insert, _min_image, _neighbour_cells, _set_position
 from opalflow.bpm.bonds import find_bonds
 from opalflow.structure import quantize
 #: a deflected sphere stops this fraction of the contact distance short of touching (never an overlap)
@@ -105,7 +105,7 @@ def _deflect(pos, r, box, nc, head, nxt, prv, cell_of, leaves, anchors, partner)
         if best_k < 0:
             partner[m] = -1
             continue
-        if best <= 0.0:
+        if best <= 1e-9:           # already touching (a sphere deflected earlier onto this one)
             partner[m] = -2
             continue
         # the new direction: at angle th from e, in the plane of n0 and e, on n0's side
@@ -121,16 +121,10 @@ def _deflect(pos, r, box, nc, head, nxt, prv, cell_of, leaves, anchors, partner)
         if wn < 1e-12:           # n0 along e: any perpendicular (cannot happen without an overlap)
             w[0], w[1], w[2] = -best_e[1], best_e[0], 0.0
             wn = math.sqrt(w[0] * w[0] + w[1] * w[1])
+        x = np.empty(3)
         for k in range(3):
-            x = pos[j, k] + rho * (math.cos(best_th) * best_e[k] + math.sin(best_th) * w[k] / wn)
-            x -= box * math.floor(x / box)
-            if x >= box:
-                x = 0.0
-            pos[i, k] = x
-        cnew = _cell(pos[i], box, nc)
-        if cnew != cell_of[i]:
-            _remove(i, head, nxt, prv, cell_of)
-            _insert(i, cnew, head, nxt, prv, cell_of)
+            x[k] = pos[j, k] + rho * (math.cos(best_th) * best_e[k] + math.sin(best_th) * w[k] / wn)
+        _set_position(i, x, pos, box, nc, head, nxt, prv, cell_of)
         partner[m] = best_k
 
 
@@ -149,13 +143,13 @@ def deflect_dangling(agg: Aggregate, cutoff_factor: float) -> tuple[Aggregate, d
     nxt = np.full(n, -1, np.int64)
     prv = np.full(n, -1, np.int64)
     cell_of = np.zeros(n, np.int64)
-    pos = np.array(x, float)
+    pos = agg.positions.copy()          # as aggregated (the bonds above are the structure's, on quantized ones)
     for i in range(n):
         _insert(i, _cell(pos[i], agg.box, nc), head, nxt, prv, cell_of)
     partner = np.full(len(leaves), -1, np.int64)
     _deflect(pos, r, agg.box, nc, head, nxt, prv, cell_of, leaves.astype(np.int64), anchors, partner)
     counts = {"dangling_before": int(len(leaves)), "deflected": int(np.sum(partner >= 0)),
-              "left_dangling": int(np.sum(partner == -1))}
+              "touched_by_another": int(np.sum(partner == -2)), "left_dangling": int(np.sum(partner == -1))}
     return replace(agg, positions=pos), counts
 
 
