@@ -284,9 +284,16 @@ def plot_fractal(fits: dict, path) -> None:
     fit, c = fits["g(r)"]
     ex = c["g"] - 1.0
     cg.loglog(c["r_nm"][ex > 0], ex[ex > 0], "o", ms=3, label="g(r) - 1")
-    _fit_line(cg, fit, c["r_nm"], ex, lambda D: D - 3)
+    if math.isfinite(fit.D):             # the fit: the power law times the cut-off, through the window's points
+        r, xi, beta = c["r_nm"], c["xi_nm"], c["beta"]
+        sel = (r >= fit.range[0]) & (r <= fit.range[1]) & (ex > 0)
+        k = np.exp(np.mean(np.log(ex[sel]) + (r[sel] / xi) ** beta - (fit.D - 3) * np.log(r[sel])))
+        g = np.geomspace(fit.range[0], xi, 30)
+        cg.loglog(g, k * g ** (fit.D - 3) * np.exp(-(g / xi) ** beta), "r-", lw=2,
+                  label=f"D = {fit.D:.2f} [{fit.ci95[0]:.2f}, {fit.ci95[1]:.2f}], cut-off beta = {beta:.2f}")
+        cg.axvline(fit.range[1], color="r", ls=":", lw=1, label="xi / 2: end of the fitted window")
     if math.isfinite(c["xi_nm"]):
-        cg.axvline(c["xi_nm"], color="k", ls="--", lw=1, label=f"xi = {c['xi_nm']:.3g} nm (g = 1)")
+        cg.axvline(c["xi_nm"], color="k", ls="--", lw=1, label=f"xi = {c['xi_nm']:.3g} nm (cut-off length)")
     cg.set_xlabel("r (nm)")
     cg.set_ylabel("g(r) - 1")
     cg.set_title("pair correlation of the gel")
