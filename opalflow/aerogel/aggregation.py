@@ -686,8 +686,9 @@ def aggregate(diameters: np.ndarray, box: float, *, seed: int, step_fraction: fl
     rec_n = np.zeros_like(rec_i)
     rec_rg2 = np.zeros(len(rec_i))
     arrival = np.full(n, -1, np.int64)
-    clock = -np.log1p(-rng.random(n)) if jumps else np.zeros(n)   # each cluster's first move (Poisson clocks)
-    hk, hv = np.empty(n + 1), np.empty(n + 1, np.int64)
+    n_clocks = n if jumps else 1                   # the clocks and their heap: the jump kernel's only
+    clock = -np.log1p(-rng.random(n)) if jumps else np.zeros(n_clocks)   # each cluster's first move (Poisson clocks)
+    hk, hv = np.empty(n_clocks + 1), np.empty(n_clocks + 1, np.int64)
     hsize = np.zeros(1, np.int64)
     if jumps:
         for c in range(n):

@@ -73,6 +73,15 @@ def mass_radius(agg: Aggregate, *, centres: int = 4000, seed: int = 0) -> tuple[
     return FractalFit("mass-radius", slope, (slope - half, slope + half), (2 * d, r_hi), int(sel.sum())), curve
 
 
+def _bin_means(x: np.ndarray, y: np.ndarray, width: float = 0.25) -> tuple[np.ndarray, np.ndarray]:
+    """Means of x and y in bins of x ``width`` wide from its smallest value (empty bins left out): ln R_g
+    against ln N in bins of a quarter of an e-fold."""
+    which = np.floor((x - x.min()) / width).astype(int)
+    counts = np.bincount(which)
+    bins = np.flatnonzero(counts)
+    return np.bincount(which, x)[bins] / counts[bins], np.bincount(which, y)[bins] / counts[bins]
+
+
 def crossover_mass(N: np.ndarray, rg: np.ndarray, diameters: np.ndarray, solid_fraction: float) -> float:
     """The crossover mass N_c: the cluster size at which a cluster's diameter 2 sqrt(5/3) R_g (the sphere of
     the same R_g) equals the spacing of the cluster centres, nu^(-1/3) with nu = phi / (N v) clusters per
@@ -82,12 +91,7 @@ def crossover_mass(N: np.ndarray, rg: np.ndarray, diameters: np.ndarray, solid_f
     keep = (N >= 2) & (rg > 0)
     if keep.sum() < 2:
         return math.inf
-    lnN = np.log(N[keep])
-    which = np.floor((lnN - lnN.min()) / 0.25).astype(int)
-    counts = np.bincount(which)
-    bins = np.flatnonzero(counts)
-    bN = np.exp(np.bincount(which, lnN)[bins] / counts[bins])
-    brg = np.exp(np.bincount(which, np.log(rg[keep]))[bins] / counts[bins])
+    bN, brg = map(np.exp, _bin_means(np.log(N[keep]), np.log(rg[keep])))
     v = float(np.mean(np.pi / 6 * diameters**3))
     nu = solid_fraction / (bN * v)
     reach = 2 * math.sqrt(5 / 3) * brg * nu ** (1 / 3)
@@ -125,11 +129,7 @@ def radius_of_gyration(agg: Aggregate, *, n_min: int = RG_N_MIN) -> tuple[Fracta
         return FractalFit("R_g(N)", math.nan, (math.nan, math.nan), rng, int(keep.sum()),
                           f"no dilute range: crossover mass {n_c:.4g}, a third of it is less than 3 x {n_min} "
                           "(too dense: measure D_f by g(r) or S(q), or dilute the aggregate)"), curve
-    lnN, lnrg = np.log(N[keep]), np.log(rg[keep])
-    edges = np.arange(lnN.min(), lnN.max() + 0.25, 0.25)
-    which = np.digitize(lnN, edges)
-    bx = np.array([lnN[which == b].mean() for b in np.unique(which)])
-    by = np.array([lnrg[which == b].mean() for b in np.unique(which)])
+    bx, by = _bin_means(np.log(N[keep]), np.log(rg[keep]))
     curve.update(bin_N=np.exp(bx), bin_rg_nm=np.exp(by))
     if len(bx) < 4:
         return FractalFit("R_g(N)", math.nan, (math.nan, math.nan), rng, len(bx), "fewer than 4 bins of ln N"), curve

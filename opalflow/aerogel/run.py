@@ -74,10 +74,8 @@ def _fit_line(f: FractalFit) -> str:
 
 def fractal_fits(agg: Aggregate, seed: int) -> dict:
     """Every estimate of D_f of an aggregate: method -> (FractalFit, curve)."""
-    fits = {}
-    for method in (mass_radius, radius_of_gyration, pair_correlation):
-        fit, curve = method(agg, seed=seed) if method is not radius_of_gyration else method(agg)
-        fits[fit.method] = (fit, curve)
+    fits = {"mass-radius": mass_radius(agg, seed=seed), "R_g(N)": radius_of_gyration(agg),
+            "g(r)": pair_correlation(agg, seed=seed)}
     fits["S(q)"] = structure_factor(agg, fits["g(r)"][1]["xi_nm"])
     return fits
 
