@@ -46,7 +46,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from opalflow.bpm.spec import RESOLVERS
-from opalflow.bpm.static import DIRECT_MAX_DOFS, Factor, amg_hierarchy, block_matrix, bond_blocks, pcg, rigid_body_modes
+from opalflow.bpm.static import (DIRECT_MAX_DOFS, Factor, Stop, amg_preconditioner, block_matrix, bond_blocks, pcg,
+                                  rigid_body_modes)
 from opalflow.bpm.stiffness import BondNetwork
 from opalflow.spec import InputError
 
@@ -217,7 +218,7 @@ class AmgResolver:
         self.free0 = free.copy()
         self.factorizations = 1
         K = km.free_part(free).tocsr()
-        self.vcycle = amg_hierarchy(K, rigid_body_modes(positions)[free]).aspreconditioner(cycle="V")
+        self.vcycle = amg_preconditioner(K, rigid_body_modes(positions)[free])
         self.free = free.copy()
 
     def remove(self, bonds: np.ndarray, free: np.ndarray) -> None:
@@ -232,7 +233,7 @@ class AmgResolver:
 
         def precondition(r):
             z = np.zeros_like(r)
-            z[self.free0] = self.vcycle.matvec(r[self.free0])
+            z[self.free0] = self.vcycle(r[self.free0])
             return m * z + (1 - m) * r
 
         x0 = np.where(self.free, x0, b)
@@ -240,8 +241,7 @@ class AmgResolver:
         scale = float(np.linalg.norm(b))
         if np.linalg.norm(r0) <= self.rtol * scale:
             return x0, 0
-        d, its = pcg(matvec, precondition, r0, self.rtol * scale / float(np.linalg.norm(r0)), 20000,
-                     lambda k, r: None)
+        d, its = pcg(matvec, precondition, r0, Stop(self.rtol * scale / float(np.linalg.norm(r0))), lambda k, r: None)
         return x0 + d, its
 
 

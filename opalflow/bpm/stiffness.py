@@ -37,6 +37,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from opalflow.materials import BondCoefficients
 from opalflow.structure import Structure
@@ -87,38 +88,72 @@ class BondNetwork:
         return BondNetwork(self.n_particles, self.i[sel], self.j[sel], self.n[sel], self.L[sel], self.a_r[sel],
                            self.a_s[sel], self.bend[sel], self.twist[sel])
 
-    def forces(self, u: np.ndarray, theta: np.ndarray, stretch: np.ndarray | None = None,
-               chunk: int = 2_000_000) -> tuple[np.ndarray, np.ndarray]:
+    def forces(self, u: np.ndarray, theta: np.ndarray,
+               stretch: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Forces and torques (N, 3) of the bonds for displacements u and rotations theta (N, 3) (and a
-        per-bond ``stretch``, see bond_forces): minus the stiffness (or damping) matrix times (u, theta);
-        ``chunk`` bonds at a time."""
-        f = np.zeros((self.n_particles, 3))
-        tau = np.zeros((self.n_particles, 3))
-        for start in range(0, len(self.L), chunk):
-            sel = slice(start, start + chunk)
-            b = self.part(sel)
-            i, j, n, L = b.i, b.j, b.n, b.L
-            extra = None if stretch is None else stretch[sel]
-            du = u[i] - u[j] if extra is None else u[i] - u[j] + extra
-            sum_t = theta[i] + theta[j]
-            d_t = theta[i] - theta[j]
-            half = (0.5 * b.a_s * L)[:, None]
-            F = b.bond_forces(u, theta, extra)
-            n_st = np.einsum("ij,ij->i", n, sum_t)[:, None]
-            Ts = half * np.cross(n, du) - (0.5 * half * L[:, None]) * (sum_t - n_st * n)
-            n_dt = np.einsum("ij,ij->i", n, d_t)[:, None]
-            Bd = b.bend[:, None] * (d_t - n_dt * n) + b.twist[:, None] * n_dt * n
-            for k in range(3):
-                f[:, k] += np.bincount(j, F[:, k], self.n_particles) - np.bincount(i, F[:, k], self.n_particles)
-                tau[:, k] += np.bincount(i, Ts[:, k] - Bd[:, k], self.n_particles) \
-                    + np.bincount(j, Ts[:, k] + Bd[:, k], self.n_particles)
-        return f, tau
+        per-bond ``stretch``, see bond_forces): minus the stiffness (or damping) matrix times (u, theta)."""
+        x = np.ascontiguousarray(np.hstack([u, theta]), dtype=float)
+        out = np.zeros((self.n_particles, 6))
+        _bond_loads(self.i, self.j, self.n, self.L, self.a_r, self.a_s, self.bend, self.twist, x,
+                    _NO_STRETCH if stretch is None else np.ascontiguousarray(stretch, dtype=float), out)
+        return -out[:, :3], -out[:, 3:]
 
     def matvec(self, x: np.ndarray) -> np.ndarray:
         """The matrix times x = (u_1, theta_1, u_2, theta_2, ...) (6 per particle)."""
-        x = x.reshape(self.n_particles, 6)
-        f, tau = self.forces(x[:, :3], x[:, 3:])
-        return -np.hstack([f, tau]).ravel()
+        out = np.zeros((self.n_particles, 6))
+        _bond_loads(self.i, self.j, self.n, self.L, self.a_r, self.a_s, self.bend, self.twist,
+                    np.ascontiguousarray(x, dtype=float).reshape(self.n_particles, 6), _NO_STRETCH, out)
+        return out.ravel()
+
+
+_NO_STRETCH = np.zeros((0, 3))
+
+
+@njit(cache=True, nogil=True)
+def _bond_loads(i, j, n, L, a_r, a_s, bend, twist, x, stretch, out):
+    """out += K x, (N, 6): each bond's F and Ts of the module docstring (du plus ``stretch`` where it has
+    rows) and B dtheta, f_i -= F, f_j += F, tau_i += Ts - B dtheta, tau_j += Ts + B dtheta, negated.  One
+    pass over the bonds (the matrix-free product of the static and quasi-static solvers: ~10x numpy's and
+    JAX's gathers and scatters on a CPU)."""
+    with_stretch = stretch.shape[0] > 0
+    du, st, dt = np.empty(3), np.empty(3), np.empty(3)
+    for b in range(len(L)):
+        p, q = i[b], j[b]
+        nx, ny, nz = n[b, 0], n[b, 1], n[b, 2]
+        for k in range(3):
+            du[k] = x[p, k] - x[q, k] + (stretch[b, k] if with_stretch else 0.0)
+            st[k] = x[p, 3 + k] + x[q, 3 + k]
+            dt[k] = x[p, 3 + k] - x[q, 3 + k]
+        half = 0.5 * a_s[b] * L[b]
+        n_du = nx * du[0] + ny * du[1] + nz * du[2]
+        n_st = nx * st[0] + ny * st[1] + nz * st[2]
+        n_dt = nx * dt[0] + ny * dt[1] + nz * dt[2]
+        c = (a_r[b] - a_s[b]) * n_du
+        # n x st and n x du
+        ns0, ns1, ns2 = ny * st[2] - nz * st[1], nz * st[0] - nx * st[2], nx * st[1] - ny * st[0]
+        nd0, nd1, nd2 = ny * du[2] - nz * du[1], nz * du[0] - nx * du[2], nx * du[1] - ny * du[0]
+        F0 = c * nx + a_s[b] * du[0] + half * ns0
+        F1 = c * ny + a_s[b] * du[1] + half * ns1
+        F2 = c * nz + a_s[b] * du[2] + half * ns2
+        h2 = 0.5 * half * L[b]
+        T0 = half * nd0 - h2 * (st[0] - n_st * nx)
+        T1 = half * nd1 - h2 * (st[1] - n_st * ny)
+        T2 = half * nd2 - h2 * (st[2] - n_st * nz)
+        B0 = bend[b] * (dt[0] - n_dt * nx) + twist[b] * n_dt * nx
+        B1 = bend[b] * (dt[1] - n_dt * ny) + twist[b] * n_dt * ny
+        B2 = bend[b] * (dt[2] - n_dt * nz) + twist[b] * n_dt * nz
+        out[p, 0] += F0
+        out[p, 1] += F1
+        out[p, 2] += F2
+        out[q, 0] -= F0
+        out[q, 1] -= F1
+        out[q, 2] -= F2
+        out[p, 3] -= T0 - B0
+        out[p, 4] -= T1 - B1
+        out[p, 5] -= T2 - B2
+        out[q, 3] -= T0 + B0
+        out[q, 4] -= T1 + B1
+        out[q, 5] -= T2 + B2
 
 
 def _geometry(s: Structure, L0: np.ndarray | None):
