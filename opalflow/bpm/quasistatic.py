@@ -26,18 +26,24 @@ are held still (they carry nothing).
 
 Re-solves (measured in bench/bench_quasistatic.py, kept: ``auto``):
 
-- ``direct``: K_ff factorised once (sparse Cholesky, :class:`opalflow.bpm.static.Factor`); each broken bond removes its 12 x 12
-  block, a rank <= 6 change, applied by the Sherman-Morrison-Woodbury formula on the old factor; the
-  factor is renewed when the updates have cost as much time as it did, and when particles come loose;
-- ``amg``: the smoothed-aggregation AMG of the intact network as the preconditioner of CG on the damaged
-  one, warm-started from the last solution (measured 20-70 iterations per event: the load a broken bond
-  carried spreads through the whole sample); slower per event than ``direct`` (5-10x at 15 k-56 k dofs) but
-  the only one that fits large samples;
-- ``auto``: ``direct`` up to DIRECT_MAX_DOFS free degrees of freedom (the static solver's bound; the factor's fill grows fast in
-  3D), ``amg`` above.
+- ``direct``: K_ff factorised once (sparse Cholesky, :class:`opalflow.bpm.static.Factor`); each broken bond
+  removes its 12 x 12 block, a rank <= 6 change, applied by the Sherman-Morrison-Woodbury formula on the old
+  factor; the factor is renewed when the updates have cost as much time as it did, and when particles come
+  loose;
+- ``amg``: the smoothed-aggregation AMG of the intact network (six dofs a particle) as the preconditioner of
+  CG on the damaged one, warm-started from the last solution, to an absolute residual of ``rtol`` |b|
+  (1e-6: quickstart at d = 40 nm, first 100 events, strength within 5e-6 of the factor's, 9 iterations an
+  event; 1e-9 took 21); fits samples the factor does not;
+- ``block-amg``: matrix-free CG (the numba operator over the damaged network) with the static solver's
+  block-amg preconditioner of the intact one: nothing assembled but K_uu in float32, what fits the paper's
+  sample, at ~3x the iterations of ``amg`` (the preconditioner leaves out the coupling of translations and
+  rotations that a broken bond's load mostly is; 31 an event at d = 40 nm) and half the cost of each;
+- ``auto``: ``direct`` up to DIRECT_MAX_DOFS free degrees of freedom (the static solver's bound; the
+  factor's fill grows fast in 3D), ``amg`` above.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass
@@ -46,8 +52,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from opalflow.bpm.spec import RESOLVERS
-from opalflow.bpm.static import (DIRECT_MAX_DOFS, Factor, Stop, amg_preconditioner, block_matrix, bond_blocks, pcg,
-                                  rigid_body_modes)
+from opalflow.bpm.static import (DIRECT_MAX_DOFS, Factor, Stop, amg_preconditioner, block_amg_preconditioner,
+                                  block_matrix, bond_blocks, pcg, rigid_body_modes)
 from opalflow.bpm.stiffness import BondNetwork
 from opalflow.spec import InputError
 
@@ -163,7 +169,11 @@ class DirectResolver:
                 cinv.append(1.0 / w[k])
         return np.array(idx, np.int64).reshape(-1, 12), np.array(val).reshape(-1, 12), np.array(cinv)
 
+    def matvec(self, x: np.ndarray) -> np.ndarray:
+        return self.km.K @ x
+
     def remove(self, bonds: np.ndarray, free: np.ndarray) -> None:
+        self.km.remove(bonds)
         t = time.perf_counter()
         if np.any(self.free & ~free) or self.update_s > self.factor_s or self.R + 6 * len(bonds) > len(self.S):
             self._factor(free)       # (at most 6 columns a bond)
@@ -208,33 +218,24 @@ class DirectResolver:
         return x, 1
 
 
-class AmgResolver:
-    """CG on the damaged network, preconditioned by the AMG of the intact one, warm-started."""
+class _WarmCG:
+    """CG on the damaged network from the last solution, preconditioned by a preconditioner of the network
+    it was set up on (``_precondition`` on the dofs free then), prescribed dofs kept by an identity block;
+    stops at an absolute residual of ``rtol`` |b|."""
 
-    name = "amg"
+    factorizations = 1
 
-    def __init__(self, km: StiffnessMatrix, free: np.ndarray, positions: np.ndarray, rtol: float):
-        self.km, self.rtol = km, rtol
-        self.free0 = free.copy()
-        self.factorizations = 1
-        K = km.free_part(free).tocsr()
-        self.vcycle = amg_preconditioner(K, rigid_body_modes(positions)[free])
-        self.free = free.copy()
-
-    def remove(self, bonds: np.ndarray, free: np.ndarray) -> None:
-        self.free = free.copy()
+    def _setup(self, free: np.ndarray, rtol: float) -> None:
+        self.free0, self.free, self.rtol = free.copy(), free.copy(), rtol
 
     def solve(self, b: np.ndarray, x0: np.ndarray) -> tuple[np.ndarray, int]:
         m = self.free.astype(float)
-        K = self.km.K
 
         def matvec(v):
-            return m * (K @ (m * v)) + (1 - m) * v
+            return m * self.matvec(m * v) + (1 - m) * v
 
         def precondition(r):
-            z = np.zeros_like(r)
-            z[self.free0] = self.vcycle(r[self.free0])
-            return m * z + (1 - m) * r
+            return m * self._precondition(r) + (1 - m) * r
 
         x0 = np.where(self.free, x0, b)
         r0 = b - matvec(x0)
@@ -243,6 +244,63 @@ class AmgResolver:
             return x0, 0
         d, its = pcg(matvec, precondition, r0, Stop(self.rtol * scale / float(np.linalg.norm(r0))), lambda k, r: None)
         return x0 + d, its
+
+
+class AmgResolver(_WarmCG):
+    """CG on the assembled damaged K, preconditioned by the smoothed-aggregation AMG of the network at the
+    start (all six dofs a particle, :func:`opalflow.bpm.static.amg_preconditioner`)."""
+
+    name = "amg"
+
+    def __init__(self, km: StiffnessMatrix, free: np.ndarray, positions: np.ndarray, rtol: float):
+        self._setup(free, rtol)
+        self.km = km
+        vcycle = amg_preconditioner(km.free_part(free).tocsr(), rigid_body_modes(positions)[free])
+
+        def precondition(r):
+            z = np.zeros_like(r)
+            z[self.free0] = vcycle(r[self.free0])
+            return z
+        self._precondition = precondition
+
+    def matvec(self, x: np.ndarray) -> np.ndarray:
+        return self.km.K @ x
+
+    def remove(self, bonds: np.ndarray, free: np.ndarray) -> None:
+        self.km.remove(bonds)
+        self.free = free.copy()
+
+
+class BlockAmgResolver(_WarmCG):
+    """Matrix-free CG on the damaged network (the numba bond operator over a copy of the network whose broken
+    bonds have zero stiffness: nothing assembled but K_uu in float32), preconditioned by the static solver's
+    block-amg of the network at the start (:func:`opalflow.bpm.static.block_amg_preconditioner`): what fits
+    large samples."""
+
+    name = "block-amg"
+
+    def __init__(self, net: BondNetwork, alive: np.ndarray, free: np.ndarray, positions: np.ndarray, rtol: float):
+        self._setup(free, rtol)
+        self.net = dataclasses.replace(net, a_r=net.a_r * alive, a_s=net.a_s * alive, bend=net.bend * alive,
+                                       twist=net.twist * alive)
+        self._precondition = block_amg_preconditioner(self.net, free, positions)
+
+    def matvec(self, x: np.ndarray) -> np.ndarray:
+        return self.net.matvec(x)
+
+    def remove(self, bonds: np.ndarray, free: np.ndarray) -> None:
+        for coefficient in (self.net.a_r, self.net.a_s, self.net.bend, self.net.twist):
+            coefficient[bonds] = 0.0
+        self.free = free.copy()
+
+
+def _resolver(name: str, net: BondNetwork, alive: np.ndarray, free: np.ndarray, positions: np.ndarray, rtol: float):
+    """The re-solver ``name`` for the network with bonds ``alive`` (module docstring)."""
+    if name == "block-amg":
+        return BlockAmgResolver(net, alive, free, positions, rtol)
+    km = StiffnessMatrix(net)
+    km.remove(np.flatnonzero(~alive))
+    return DirectResolver(km, free) if name == "direct" else AmgResolver(km, free, positions, rtol)
 
 
 class Stopped(Exception):
@@ -287,7 +345,7 @@ class FractureResult:
 def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray, fixed: np.ndarray,
                    top: np.ndarray, height: float, area: float, *, clamp_top: bool = False, sense: int = 1,
                    strain_max: float = 0.04, stop_fraction: float = 0.5, events_max: int = 100_000,
-                   tolerance: float = 0.0, resolver: str = "auto", rtol: float = 1e-9,
+                   tolerance: float = 0.0, resolver: str = "auto", rtol: float = 1e-6,
                    state: dict | None = None, checkpoint=None, checkpoint_s: float = 5.0, should_stop=lambda: False,
                    say=print) -> FractureResult:
     """The event loop of the module docstring under the loading of
@@ -304,10 +362,8 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
         raise InputError(f"compression.resolver = {resolver!r}: must be one of {', '.join(RESOLVERS)}")
     t0 = time.perf_counter()
     n, m = net.n_particles, len(net.L)
-    km = StiffnessMatrix(net)
     events = [Event(**e) for e in state["events"]] if state else []
     alive = _intact(m, events)
-    km.remove(np.flatnonzero(~alive))
     anchored = fixed | (top if clamp_top else np.zeros(n, bool))
 
     def loose_of(alive):
@@ -330,14 +386,13 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
     free, x_p, loaded = constraints(loose)
     if resolver == "auto":
         resolver = "direct" if free.sum() <= DIRECT_MAX_DOFS else "amg"
-    solver = (DirectResolver(km, free) if resolver == "direct"
-              else AmgResolver(km, free, positions, rtol))
+    solver = _resolver(resolver, net, alive, free, positions, rtol)
     setup = time.perf_counter() - t0
 
     def solve(x_prev):
-        b = np.where(free, -(km.K @ x_p), x_p)
+        b = np.where(free, -solver.matvec(x_p), x_p)
         x, its = solver.solve(b, x_prev)
-        reaction = (km.K @ x).reshape(n, 6)
+        reaction = solver.matvec(x).reshape(n, 6)
         stress = -sense * float(np.sum(reaction[loaded, 2])) / area      # per unit strain, > 0
         return x, stress, its
 
@@ -375,7 +430,6 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
                 peak_stress, peak_alive, peak_x = stress, alive.copy(), strain * x.reshape(n, 6)
             broken = np.flatnonzero(B >= worst / (1.0 + tolerance))
             alive[broken] = False
-            km.remove(broken)
             new_loose = loose_of(alive)
             if np.any(new_loose & ~loose):
                 loose = new_loose

@@ -83,7 +83,7 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
                         "tolerance": c.event_tolerance, "setup_s": round(res.setup_seconds, 3),
                         "events_s": round(res.seconds - res.setup_seconds, 3),
                         "factorizations": res.factorizations,
-                        "cg_iterations": int(sum(e.iterations for e in res.events)) if res.resolver == "amg" else 0,
+                        "cg_iterations": int(sum(e.iterations for e in res.events)) if res.resolver != "direct" else 0,
                         "loose_particles": res.loose},
         **info.get("structure", {}),
         "headline": f"E = {E:.4g} GPa, strength = {got['strength_MPa']:.4g} MPa (strain at peak "

@@ -59,7 +59,7 @@ METHODS = ("dynamic", "static", "quasistatic")
 #: solvers of the static method (opalflow.bpm.static.SOLVERS)
 STATIC_SOLVERS = ("auto", "direct", "amg", "block-amg", "cg", "cg-jax")
 #: re-solves of the quasistatic method (opalflow.bpm.quasistatic.RESOLVERS)
-RESOLVERS = ("auto", "direct", "amg")
+RESOLVERS = ("auto", "direct", "amg", "block-amg")
 
 
 @dataclass
@@ -79,7 +79,7 @@ class CompressionSpec:
     method: str = "dynamic"          # dynamic: LAMMPS; static: one linear solve (E and stresses only)
     solver: str = "auto"             # static: auto, amg, block-amg, cg or cg-jax (opalflow/bpm/static.py)
     drop_loose: bool = False         # static: leave out particles with no bond path to the substrate
-    resolver: str = "auto"           # quasistatic: re-solves by direct (Cholesky + Woodbury), amg, or auto
+    resolver: str = "auto"           # quasistatic: re-solves by direct (Cholesky + Woodbury), amg, block-amg, or auto
     event_tolerance: float = 0.0     # quasistatic: break every bond within this fraction of the next one's limit
     stop_fraction: float = 0.5       # quasistatic: stop when the stress has fallen below this fraction of the peak
     events_max: int = 100_000        # quasistatic: at most this many events
