@@ -4,14 +4,21 @@ own designs, on the same samples.
     python bench/bench_quasistatic.py dynamic      # LAMMPS runs at plate speeds 1, 0.5, 0.25, 0.125 m/s
     python bench/bench_quasistatic.py resolvers    # re-solve designs: direct (Cholesky + Woodbury) vs amg
     python bench/bench_quasistatic.py compare      # quasi-static vs the dynamic runs extrapolated to zero rate
+    python bench/bench_quasistatic.py scale [--diameters 60 45] [--record DIR[:TIME]]   # the paper's sample coarser
 
 ``dynamic``: quickstart and opal_quick compressed by the plate with ``smooth no`` (bonds break at full
 load, the quasi-static rule) at four plate speeds past their peaks, LAMMPS's ``smooth yes`` (opalflow's
 default deck) at four speeds (quickstart) and at 0.25 m/s (opal_quick), and contacts off at 0.25 m/s; strength, strain at peak,
 bonds broken, wall.  The zero-rate value is the intercept of a straight line through strength against
-speed.  ``resolvers``: both designs on quickstart at d = 60 nm and on the first 100 events at d = 40 nm, then whole
-runs at d = 40 nm with event tolerances 0, 0.01, 0.05: events, broken bonds, strength,
-time, factorisations or CG iterations.  Results: bench/results/quasistatic_dynamic.json, _resolvers.json, _compare.json.
+speed.  ``resolvers``: the three designs on quickstart at d = 60 nm and on the first 100 events at d = 40 nm, then
+whole runs at d = 40 nm with event tolerances 0, 0.01, 0.05 (and amg at 0.05): events, broken bonds, strength,
+time, factorisations or CG iterations.  ``scale``: the paper's standard sample (``opal_fcc``) at coarser
+particle diameters, each the whole command ``python -m opalflow run opal_fcc --set packing.diameter_nm=D
+--set compression.method=quasistatic ...`` in a child process (peak memory from its rusage), with the
+re-solve and event tolerance given; ``--record DIR[:TIME]`` adds a finished run of that command instead
+(its folder, and the ``/usr/bin/time -v`` output for its memory); the cost law: events, broken bonds and
+wall time against particles (power laws through the rows), extrapolated to the paper's d = 15 nm.
+Results: bench/results/quasistatic_dynamic.json, _resolvers.json, _compare.json, _scale.json.
 One BLAS thread (threadpoolctl), as the run layer's jobs.
 """
 from __future__ import annotations
@@ -20,6 +27,7 @@ import argparse
 import json
 import os
 import platform
+import subprocess
 import sys
 import tempfile
 import time
@@ -70,8 +78,10 @@ def resolvers(out: Path) -> None:
 
     rows = []
     # (diameter, resolver, events_max, tolerance): both designs on the same events, then whole runs
-    cases = [(60, "direct", 100000, 0.0), (60, "amg", 100000, 0.0), (40, "direct", 100, 0.0), (40, "amg", 100, 0.0),
-             (40, "direct", 100000, 0.0), (40, "direct", 100000, 0.01), (40, "direct", 100000, 0.05)]
+    cases = [(60, "direct", 100000, 0.0), (60, "amg", 100000, 0.0), (60, "block-amg", 100000, 0.0),
+             (40, "direct", 100, 0.0), (40, "amg", 100, 0.0), (40, "block-amg", 100, 0.0),
+             (40, "direct", 100000, 0.0), (40, "direct", 100000, 0.01), (40, "direct", 100000, 0.05),
+             (40, "amg", 100000, 0.05)]
     for d, r, n, tol in cases:
         sets = [f"packing.diameter_nm={d}", "compression.method=quasistatic", f"compression.resolver={r}",
                 "compression.strain_max=0.03", "compression.snapshot_strains=[]", "compression.drop_loose=true",
@@ -131,17 +141,81 @@ def compare(out: Path) -> None:
     (RESULTS / "quasistatic_compare.json").write_text(json.dumps({"machine": machine(), "rows": res}, indent=1))
 
 
+#: the paper's standard sample at d = 15 nm (bench/results/build_opal_fcc.json)
+PAPER_PARTICLES = 1_624_700
+SCALE_SETS = ["compression.method=quasistatic", "compression.drop_loose=true", "bonds.smooth=false"]
+
+
+def scale_row(folder: Path, peak_GiB: float) -> dict:
+    """One row of ``scale`` from a finished run folder."""
+    s = json.loads((folder / "summary.json").read_text())
+    spec = json.loads((folder / "run.json").read_text())["spec"]
+    q = s["quasistatic"]
+    return {"diameter_nm": spec["packing"]["diameter_nm"], "resolver": q["resolver"], "tolerance": q["tolerance"],
+            "n_particles": s["n_particles"], "n_bonds": s["n_bonds"], "events": q["events"],
+            "broken_bonds": s["broken_bonds"], "broken_bonds_at_peak": s.get("broken_bonds_at_peak"),
+            "strength_MPa": s["strength_MPa"], "strain_at_peak": s["strain_at_peak"],
+            "youngs_modulus_GPa": s["youngs_modulus_GPa"], "stopped": q["stopped"], "setup_s": q["setup_s"],
+            "events_s": q["events_s"], "s_per_event": round(q["events_s"] / max(q["events"], 1), 2),
+            "cg_iterations": q["cg_iterations"], "wall_s": s["wall_s"], "peak_memory_GiB": round(peak_GiB, 2)}
+
+
+def scale(out: Path, diameters: list[float], resolver: str, tolerance: float, record: list[str]) -> None:
+    path = RESULTS / "quasistatic_scale.json"
+    old = json.loads(path.read_text()) if path.exists() else {}
+    rows = [r for r in old.get("rows", []) if "diameter_nm" in r]
+    for d in diameters:
+        folder = out / f"fcc-{d:g}"
+        cmd = [sys.executable, "-m", "opalflow", "run", "opal_fcc", "--out", str(folder), "--set",
+               f"packing.diameter_nm={d:g}", "--set", f"packing.tile_nm={0 if d > 47 else 380}",
+               *[x for kv in SCALE_SETS for x in ("--set", kv)], "--set", f"compression.resolver={resolver}",
+               "--set", f"compression.event_tolerance={tolerance}"]
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL)
+        _, status, usage = os.wait4(proc.pid, 0)
+        if os.waitstatus_to_exitcode(status):
+            raise SystemExit(f"{' '.join(cmd)} failed")
+        rows.append(scale_row(folder, usage.ru_maxrss / 2**20))
+        print(json.dumps(rows[-1]), flush=True)
+    for item in record:
+        folder, _, timing = item.partition(":")
+        peak = 0.0
+        if timing:
+            kb = [line for line in Path(timing).read_text().splitlines() if "Maximum resident set size" in line]
+            peak = int(kb[0].split(":")[1]) / 2**20 if kb else 0.0
+        rows.append(scale_row(Path(folder), peak))
+        print(json.dumps(rows[-1]), flush=True)
+    rows.sort(key=lambda r: -r["diameter_nm"])
+    law = {}
+    if len({r["n_particles"] for r in rows}) >= 2:
+        x = np.log([r["n_particles"] for r in rows])
+        for key in ("events", "broken_bonds_at_peak", "wall_s", "s_per_event"):
+            slope, icpt = np.polyfit(x, np.log([max(r[key], 1e-9) for r in rows]), 1)
+            law[key] = {"exponent": float(slope), "at_paper_scale": float(np.exp(icpt) * PAPER_PARTICLES ** slope)}
+    path.write_text(json.dumps({"machine": machine(), "sample": "opal_fcc (the paper's standard sample) at coarser "
+                                "particle diameters", "sets": SCALE_SETS, "rows": rows,
+                                "cost_law_vs_particles": law, "paper_particles": PAPER_PARTICLES,
+                                "before": old.get("before") or {k: v for k, v in old.items() if k in ("direct", "amg")}},
+                               indent=1) + "\n")
+
+
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("part", choices=["dynamic", "resolvers", "compare"])
+    p.add_argument("part", choices=["dynamic", "resolvers", "compare", "scale"])
     p.add_argument("--out", default="", help="folder for the runs (default: a temporary one)")
+    p.add_argument("--diameters", type=float, nargs="*", default=[60.0, 45.0], help="scale: particle diameters (nm)")
+    p.add_argument("--resolver", default="amg", help="scale: compression.resolver")
+    p.add_argument("--tolerance", type=float, default=0.05, help="scale: compression.event_tolerance")
+    p.add_argument("--record", nargs="*", default=[], help="scale: finished run folders to add, DIR[:TIME_OUTPUT]")
     a = p.parse_args(argv)
     from threadpoolctl import threadpool_limits
 
     threadpool_limits(1)
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(a.out or tmp)
-        {"dynamic": dynamic, "resolvers": resolvers, "compare": compare}[a.part](out)
+        if a.part == "scale":
+            scale(out, a.diameters, a.resolver, a.tolerance, a.record)
+        else:
+            {"dynamic": dynamic, "resolvers": resolvers, "compare": compare}[a.part](out)
 
 
 if __name__ == "__main__":

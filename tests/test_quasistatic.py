@@ -78,12 +78,12 @@ def test_first_branch_is_the_static_modulus(quick, tmp_path):
 @pytest.mark.parametrize("resolver", ["amg", "block-amg"])
 def test_every_resolver_breaks_the_same_bonds(quick, tmp_path, resolver):
     """The iterative re-solves (warm-started CG to 1e-6 |b|) against the factor: the same bonds in the same
-    order, strength and strain at peak within 1e-5, E within 1e-6."""
+    order, strength and strain at peak within 5e-5, E within 1e-6."""
     root, direct = quick
     other = opalflow.run("quickstart", tmp_path / resolver, set=[*QUICK, f"compression.resolver={resolver}"],
                          quiet=True)
     assert other["quasistatic"]["resolver"] == resolver and other["quasistatic"]["cg_iterations"] > 0
-    for key, rel in (("strength_MPa", 1e-5), ("strain_at_peak", 1e-5), ("youngs_modulus_GPa", 1e-6)):
+    for key, rel in (("strength_MPa", 5e-5), ("strain_at_peak", 5e-5), ("youngs_modulus_GPa", 1e-6)):
         assert other[key] == pytest.approx(direct[key], rel=rel), key
     import h5py
 

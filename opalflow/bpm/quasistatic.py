@@ -52,8 +52,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from opalflow.bpm.spec import RESOLVERS
-from opalflow.bpm.static import (DIRECT_MAX_DOFS, Factor, Stop, amg_preconditioner, block_amg_preconditioner,
-                                  block_matrix, bond_blocks, pcg, rigid_body_modes)
+from opalflow.bpm.static import (DIRECT_MAX_DOFS, Factor, Stop, block_amg_preconditioner, block_matrix, bond_blocks,
+                                  particle_amg, pcg)
 from opalflow.bpm.stiffness import BondNetwork
 from opalflow.spec import InputError
 
@@ -248,20 +248,14 @@ class _WarmCG:
 
 class AmgResolver(_WarmCG):
     """CG on the assembled damaged K, preconditioned by the smoothed-aggregation AMG of the network at the
-    start (all six dofs a particle, :func:`opalflow.bpm.static.amg_preconditioner`)."""
+    start (particles aggregated, six dofs each: :func:`opalflow.bpm.static.particle_amg`)."""
 
     name = "amg"
 
-    def __init__(self, km: StiffnessMatrix, free: np.ndarray, positions: np.ndarray, rtol: float):
+    def __init__(self, km: StiffnessMatrix, net: BondNetwork, free: np.ndarray, positions: np.ndarray, rtol: float):
         self._setup(free, rtol)
         self.km = km
-        vcycle = amg_preconditioner(km.free_part(free).tocsr(), rigid_body_modes(positions)[free])
-
-        def precondition(r):
-            z = np.zeros_like(r)
-            z[self.free0] = vcycle(r[self.free0])
-            return z
-        self._precondition = precondition
+        self._precondition = particle_amg(net, free, positions)[1]
 
     def matvec(self, x: np.ndarray) -> np.ndarray:
         return self.km.K @ x
@@ -281,8 +275,7 @@ class BlockAmgResolver(_WarmCG):
 
     def __init__(self, net: BondNetwork, alive: np.ndarray, free: np.ndarray, positions: np.ndarray, rtol: float):
         self._setup(free, rtol)
-        self.net = dataclasses.replace(net, a_r=net.a_r * alive, a_s=net.a_s * alive, bend=net.bend * alive,
-                                       twist=net.twist * alive)
+        self.net = _damaged(net, alive)
         self._precondition = block_amg_preconditioner(self.net, free, positions)
 
     def matvec(self, x: np.ndarray) -> np.ndarray:
@@ -300,7 +293,15 @@ def _resolver(name: str, net: BondNetwork, alive: np.ndarray, free: np.ndarray, 
         return BlockAmgResolver(net, alive, free, positions, rtol)
     km = StiffnessMatrix(net)
     km.remove(np.flatnonzero(~alive))
-    return DirectResolver(km, free) if name == "direct" else AmgResolver(km, free, positions, rtol)
+    if name == "direct":
+        return DirectResolver(km, free)
+    return AmgResolver(km, _damaged(net, alive), free, positions, rtol)
+
+
+def _damaged(net: BondNetwork, alive: np.ndarray) -> BondNetwork:
+    """``net`` with the broken bonds' stiffness zero (a copy of the four coefficients)."""
+    return dataclasses.replace(net, a_r=net.a_r * alive, a_s=net.a_s * alive, bend=net.bend * alive,
+                               twist=net.twist * alive)
 
 
 class Stopped(Exception):

@@ -12,6 +12,7 @@ the same numbers.
 from __future__ import annotations
 
 import json
+import resource
 import time
 from pathlib import Path
 
@@ -84,7 +85,8 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
                         "events_s": round(res.seconds - res.setup_seconds, 3),
                         "factorizations": res.factorizations,
                         "cg_iterations": int(sum(e.iterations for e in res.events)) if res.resolver != "direct" else 0,
-                        "loose_particles": res.loose},
+                        "loose_particles": res.loose,
+                        "peak_memory_MiB": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0},
         **info.get("structure", {}),
         "headline": f"E = {E:.4g} GPa, strength = {got['strength_MPa']:.4g} MPa (strain at peak "
                     f"{got['strain_at_peak']:.4f}; quasi-static, {got['events']} events, {got['broken_bonds']} "

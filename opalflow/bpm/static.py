@@ -293,36 +293,41 @@ def amg_preconditioner(K, B):
     try:
         ml = pyamg.smoothed_aggregation_solver(K, B=B, strength=("symmetric", {"theta": 0.0}), max_coarse=500,
                                                smooth=("jacobi", {"omega": 4.0 / 3.0}), improve_candidates=None,
-                                               presmoother=None, postsmoother=None)       # (v_cycle's own)
+                                               presmoother=("block_gauss_seidel", {"sweep": "forward"}),
+                                               postsmoother=("block_gauss_seidel", {"sweep": "backward"}))
         return v_cycle(ml)
     finally:
         np.random.set_state(state)
 
 
 def v_cycle(ml):
-    """b -> one V-cycle from x = 0 on pyamg's hierarchy ``ml`` (as MultilevelSolver.__solve: its R, P and
-    coarse solver), with one forward block Gauss-Seidel sweep before the coarse correction and one backward
-    after it (:func:`_block_gauss_seidel`).  pyamg's own preconditioner (``aspreconditioner``) also forms the
-    fine-level residual before the cycle and after it, two products with the finest matrix that a
-    preconditioner does not need, and its sweeps take 2.3 ns a stored entry where the numba one takes ~1
-    (measured at 70 k dofs: the V-cycle 41 -> 20 ms)."""
+    """b -> one V-cycle from x = 0 on pyamg's hierarchy ``ml`` (as MultilevelSolver.__solve: its smoothers,
+    R, P and coarse solver).  pyamg's own preconditioner (``aspreconditioner``) also forms the fine-level
+    residual before the cycle and after it, two products with the finest matrix that a preconditioner does
+    not need; and its block Gauss-Seidel converts a single-precision matrix on every sweep (3.7 ns a stored
+    entry of block-amg's K_uu where :func:`_block_gauss_seidel` takes 1.3; in double precision pyamg's are
+    the faster, 0.8-1.6 ns, and are kept).  Measured at 70 k dofs: block-amg's V-cycle 41 -> 21 ms."""
     from pyamg.util.utils import get_block_diag
 
     levels = ml.levels
-    blocks = []
+    sweeps = []
     for lv in levels[:-1]:
-        size = lv.A.blocksize[0] if lv.A.format == "bsr" else 1
-        blocks.append((lv.A.indptr, lv.A.indices, lv.A.data.reshape(-1, size, size),
-                       get_block_diag(lv.A, size, inv_flag=True)))
+        if lv.A.dtype == np.float32 and lv.A.format == "bsr":
+            size = lv.A.blocksize[0]
+            own = (lv.A.indptr, lv.A.indices, lv.A.data, get_block_diag(lv.A, size, inv_flag=True).astype(np.float32))
+            sweeps.append((lambda A, x, b, own=own: _block_gauss_seidel(*own, x, b, 1),
+                           lambda A, x, b, own=own: _block_gauss_seidel(*own, x, b, -1)))
+        else:
+            sweeps.append((lv.presmoother, lv.postsmoother))
 
     def cycle(lvl: int, b: np.ndarray) -> np.ndarray:
         A = levels[lvl].A
         if lvl == len(levels) - 1:
             return np.asarray(ml.coarse_solver(A, b), b.dtype).reshape(b.shape)
         x = np.zeros_like(b)
-        _block_gauss_seidel(*blocks[lvl], x, b, 1)
+        sweeps[lvl][0](A, x, b)
         x += levels[lvl].P @ cycle(lvl + 1, levels[lvl].R @ (b - A @ x))
-        _block_gauss_seidel(*blocks[lvl], x, b, -1)
+        sweeps[lvl][1](A, x, b)
         return x
 
     return lambda b: cycle(0, np.ascontiguousarray(b))
@@ -458,14 +463,19 @@ def _prepare_direct(net, free, positions):
 
 
 def _prepare_amg(net, free, positions):
-    """K on all dofs in 6 x 6 blocks, prescribed dofs decoupled (:func:`block_matrix`); smoothed-aggregation
-    AMG that aggregates particles (the blocks), the six rigid-body modes (zero on prescribed dofs) as
-    near-null space; one V-cycle per CG iteration."""
+    """K assembled (:func:`particle_amg`'s), one V-cycle of its AMG per CG iteration."""
+    K, vcycle = particle_amg(net, free, positions)
+    return lambda b, stop, progress: pcg(lambda v: K @ v, vcycle, b, stop, progress)
+
+
+def particle_amg(net: BondNetwork, free: np.ndarray, positions: np.ndarray):
+    """(K, V-cycle): K on all dofs in 6 x 6 blocks, prescribed dofs decoupled (:func:`block_matrix`), and
+    smoothed-aggregation AMG that aggregates particles (the blocks), the six rigid-body modes (zero on
+    prescribed dofs) as near-null space (:func:`amg_preconditioner`)."""
     K = block_matrix(net, free)[0]
     K.sum_duplicates()
     B = np.where(free[:, None], rigid_body_modes(positions), 0.0)
-    vcycle = amg_preconditioner(K, B)
-    return lambda b, stop, progress: pcg(lambda v: K @ v, vcycle, b, stop, progress)
+    return K, amg_preconditioner(K, B)
 
 
 @dataclass
