@@ -15,9 +15,10 @@ whole runs at d = 40 nm with event tolerances 0, 0.01, 0.05 (and amg at 0.05): e
 time, factorisations or CG iterations.  ``scale``: the paper's standard sample (``opal_fcc``) at coarser
 particle diameters, each the whole command ``python -m opalflow run opal_fcc --set packing.diameter_nm=D
 --set compression.method=quasistatic ...`` in a child process (peak memory from its rusage), with the
-re-solve and event tolerance given; ``--record DIR[:TIME]`` adds a finished run of that command instead
-(its folder, and the ``/usr/bin/time -v`` output for its memory); the cost law: events, broken bonds and
-wall time against particles (power laws through the rows), extrapolated to the paper's d = 15 nm.
+re-solve and event tolerance given; ``--record DIR[:TIME]`` adds a run of that command instead (its folder,
+and the ``/usr/bin/time -v`` output for its memory and wall time; a run stopped before its end gives its
+events so far); the cost law: events, broken bonds and wall time against particles (power laws through
+the complete rows), extrapolated to the paper's d = 15 nm.
 Results: bench/results/quasistatic_dynamic.json, _resolvers.json, _compare.json, _scale.json.
 One BLAS thread (threadpoolctl), as the run layer's jobs.
 """
@@ -146,18 +147,44 @@ PAPER_PARTICLES = 1_624_700
 SCALE_SETS = ["compression.method=quasistatic", "compression.drop_loose=true", "bonds.smooth=false"]
 
 
-def scale_row(folder: Path, peak_GiB: float) -> dict:
-    """One row of ``scale`` from a finished run folder."""
-    s = json.loads((folder / "summary.json").read_text())
+def scale_row(folder: Path, peak_GiB: float, wall_s: float = 0.0) -> dict:
+    """One row of ``scale`` from a run folder: a finished one (summary.json), or one stopped before its end
+    (its quasistatic_state.json: the events so far, ``complete`` false; ``wall_s`` from the time output)."""
     spec = json.loads((folder / "run.json").read_text())["spec"]
+    row = {"diameter_nm": spec["packing"]["diameter_nm"], "resolver": spec["compression"]["resolver"],
+           "tolerance": spec["compression"]["event_tolerance"], "peak_memory_GiB": round(peak_GiB, 2)}
+    if not (folder / "summary.json").exists():
+        state = json.loads((folder / "quasistatic_state.json").read_text())
+        events = state["events"]
+        stress = [e["stress_MPa"] for e in events]
+        p = int(np.argmax(stress))
+        return {**row, "complete": False, "events": len(events),
+                "broken_bonds": sum(len(e["bonds"]) for e in events),
+                "broken_bonds_at_peak": sum(len(e["bonds"]) for e in events[:p]), "strength_MPa": stress[p],
+                "strain_at_peak": events[p]["strain"], "peak_event": p + 1,
+                "youngs_modulus_GPa": state["modulus_MPa"] / 1e3,
+                "cg_iterations": sum(e["iterations"] for e in events), "wall_s": wall_s,
+                "s_per_event": round(wall_s / len(events), 2)}
+    s = json.loads((folder / "summary.json").read_text())
     q = s["quasistatic"]
-    return {"diameter_nm": spec["packing"]["diameter_nm"], "resolver": q["resolver"], "tolerance": q["tolerance"],
-            "n_particles": s["n_particles"], "n_bonds": s["n_bonds"], "events": q["events"],
+    return {**row, "complete": True, "n_particles": s["n_particles"], "n_bonds": s["n_bonds"], "events": q["events"],
             "broken_bonds": s["broken_bonds"], "broken_bonds_at_peak": s.get("broken_bonds_at_peak"),
             "strength_MPa": s["strength_MPa"], "strain_at_peak": s["strain_at_peak"],
             "youngs_modulus_GPa": s["youngs_modulus_GPa"], "stopped": q["stopped"], "setup_s": q["setup_s"],
             "events_s": q["events_s"], "s_per_event": round(q["events_s"] / max(q["events"], 1), 2),
-            "cg_iterations": q["cg_iterations"], "wall_s": s["wall_s"], "peak_memory_GiB": round(peak_GiB, 2)}
+            "cg_iterations": q["cg_iterations"], "wall_s": s["wall_s"]}
+
+
+def _time_output(path: str) -> tuple[float, float]:
+    """(peak memory GiB, wall s) from a ``/usr/bin/time -v`` output."""
+    peak = wall = 0.0
+    for line in Path(path).read_text().splitlines():
+        if "Maximum resident set size" in line:
+            peak = int(line.split(":")[1]) / 2**20
+        if "Elapsed (wall clock)" in line:
+            parts = [float(x) for x in line.split(": ")[-1].split(":")]
+            wall = sum(v * 60**k for k, v in enumerate(reversed(parts)))
+    return peak, wall
 
 
 def scale(out: Path, diameters: list[float], resolver: str, tolerance: float, record: list[str]) -> None:
@@ -178,23 +205,20 @@ def scale(out: Path, diameters: list[float], resolver: str, tolerance: float, re
         print(json.dumps(rows[-1]), flush=True)
     for item in record:
         folder, _, timing = item.partition(":")
-        peak = 0.0
-        if timing:
-            kb = [line for line in Path(timing).read_text().splitlines() if "Maximum resident set size" in line]
-            peak = int(kb[0].split(":")[1]) / 2**20 if kb else 0.0
-        rows.append(scale_row(Path(folder), peak))
+        rows.append(scale_row(Path(folder), *(_time_output(timing) if timing else (0.0, 0.0))))
         print(json.dumps(rows[-1]), flush=True)
     rows.sort(key=lambda r: -r["diameter_nm"])
     law = {}
-    if len({r["n_particles"] for r in rows}) >= 2:
-        x = np.log([r["n_particles"] for r in rows])
+    whole = [r for r in rows if r.get("complete") and r.get("n_particles")]
+    if len({r["n_particles"] for r in whole}) >= 2:
+        x = np.log([r["n_particles"] for r in whole])
         for key in ("events", "broken_bonds_at_peak", "wall_s", "s_per_event"):
-            slope, icpt = np.polyfit(x, np.log([max(r[key], 1e-9) for r in rows]), 1)
+            slope, icpt = np.polyfit(x, np.log([max(r[key], 1e-9) for r in whole]), 1)
             law[key] = {"exponent": float(slope), "at_paper_scale": float(np.exp(icpt) * PAPER_PARTICLES ** slope)}
+    before = old.get("before") or {k: v for k, v in old.items() if k in ("direct", "amg")}
     path.write_text(json.dumps({"machine": machine(), "sample": "opal_fcc (the paper's standard sample) at coarser "
                                 "particle diameters", "sets": SCALE_SETS, "rows": rows,
-                                "cost_law_vs_particles": law, "paper_particles": PAPER_PARTICLES,
-                                "before": old.get("before") or {k: v for k, v in old.items() if k in ("direct", "amg")}},
+                                "cost_law_vs_particles": law, "paper_particles": PAPER_PARTICLES, "before": before},
                                indent=1) + "\n")
 
 

@@ -1,13 +1,19 @@
 """Benchmark of the static solver designs (opalflow/bpm/static.py) on the same samples.
 
     python bench/bench_static.py [--diameters 60 40 30 20] [--solvers direct amg block-amg cg cg-jax] [--workflow quickstart]
+    /usr/bin/time -v python -m opalflow run opal_fcc --out DIR --set compression.method=static \
+        --set compression.drop_loose=true 2> TIME
+    python bench/bench_static.py --record DIR:TIME      # the paper's sample, the whole command
 
 For each particle diameter the workflow's sample is built once (in a child process) and pickled; each
 solver then solves it in a fresh child process, so that its peak resident memory (``ru_maxrss`` of that
 child: the loaded sample, the solver's set-up and the solve) is its own.  Recorded per row: particles,
 bonds, dofs, E, iterations, set-up and solve time, solve time per iteration per bond, peak memory.  The
 cost exponent of each design is the slope of log(set-up + solve time) against log(particles).  Results:
-bench/results/static_<workflow>.json.
+bench/results/static_<workflow>.json; the rows of diameters and solvers not measured in a call are kept
+(each row has the date it was measured).  ``--record DIR:TIME`` keeps a whole command's run (its
+summary's E, iterations and ``timings_s``, and the wall time and peak memory of ``/usr/bin/time -v``) in
+bench/results/static_<workflow>_command.json.
 """
 from __future__ import annotations
 
@@ -71,20 +77,52 @@ def child(args: list[str]) -> tuple[dict, float]:
     return (json.loads(out) if out.strip() else {}), usage.ru_maxrss / 2**20
 
 
+def record(folder: str, timing: str) -> int:
+    """bench/results/static_<workflow>_command.json from a run folder and its ``/usr/bin/time -v`` output."""
+    s = json.loads((Path(folder) / "summary.json").read_text())
+    run = json.loads((Path(folder) / "run.json").read_text())
+    got = {}
+    for line in Path(timing).read_text().splitlines():
+        key, _, value = line.strip().partition(": ")
+        if key.startswith("Command being timed"):
+            got["command"] = value.strip('"')
+        elif key.startswith("Elapsed (wall clock)"):
+            got["wall_s"] = sum(float(v) * 60**k for k, v in enumerate(reversed(value.split(":"))))
+        elif key.startswith("Maximum resident set size"):
+            got["peak_memory_GiB"] = round(int(value) / 2**20, 2)
+    out = HERE / "results" / f"static_{s['workflow']}_command.json"
+    out.write_text(json.dumps({**got, "workflow": s["workflow"], "n_particles": s["n_particles"],
+                               "n_bonds": s["n_bonds"], "youngs_modulus_GPa": s["youngs_modulus_GPa"],
+                               "solver": s["solver"], "iterations": s["iterations"],
+                               "relative_residual": s["relative_residual"], "timings_s": s["timings_s"],
+                               "recorded_wall_s": s["wall_s"], "provenance": run.get("provenance"),
+                               "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
+                                           "load_1min": os.getloadavg()[0]},
+                               "measured": time.strftime("%Y-%m-%d")}, indent=2) + "\n")
+    print(f"{got} -> {out}")
+    return 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--workflow", default="quickstart")
     ap.add_argument("--diameters", type=float, nargs="+", default=[60.0, 40.0, 30.0, 20.0])
     ap.add_argument("--solvers", nargs="+", default=["direct", "amg", "block-amg", "cg", "cg-jax"])
     ap.add_argument("--child", nargs="+", help=argparse.SUPPRESS)
+    ap.add_argument("--record", help="DIR:TIME: a finished static run and its /usr/bin/time -v output")
     a = ap.parse_args()
+    if a.record:
+        return record(*a.record.split(":"))
     if a.child:
         if a.child[0] == "build":
             build(a.child[1], float(a.child[2]), Path(a.child[3]))
         else:
             print(json.dumps(solve(Path(a.child[1]), a.child[2])))
         return 0
-    rows = []
+    out = HERE / "results" / f"static_{a.workflow}.json"
+    # rows of diameters or solvers not measured this time are kept (each row says when it was measured)
+    rows = [r for r in (json.loads(out.read_text())["rows"] if out.exists() else [])
+            if r["diameter_nm"] not in a.diameters or r["solver"] not in a.solvers]
     with tempfile.TemporaryDirectory() as tmp:
         for d in a.diameters:
             sample = Path(tmp) / f"d{d:g}.pkl"
@@ -92,13 +130,14 @@ def main() -> int:
             for solver in a.solvers:
                 row, peak = child(["--child", "solve", str(sample), solver])
                 row.update({"diameter_nm": d, "solver": solver, "peak_memory_GiB": round(peak, 3),
-                            "build_peak_memory_GiB": round(build_gib, 3)})
+                            "build_peak_memory_GiB": round(build_gib, 3), "measured": time.strftime("%Y-%m-%d")})
                 rows.append(row)
                 print(f"d = {d:g} nm, {row['n_particles']} particles, {row['n_bonds']} bonds, {solver}: "
                       f"E = {row['youngs_modulus_GPa']:.5g} GPa, {row['iterations']} iterations, set-up "
                       f"{row['setup_s']:.2f} s, solve {row['solve_s']:.2f} s "
                       f"({row['solve_ns_per_iteration_per_bond']:.1f} ns/iteration/bond), peak {peak:.2f} GiB",
                       flush=True)
+    rows.sort(key=lambda r: (-r["diameter_nm"], r["solver"]))
     exponents = {}
     for solver in a.solvers:
         sel = [r for r in rows if r["solver"] == solver]
@@ -111,7 +150,6 @@ def main() -> int:
     result = {"workflow": a.workflow, "rows": rows, "cost_exponents": exponents,
               "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
                           "processor": platform.machine()}}
-    out = HERE / "results" / f"static_{a.workflow}.json"
     out.write_text(json.dumps(result, indent=2) + "\n")
     print(f"cost exponents: {exponents} -> {out}")
     return 0

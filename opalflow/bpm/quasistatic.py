@@ -30,14 +30,15 @@ Re-solves (measured in bench/bench_quasistatic.py, kept: ``auto``):
   removes its 12 x 12 block, a rank <= 6 change, applied by the Sherman-Morrison-Woodbury formula on the old
   factor; the factor is renewed when the updates have cost as much time as it did, and when particles come
   loose;
-- ``amg``: the smoothed-aggregation AMG of the intact network (six dofs a particle) as the preconditioner of
-  CG on the damaged one, warm-started from the last solution, to an absolute residual of ``rtol`` |b|
-  (1e-6: quickstart at d = 40 nm, first 100 events, strength within 5e-6 of the factor's, 9 iterations an
-  event; 1e-9 took 21); fits samples the factor does not;
+- ``amg``: the smoothed-aggregation AMG of the intact network (particles aggregated, six dofs each, as the
+  static solver's ``amg``) as the preconditioner of CG on the damaged one, warm-started from the last
+  solution, to an absolute residual of ``rtol`` |b| (1e-6: quickstart at d = 40 nm, first 60 events, 8.4
+  iterations an event; strength within 2e-5 of the factor's at d = 60 nm; 1e-9 took 21 an event); fits
+  samples the factor does not;
 - ``block-amg``: matrix-free CG (the numba operator over the damaged network) with the static solver's
   block-amg preconditioner of the intact one: nothing assembled but K_uu in float32, what fits the paper's
   sample, at ~3x the iterations of ``amg`` (the preconditioner leaves out the coupling of translations and
-  rotations that a broken bond's load mostly is; 31 an event at d = 40 nm) and half the cost of each;
+  rotations that a broken bond's load mostly is; 31 an event at d = 40 nm) and about half the cost of each;
 - ``auto``: ``direct`` up to DIRECT_MAX_DOFS free degrees of freedom (the static solver's bound; the
   factor's fill grows fast in 3D), ``amg`` above.
 """
