@@ -31,12 +31,11 @@ Re-solves (measured in bench/bench_quasistatic.py, kept: ``auto``):
   factor; the factor is renewed when the updates have cost as much time as it did, and when particles come
   loose;
 - ``amg``: the smoothed-aggregation AMG of the intact network (particles aggregated, six dofs each, as the
-  static solver's ``amg``) as the preconditioner of CG on the damaged one, warm-started from the last
-  solution, to an absolute residual of ``rtol`` |b| (1e-6: quickstart at d = 40 nm, first 60 events, 8.4
+  static solver's ``amg``) as the preconditioner of CG on the damaged one (:class:`IterativeResolver`: the
+  numba bond operator, no matrix kept for it), warm-started from the last solution, to an absolute residual of ``rtol`` |b| (1e-6: quickstart at d = 40 nm, first 60 events, 8.4
   iterations an event; strength within 2e-5 of the factor's at d = 60 nm; 1e-9 took 21 an event); fits
   samples the factor does not;
-- ``block-amg``: matrix-free CG (the numba operator over the damaged network) with the static solver's
-  block-amg preconditioner of the intact one: nothing assembled but K_uu in float32, what fits the paper's
+- ``block-amg``: the same CG with the static solver's block-amg preconditioner of the intact one: nothing assembled but K_uu in float32, what fits the paper's
   sample, at ~3x the iterations of ``amg`` (the preconditioner leaves out the coupling of translations and
   rotations that a broken bond's load mostly is; 31 an event at d = 40 nm) and about half the cost of each;
 - ``auto``: ``direct`` up to DIRECT_MAX_DOFS free degrees of freedom (the static solver's bound; the
@@ -219,15 +218,28 @@ class DirectResolver:
         return x, 1
 
 
-class _WarmCG:
-    """CG on the damaged network from the last solution, preconditioned by a preconditioner of the network
-    it was set up on (``_precondition`` on the dofs free then), prescribed dofs kept by an identity block;
-    stops at an absolute residual of ``rtol`` |b|."""
+class IterativeResolver:
+    """CG on the damaged network (the numba bond operator over a copy of the network whose broken bonds have
+    zero stiffness: nothing assembled for the product), warm-started from the last solution and
+    preconditioned by the preconditioner ``name`` of the network at the start (:data:`PRECONDITIONERS`),
+    prescribed dofs kept by an identity block; stops at an absolute residual of ``rtol`` |b|."""
 
     factorizations = 1
 
-    def _setup(self, free: np.ndarray, rtol: float) -> None:
-        self.free0, self.free, self.rtol = free.copy(), free.copy(), rtol
+    def __init__(self, name: str, net: BondNetwork, alive: np.ndarray, free: np.ndarray, positions: np.ndarray,
+                 rtol: float):
+        self.name, self.rtol, self.free = name, rtol, free.copy()
+        self.net = dataclasses.replace(net, a_r=net.a_r * alive, a_s=net.a_s * alive, bend=net.bend * alive,
+                                       twist=net.twist * alive)
+        self._precondition = PRECONDITIONERS[name](self.net, free, positions)
+
+    def matvec(self, x: np.ndarray) -> np.ndarray:
+        return self.net.matvec(x)
+
+    def remove(self, bonds: np.ndarray, free: np.ndarray) -> None:
+        for coefficient in (self.net.a_r, self.net.a_s, self.net.bend, self.net.twist):
+            coefficient[bonds] = 0.0
+        self.free = free.copy()
 
     def solve(self, b: np.ndarray, x0: np.ndarray) -> tuple[np.ndarray, int]:
         m = self.free.astype(float)
@@ -247,62 +259,18 @@ class _WarmCG:
         return x0 + d, its
 
 
-class AmgResolver(_WarmCG):
-    """CG on the assembled damaged K, preconditioned by the smoothed-aggregation AMG of the network at the
-    start (particles aggregated, six dofs each: :func:`opalflow.bpm.static.particle_amg`)."""
-
-    name = "amg"
-
-    def __init__(self, km: StiffnessMatrix, net: BondNetwork, free: np.ndarray, positions: np.ndarray, rtol: float):
-        self._setup(free, rtol)
-        self.km = km
-        self._precondition = particle_amg(net, free, positions)[1]
-
-    def matvec(self, x: np.ndarray) -> np.ndarray:
-        return self.km.K @ x
-
-    def remove(self, bonds: np.ndarray, free: np.ndarray) -> None:
-        self.km.remove(bonds)
-        self.free = free.copy()
-
-
-class BlockAmgResolver(_WarmCG):
-    """Matrix-free CG on the damaged network (the numba bond operator over a copy of the network whose broken
-    bonds have zero stiffness: nothing assembled but K_uu in float32), preconditioned by the static solver's
-    block-amg of the network at the start (:func:`opalflow.bpm.static.block_amg_preconditioner`): what fits
-    large samples."""
-
-    name = "block-amg"
-
-    def __init__(self, net: BondNetwork, alive: np.ndarray, free: np.ndarray, positions: np.ndarray, rtol: float):
-        self._setup(free, rtol)
-        self.net = _damaged(net, alive)
-        self._precondition = block_amg_preconditioner(self.net, free, positions)
-
-    def matvec(self, x: np.ndarray) -> np.ndarray:
-        return self.net.matvec(x)
-
-    def remove(self, bonds: np.ndarray, free: np.ndarray) -> None:
-        for coefficient in (self.net.a_r, self.net.a_s, self.net.bend, self.net.twist):
-            coefficient[bonds] = 0.0
-        self.free = free.copy()
+#: the iterative re-solves' preconditioners (module docstring): (network, free dofs, positions) -> v -> z
+PRECONDITIONERS = {"amg": lambda net, free, positions: particle_amg(net, free, positions)[1],
+                   "block-amg": block_amg_preconditioner}
 
 
 def _resolver(name: str, net: BondNetwork, alive: np.ndarray, free: np.ndarray, positions: np.ndarray, rtol: float):
     """The re-solver ``name`` for the network with bonds ``alive`` (module docstring)."""
-    if name == "block-amg":
-        return BlockAmgResolver(net, alive, free, positions, rtol)
+    if name != "direct":
+        return IterativeResolver(name, net, alive, free, positions, rtol)
     km = StiffnessMatrix(net)
     km.remove(np.flatnonzero(~alive))
-    if name == "direct":
-        return DirectResolver(km, free)
-    return AmgResolver(km, _damaged(net, alive), free, positions, rtol)
-
-
-def _damaged(net: BondNetwork, alive: np.ndarray) -> BondNetwork:
-    """``net`` with the broken bonds' stiffness zero (a copy of the four coefficients)."""
-    return dataclasses.replace(net, a_r=net.a_r * alive, a_s=net.a_s * alive, bend=net.bend * alive,
-                               twist=net.twist * alive)
+    return DirectResolver(km, free)
 
 
 class Stopped(Exception):
