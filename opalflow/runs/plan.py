@@ -6,7 +6,7 @@ runs none, :class:`opalflow.runs.executors.Planned`); each is priced by its kind
 this kind of machine (``bench/bench_cost.py`` -> ``bench/results/cost_laws.json``):
 
 - every job: the structure and deck build, timed here while the plan builds the job's structure;
-- static solve: c * bonds^p of its solver (``amg`` up to 500 000 bonds, ``block-amg`` above), fitted to
+- static solve: c * bonds^p of its solver (``auto``'s choice: opalflow.bpm.static.auto_solver), fitted to
   ``bench/results/static_quickstart.json`` (d = 60-20 nm), plus the outputs (a + b * bonds);
 - dynamic run: steps * bonds * t_bond (bpm/rotational; bpm/spring ``spring_factor`` times cheaper per
   bond), divided by the MPI ranks at the measured efficiency, plus the analysis;
