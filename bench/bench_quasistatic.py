@@ -147,12 +147,13 @@ PAPER_PARTICLES = 1_624_700
 SCALE_SETS = ["compression.method=quasistatic", "compression.drop_loose=true", "bonds.smooth=false"]
 
 
-def scale_row(folder: Path, peak_GiB: float, wall_s: float = 0.0) -> dict:
+def scale_row(folder: Path, peak_GiB: float | None, wall_s: float | None = None) -> dict:
     """One row of ``scale`` from a run folder: a finished one (summary.json), or one stopped before its end
     (its quasistatic_state.json: the events so far, ``complete`` false; ``wall_s`` from the time output)."""
     spec = json.loads((folder / "run.json").read_text())["spec"]
     row = {"diameter_nm": spec["packing"]["diameter_nm"], "resolver": spec["compression"]["resolver"],
-           "tolerance": spec["compression"]["event_tolerance"], "peak_memory_GiB": round(peak_GiB, 2)}
+           "tolerance": spec["compression"]["event_tolerance"],
+           "peak_memory_GiB": round(peak_GiB, 2) if peak_GiB else None}
     if not (folder / "summary.json").exists():
         state = json.loads((folder / "quasistatic_state.json").read_text())
         events = state["events"]
@@ -164,7 +165,7 @@ def scale_row(folder: Path, peak_GiB: float, wall_s: float = 0.0) -> dict:
                 "strain_at_peak": events[p]["strain"], "peak_event": p + 1,
                 "youngs_modulus_GPa": state["modulus_MPa"] / 1e3,
                 "cg_iterations": sum(e["iterations"] for e in events), "wall_s": wall_s,
-                "s_per_event": round(wall_s / len(events), 2)}
+                "s_per_event": round(wall_s / len(events), 2) if wall_s else None}
     s = json.loads((folder / "summary.json").read_text())
     q = s["quasistatic"]
     return {**row, "complete": True, "n_particles": s["n_particles"], "n_bonds": s["n_bonds"], "events": q["events"],
@@ -205,7 +206,7 @@ def scale(out: Path, diameters: list[float], resolver: str, tolerance: float, re
         print(json.dumps(rows[-1]), flush=True)
     for item in record:
         folder, _, timing = item.partition(":")
-        rows.append(scale_row(Path(folder), *(_time_output(timing) if timing else (0.0, 0.0))))
+        rows.append(scale_row(Path(folder), *(_time_output(timing) if timing else (None, None))))
         print(json.dumps(rows[-1]), flush=True)
     rows.sort(key=lambda r: -r["diameter_nm"])
     law = {}
