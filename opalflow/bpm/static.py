@@ -14,13 +14,15 @@ The stress is the top layer's reaction force over the area, the strain delta / H
 run's ``youngs_modulus_specimen_GPa`` at zero loading rate.  Particle stresses are eq. 21 of Dosta et al.
 with the bond forces of the solution.
 
-Solvers (measured in bench/bench_static.py):
+Solvers (measured in bench/bench_static.py; the iterative ones stop on CG's energy error, :class:`Stop`):
 
-- ``auto`` (default): ``amg`` up to AMG_MAX_BONDS bonds, ``block-amg`` above;
-- ``amg``: K assembled as a sparse matrix (12 x 12 per bond), smoothed-aggregation AMG (pyamg) with the
+- ``auto`` (default): ``direct`` up to DIRECT_MAX_DOFS dofs, ``amg`` up to AMG_MAX_BONDS bonds,
+  ``block-amg`` above;
+- ``direct``: K factorised by MKL PARDISO (:class:`Factor`), one pair of triangular solves;
+- ``amg``: K assembled in 6 x 6 blocks, smoothed-aggregation AMG (pyamg) aggregating particles with the
   six rigid-body modes as near-null space, as the preconditioner of conjugate gradients;
-- ``block-amg``: matrix-free CG (the numba bond operator) preconditioned by AMG on the translational part of K
-  only (a quarter of its entries) and block Jacobi on the rotations: what fits the paper's sample;
+- ``block-amg``: matrix-free CG (the numba bond operator) preconditioned by AMG on the translational part of
+  K only (a quarter of its entries) and block Jacobi on the rotations: what fits the paper's sample;
 - ``cg``: matrix-free conjugate gradients with a 6 x 6 block-Jacobi preconditioner (the numba operator);
 - ``cg-jax``: the same, the operator jit-compiled by JAX (runs on a GPU where JAX has one).
 """
