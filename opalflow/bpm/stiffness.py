@@ -92,18 +92,19 @@ class BondNetwork:
                stretch: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Forces and torques (N, 3) of the bonds for displacements u and rotations theta (N, 3) (and a
         per-bond ``stretch``, see bond_forces): minus the stiffness (or damping) matrix times (u, theta)."""
-        x = np.ascontiguousarray(np.hstack([u, theta]), dtype=float)
-        out = np.zeros((self.n_particles, 6))
-        _bond_loads(self.i, self.j, self.n, self.L, self.a_r, self.a_s, self.bend, self.twist, x,
-                    _NO_STRETCH if stretch is None else np.ascontiguousarray(stretch, dtype=float), out)
+        out = self._loads(np.hstack([u, theta]), _NO_STRETCH if stretch is None else stretch)
         return -out[:, :3], -out[:, 3:]
 
     def matvec(self, x: np.ndarray) -> np.ndarray:
         """The matrix times x = (u_1, theta_1, u_2, theta_2, ...) (6 per particle)."""
+        return self._loads(np.reshape(x, (self.n_particles, 6)), _NO_STRETCH).ravel()
+
+    def _loads(self, x: np.ndarray, stretch: np.ndarray) -> np.ndarray:
+        """K x (N, 6) for x (N, 6) through :func:`_bond_loads`."""
         out = np.zeros((self.n_particles, 6))
         _bond_loads(self.i, self.j, self.n, self.L, self.a_r, self.a_s, self.bend, self.twist,
-                    np.ascontiguousarray(x, dtype=float).reshape(self.n_particles, 6), _NO_STRETCH, out)
-        return out.ravel()
+                    np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(stretch, dtype=float), out)
+        return out
 
 
 _NO_STRETCH = np.zeros((0, 3))
