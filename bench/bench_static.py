@@ -34,7 +34,7 @@ HERE = Path(__file__).resolve().parent
 
 
 def build(workflow: str, diameter: float, path: Path) -> None:
-    from opalflow.bpm.deck import compression_deck
+    from opalflow.bpm.deck import loaded_sample
     from opalflow.bpm.scene import scene_of
     from opalflow.registry import load_spec
     from opalflow.resources import WORKFLOWS
@@ -42,7 +42,7 @@ def build(workflow: str, diameter: float, path: Path) -> None:
     spec = load_spec(WORKFLOWS / f"{workflow}.toml", [f"packing.diameter_nm={diameter}"])
     t = time.perf_counter()
     s = scene_of(spec).structure(spec)          # (from the structure cache where built before)
-    deck = compression_deck(spec, s)
+    deck = loaded_sample(spec, s)
     data = deck.structure
     with open(path, "wb") as f:
         pickle.dump({"structure": data, "coefficients": deck.coefficients, "top": deck.top_layer,

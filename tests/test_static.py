@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from opalflow.bpm.deck import compression_deck
+from opalflow.bpm.deck import loaded_sample
 from opalflow.bpm.scene import scene_of
 from opalflow.bpm.static import LooseParticlesError, assemble, solve_compression
 from opalflow.bpm.stiffness import stiffness_network
@@ -21,8 +21,8 @@ SMALL_OPAL = ["pores.arrangement=none", "pores.spacing_nm=300.0", "pores.diamete
 def scene(workflow: str, sets=()):
     spec = load_spec(WORKFLOWS / f"{workflow}.toml", list(sets))
     s = scene_of(spec).build(spec, lambda m: None)
-    deck = compression_deck(spec, s)
-    return spec, deck, stiffness_network(deck.structure, deck.coefficients)
+    sample = loaded_sample(spec, s)
+    return spec, sample, stiffness_network(sample.structure, sample.coefficients)
 
 
 def test_lattice_modulus_is_the_analytic_one(tmp_path, capsys):
@@ -55,9 +55,9 @@ def test_assembled_matrix_is_the_operator(workflow, sets):
 
 
 def test_every_solver_gives_the_same_modulus():
-    _, deck, net = scene("opal_quick", SMALL_OPAL)
-    s = deck.structure
-    args = (net, s.positions, s.groups["substrate"], deck.top_layer, deck.height_nm, deck.area_nm2)
+    _, sample, net = scene("opal_quick", SMALL_OPAL)
+    s = sample.structure
+    args = (net, s.positions, s.groups["substrate"], sample.top_layer, sample.height_nm, sample.area_nm2)
     direct = solve_compression(*args, solver="direct", say=lambda m: None)      # the factor: exact to round-off
     assert direct.residual < 1e-12
     amg = solve_compression(*args, solver="amg", energy_tol=0, say=lambda m: None)
@@ -75,9 +75,9 @@ def test_every_solver_gives_the_same_modulus():
 def test_the_energy_stop_bounds_the_modulus_error(solver):
     """CG's energy stop (static.Stop): E from the energy is an upper bound of the exact E (the direct
     factor's) and its error is near the tolerance asked for, with fewer iterations than the residual rule."""
-    _, deck, net = scene("opal_quick", SMALL_OPAL)
-    s = deck.structure
-    args = (net, s.positions, s.groups["substrate"], deck.top_layer, deck.height_nm, deck.area_nm2)
+    _, sample, net = scene("opal_quick", SMALL_OPAL)
+    s = sample.structure
+    args = (net, s.positions, s.groups["substrate"], sample.top_layer, sample.height_nm, sample.area_nm2)
     exact = solve_compression(*args, solver="direct", say=lambda m: None).modulus_MPa
     by_residual = solve_compression(*args, solver=solver, energy_tol=0, say=lambda m: None)
     for tol in (1e-5, 1e-7):
@@ -91,15 +91,15 @@ def test_the_energy_stop_bounds_the_modulus_error(solver):
 def test_a_floating_cluster_is_refused_in_one_line(tmp_path, capsys):
     """Bonds of a few particles removed so that one is held by none: the static run says how many
     particles are loose before solving, exit 2."""
-    _, deck, net = scene("lattice_sc")
-    s = deck.structure
+    _, sample, net = scene("lattice_sc")
+    s = sample.structure
     mobile = np.flatnonzero(~s.groups["substrate"])
     lone = mobile[len(mobile) // 2]
     keep = (s.bonds[:, 0] != lone) & (s.bonds[:, 1] != lone)
     net.i, net.j = net.i[keep], net.j[keep]
     for name in ("n", "L", "a_r", "a_s", "bend", "twist"):
         setattr(net, name, getattr(net, name)[keep])
-    args = (net, s.positions, s.groups["substrate"], deck.top_layer, deck.height_nm, deck.area_nm2)
+    args = (net, s.positions, s.groups["substrate"], sample.top_layer, sample.height_nm, sample.area_nm2)
     with pytest.raises(LooseParticlesError, match="1 particles have no bond path to the substrate"):
         solve_compression(*args)
     said = []
@@ -126,18 +126,18 @@ def test_static_solution_is_an_equilibrium_of_lammps(tmp_path, workflow, sets):
     the top layer is the static reaction."""
     from bpm_probe import lammps_response
 
-    _, deck, net = scene(workflow, sets)
-    s = deck.structure
-    res = solve_compression(net, s.positions, s.groups["substrate"], deck.top_layer, deck.height_nm,
-                            deck.area_nm2, say=lambda m: None)
-    f, tau = lammps_response(tmp_path, s, deck.coefficients, res.u, res.theta)
+    _, sample, net = scene(workflow, sets)
+    s = sample.structure
+    res = solve_compression(net, s.positions, s.groups["substrate"], sample.top_layer, sample.height_nm,
+                            sample.area_nm2, say=lambda m: None)
+    f, tau = lammps_response(tmp_path, s, sample.coefficients, res.u, res.theta)
     scale_f = np.abs(net.bond_forces(res.u, res.theta)).max()
-    free = ~s.groups["substrate"] & ~deck.top_layer
+    free = ~s.groups["substrate"] & ~sample.top_layer
     assert np.abs(f[free]).max() < 1e-3 * scale_f
-    top = deck.top_layer & ~s.groups["substrate"]
+    top = sample.top_layer & ~s.groups["substrate"]
     assert np.abs(f[top][:, :2]).max() < 1e-3 * scale_f
     assert np.abs(tau[~s.groups["substrate"]]).max() < 1e-3 * scale_f * net.L.mean()
-    assert f[top, 2].sum() / deck.area_nm2 == pytest.approx(res.stress_MPa, rel=1e-3)
+    assert f[top, 2].sum() / sample.area_nm2 == pytest.approx(res.stress_MPa, rel=1e-3)
 
 
 def test_jax_operator_in_chunks_is_the_operator():

@@ -95,34 +95,43 @@ def plate_contact_E(particle: ContactProperties, plate: ContactProperties) -> fl
 
 
 @dataclass
-class CompressionDeck:
-    """Everything a compression run needs: the data, the decks and the numbers behind them."""
+class LoadedSample:
+    """The sample of a compression or tension as every method sees it (the dynamic deck, the static and
+    quasi-static solves): its bonded structure, the loaded height, cross-section and top layer."""
 
     structure: Structure                    # with length-binned bond types
     source: Structure                       # as built, bonds typed by material
-    in_lmp: str
-    resume_lmp: str
     bins: BondBins
     coefficients: list[BondCoefficients]
-    timestep: TimestepEstimate
-    dt_ns: float
-    steps: int
-    every: int
-    restart_every: int
-    snapshot_steps: list[int]
-    height_nm: float
-    area_nm2: float
-    plate_z0_nm: float
-    plate_speed_nm_ns: float
+    bond_lengths: np.ndarray                # r0 of each bond (nm)
+    height_nm: float                        # from the substrate's top to the sample's
+    area_nm2: float                         # the box across periodic sides, the footprint across open ones
+    base_nm: float                          # the substrate's top
+    plate_z0_nm: float                      # the sample's top
+    top_z0_nm: float                        # the top layer's mean centre height
+    top_layer: np.ndarray                   # the top particle layer (LAMMPS group "top")
+    loading: str                            # compression.loading (opalflow.bpm.loading.LOADINGS)
+    loading_sense: int                      # +1: compression, -1: tension (strain and stress positive in it)
+
+
+@dataclass
+class CompressionDeck(LoadedSample):
+    """Everything a dynamic compression run needs: the loaded sample, the decks and the numbers behind them."""
+
+    in_lmp: str = ""
+    resume_lmp: str = ""
+    timestep: TimestepEstimate | None = None
+    dt_ns: float = 0.0
+    steps: int = 0
+    every: int = 0
+    restart_every: int = 0
+    snapshot_steps: list[int] = field(default_factory=list)
+    plate_speed_nm_ns: float = 0.0
     blocks: list[str] = field(default_factory=list)
     modulus_affine_MPa: float = 0.0
     omega1_per_ns: float = 0.0
     viscous_gamma: float = 0.0
-    top_z0_nm: float = 0.0
-    top_layer: np.ndarray | None = None     # the top particle layer (LAMMPS group "top")
     initial_ke_zJ: float = 0.0              # kinetic energy given at the start (glued: affine field, top layer)
-    loading: str = "plate"                  # compression.loading (opalflow.bpm.loading.LOADINGS)
-    loading_sense: int = 1                  # +1: compression, -1: tension (strain and stress positive in it)
 
     def info(self) -> dict:
         return {
@@ -167,13 +176,37 @@ def bond_model(spec: BpmWorkflow, s: Structure, r0: np.ndarray | None = None
     return data, bins, coeffs
 
 
-def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
-    """Decks (fresh and resume) for the uniaxial compression of ``s`` by a plate (for a static solve,
-    which runs no deck, the time step is only the cheap Gershgorin bound)."""
-    c = spec.compression
-    d_mean = float(np.mean(s.diameters))
+def loaded_sample(spec: BpmWorkflow, s: Structure) -> LoadedSample:
+    """``s`` as the compression or tension of ``spec`` loads it (:class:`LoadedSample`): the static and
+    quasi-static solves need this and no deck."""
+    substrate = s.groups.get("substrate", np.zeros(s.n_particles, bool))
+    if not substrate.any():
+        # (a data file's scene names datafile.substrate itself when its choice selects no particle)
+        raise SpecError("substrate.layers", 0, "the compression needs a fixed substrate (layers >= 1)")
     r0 = s.bond_lengths()
     data, bins, coeffs = bond_model(spec, s, r0)
+    d_mean = float(np.mean(s.diameters))
+    top = float(np.max(s.positions[:, 2] + s.diameters / 2))
+    base = float(np.max(s.positions[substrate, 2] + s.diameters[substrate] / 2))
+    # the top particle layer: centres within 3/4 of a diameter of the top surface
+    top_group = (s.positions[:, 2] >= top - 0.75 * d_mean) & ~substrate
+    r = s.diameters / 2
+    extent = [float(s.box_lengths[k]) if s.periodic[k] else float(np.max(s.positions[:, k] + r) -
+                                                                    np.min(s.positions[:, k] - r)) for k in (0, 1)]
+    loading = LOADINGS[spec.compression.loading]
+    return LoadedSample(structure=data, source=s, bins=bins, coefficients=coeffs, bond_lengths=r0,
+                        height_nm=top - base, area_nm2=extent[0] * extent[1], base_nm=base, plate_z0_nm=top,
+                        top_z0_nm=float(np.mean(s.positions[top_group, 2])), top_layer=top_group,
+                        loading=loading.name, loading_sense=loading.sense)
+
+
+def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
+    """Decks (fresh and resume) for the uniaxial compression (or tension) of ``s``: the loaded sample
+    (:func:`loaded_sample`) and what a dynamic run adds to it (time step, damping, output, restarts)."""
+    c = spec.compression
+    sample = loaded_sample(spec, s)
+    d_mean = float(np.mean(s.diameters))
+    data, coeffs, r0 = sample.structure, sample.coefficients, sample.bond_lengths
     masses = s.densities * np.pi / 6 * s.diameters**3
     plate = contact_properties(DIAMOND)
     given = {k: v for k, v in (("friction", spec.contacts.friction), ("restitution", spec.contacts.restitution))
@@ -197,21 +230,9 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
     else:
         dt = c.timestep_safety * limit_ns
 
-    substrate = s.groups.get("substrate", np.zeros(s.n_particles, bool))
-    if not substrate.any():
-        # (a data file's scene names datafile.substrate itself when its choice selects no particle)
-        raise SpecError("substrate.layers", 0, "the compression needs a fixed substrate (layers >= 1)")
-    top = float(np.max(s.positions[:, 2] + s.diameters / 2))
-    base = float(np.max(s.positions[substrate, 2] + s.diameters[substrate] / 2))
-    height = top - base
-    # the top particle layer: centres within 3/4 of a diameter of the top surface
-    top_group = (s.positions[:, 2] >= top - 0.75 * d_mean) & ~substrate
-    top_z0 = float(np.mean(s.positions[top_group, 2]))
-    # the loaded cross-section: the box across periodic sides, the particles' footprint across open ones
-    r = s.diameters / 2
-    extent = [float(s.box_lengths[k]) if s.periodic[k] else float(np.max(s.positions[:, k] + r) -
-                                                                    np.min(s.positions[:, k] - r)) for k in (0, 1)]
-    area = extent[0] * extent[1]
+    substrate = s.groups["substrate"]
+    top, base, height, area = sample.plate_z0_nm, sample.base_nm, sample.height_nm, sample.area_nm2
+    top_group = sample.top_layer
     v = c.plate_speed_m_s                       # m/s = nm/ns
     steps_per_strain = height / v / dt
     steps = int(math.ceil(c.strain_max * steps_per_strain))
@@ -279,13 +300,11 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
                 parts.append(blocks[b])
         return title + "\n".join(parts)
 
-    return CompressionDeck(structure=data, source=s, in_lmp=deck(True), resume_lmp=deck(False), bins=bins,
-                           coefficients=coeffs, timestep=estimate, dt_ns=dt, steps=steps, every=every,
-                           restart_every=restart_every, snapshot_steps=snaps, height_nm=height,
-                           area_nm2=area, plate_z0_nm=top, plate_speed_nm_ns=v, blocks=wanted,
-                           modulus_affine_MPa=modulus_affine, omega1_per_ns=omega1, viscous_gamma=gamma,
-                           top_z0_nm=top_z0, top_layer=top_group, initial_ke_zJ=initial_ke,
-                           loading=loading.name, loading_sense=loading.sense)
+    return CompressionDeck(**{f.name: getattr(sample, f.name) for f in dataclasses.fields(LoadedSample)},
+                           in_lmp=deck(True), resume_lmp=deck(False), timestep=estimate, dt_ns=dt, steps=steps,
+                           every=every, restart_every=restart_every, snapshot_steps=snaps, plate_speed_nm_ns=v,
+                           blocks=wanted, modulus_affine_MPa=modulus_affine, omega1_per_ns=omega1,
+                           viscous_gamma=gamma, initial_ke_zJ=initial_ke)
 
 
 def fundamental_mode(s: Structure, coeffs: list[BondCoefficients], height: float, area: float,

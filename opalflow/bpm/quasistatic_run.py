@@ -50,13 +50,13 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
         state = json.loads((out / STATE).read_text())
     s = scene_of(spec).structure(spec, say)
     loading = LOADINGS[c.loading]
-    deck, net, info, record = network_run(spec, s, out, t0, launcher="in-process (quasi-static)",
+    sample, net, info, record = network_run(spec, s, out, t0, launcher="in-process (quasi-static)",
                                           resume=STATE if resume else "")
-    data = deck.structure
+    data = sample.structure
     say(f"quasi-static ({loading.title}): {s.n_particles} particles, {s.n_bonds} bonds, to strain {c.strain_max:g}")
     try:
-        res = solve_fracture(net, strengths_of(data, deck.coefficients), data.positions, data.groups["substrate"],
-                             deck.top_layer, deck.height_nm, deck.area_nm2, clamp_top=loading.glued,
+        res = solve_fracture(net, strengths_of(data, sample.coefficients), data.positions, data.groups["substrate"],
+                             sample.top_layer, sample.height_nm, sample.area_nm2, clamp_top=loading.glued,
                              sense=loading.sense, strain_max=c.strain_max, stop_fraction=c.stop_fraction,
                              events_max=c.events_max, tolerance=c.event_tolerance, resolver=c.resolver, state=state,
                              checkpoint=lambda st: write_json_atomic(out / STATE, st), should_stop=stop_requested,
@@ -68,9 +68,9 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
         record.end(out, "interrupted")
         raise Interrupted(out, None) from None
     got = summary_of(res)
-    materials = np.array(deck.bins.materials)[data.bond_types - 1]
+    materials = np.array(sample.bins.materials)[data.bond_types - 1]
     broken = ~res.alive
-    by_material = {m: int(np.sum(broken & (materials == m))) for m in sorted(set(deck.bins.materials))}
+    by_material = {m: int(np.sum(broken & (materials == m))) for m in sorted(set(sample.bins.materials))}
     E = got["youngs_modulus_GPa"]
     summary = {
         "workflow": spec.name, "method": "quasistatic", "loading": loading.name,

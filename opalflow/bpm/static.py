@@ -324,8 +324,9 @@ def v_cycle(ml):
         if lv.A.dtype == np.float32:       # (amg_preconditioner left these levels without pyamg's smoothers)
             A = lv.A if lv.A.format == "bsr" else lv.A.tobsr(blocksize=(1, 1))
             own = (A.indptr, A.indices, A.data, get_block_diag(A, A.blocksize[0], inv_flag=True).astype(np.float32))
-            sweeps.append((lambda A, x, b, own=own: _block_gauss_seidel(*own, x, b, 1),
-                           lambda A, x, b, own=own: _block_gauss_seidel(*own, x, b, -1)))
+            sweep = _gauss_seidel_3x3 if A.blocksize == (3, 3) else _block_gauss_seidel
+            sweeps.append((lambda A, x, b, own=own, sweep=sweep: sweep(*own, x, b, 1),
+                           lambda A, x, b, own=own, sweep=sweep: sweep(*own, x, b, -1)))
         else:
             sweeps.append((lv.presmoother, lv.postsmoother))
 
@@ -366,6 +367,27 @@ def _block_gauss_seidel(indptr, indices, data, Dinv, x, b, direction):
             for c in range(bs):
                 acc += Dinv[row, a, c] * r[c]
             x[row * bs + a] = acc
+
+
+@njit(cache=True, nogil=True)
+def _gauss_seidel_3x3(indptr, indices, data, Dinv, x, b, direction):
+    """:func:`_block_gauss_seidel` for 3 x 3 blocks (block-amg's K_uu), written out: 37 ms a sweep of K_uu at
+    1.1 M dofs where the loops over the block size take 60 (the compiler cannot unroll a block size it does
+    not know)."""
+    n = len(indptr) - 1
+    for k in range(n):
+        row = k if direction > 0 else n - 1 - k
+        r0, r1, r2 = b[3 * row], b[3 * row + 1], b[3 * row + 2]
+        for jj in range(indptr[row], indptr[row + 1]):
+            col = indices[jj]
+            if col != row:
+                x0, x1, x2 = x[3 * col], x[3 * col + 1], x[3 * col + 2]
+                r0 -= data[jj, 0, 0] * x0 + data[jj, 0, 1] * x1 + data[jj, 0, 2] * x2
+                r1 -= data[jj, 1, 0] * x0 + data[jj, 1, 1] * x1 + data[jj, 1, 2] * x2
+                r2 -= data[jj, 2, 0] * x0 + data[jj, 2, 1] * x1 + data[jj, 2, 2] * x2
+        x[3 * row] = Dinv[row, 0, 0] * r0 + Dinv[row, 0, 1] * r1 + Dinv[row, 0, 2] * r2
+        x[3 * row + 1] = Dinv[row, 1, 0] * r0 + Dinv[row, 1, 1] * r1 + Dinv[row, 1, 2] * r2
+        x[3 * row + 2] = Dinv[row, 2, 0] * r0 + Dinv[row, 2, 1] * r1 + Dinv[row, 2, 2] * r2
 
 
 class Prepared:

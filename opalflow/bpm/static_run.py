@@ -21,7 +21,7 @@ import numpy as np
 
 from opalflow.analysis import compression as mech
 from opalflow.analysis.elasticity import isotropic_average
-from opalflow.bpm.deck import bond_model, compression_deck
+from opalflow.bpm.deck import bond_model, loaded_sample
 from opalflow.bpm.loading import LOADINGS
 from opalflow.bpm.report import reference_errors, sample_lines
 from opalflow.bpm.scene import scene_of, solid_fraction
@@ -58,18 +58,19 @@ def bond_strain(net: BondNetwork, u: np.ndarray) -> np.ndarray:
 
 
 def network_run(spec: BpmWorkflow, s, out: Path, t0: float, *, launcher: str, resume: str = ""):
-    """What the static and quasi-static runs of a scene ``s`` share: the deck's bonded structure, its linear
-    network (loose particles refused before anything is written, unless ``compression.drop_loose``),
-    data.lmp and the run record, begun (``resume``: the state file a session continues from).  Returns
-    (deck, network, info, record)."""
+    """What the static and quasi-static runs of a scene ``s`` share: the loaded sample (the dynamic deck's
+    bonded structure, height, cross-section and top layer; no deck: :func:`opalflow.bpm.deck.loaded_sample`),
+    its linear network (loose particles refused before anything is written, unless
+    ``compression.drop_loose``), data.lmp and the run record, begun (``resume``: the state file a session
+    continues from).  Returns (sample, network, info, record)."""
     c = spec.compression
     timings = {"structure": time.perf_counter() - t0}
-    deck = compression_deck(spec, s)
+    sample = loaded_sample(spec, s)
     build_s = time.perf_counter() - t0
-    timings["deck"] = build_s - timings["structure"]
-    data = deck.structure
+    timings["sample"] = build_s - timings["structure"]
+    data = sample.structure
     t = time.perf_counter()
-    net = stiffness_network(data, deck.coefficients)
+    net = stiffness_network(data, sample.coefficients)
     loose = loose_particles(net, data.groups["substrate"])
     timings["network"] = time.perf_counter() - t
     if loose.any() and not c.drop_loose:     # refused before anything is written
@@ -82,16 +83,16 @@ def network_run(spec: BpmWorkflow, s, out: Path, t0: float, *, launcher: str, re
             "opalflow_version": __version__,
             "type_names": data.type_names, "n_particles": s.n_particles, "n_bonds": s.n_bonds,
             "solid_fraction": solid_fraction(s), "build_s": build_s, "references": spec.references(),
-            "height_nm": deck.height_nm, "area_nm2": deck.area_nm2, "top_layer_particles": int(deck.top_layer.sum()),
-            "loading": deck.loading, "loading_sense": deck.loading_sense, "periodic": data.periodic.tolist(),
+            "height_nm": sample.height_nm, "area_nm2": sample.area_nm2, "top_layer_particles": int(sample.top_layer.sum()),
+            "loading": sample.loading, "loading_sense": sample.loading_sense, "periodic": data.periodic.tolist(),
             "source": data.meta.get("source", "")}
     scene = scene_of(spec)
     if scene.run_keys:
-        stats = scene.statistics(deck.source)
+        stats = scene.statistics(sample.source)
         info["structure"] = {k: stats[k] for k in scene.run_keys}
     record = RunRecord.read(out) if resume else _record(spec, info)
     record.begin(out, launcher=launcher, restart=resume or "")
-    return deck, net, info, record
+    return sample, net, info, record
 
 
 def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
@@ -101,12 +102,12 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
     s = scene_of(spec).structure(spec, say)
     if np.all(s.periodic):
         return run_tensor(spec, s, out, t0, say)
-    deck, net, info, _ = network_run(spec, s, out, t0, launcher="in-process (static solve)")
+    sample, net, info, _ = network_run(spec, s, out, t0, launcher="in-process (static solve)")
     build_s = info["build_s"]
-    data = deck.structure
+    data = sample.structure
     substrate = data.groups["substrate"]
     say(f"static solve ({c.solver}): {s.n_particles} particles, {s.n_bonds} bonds, {6 * s.n_particles} dofs")
-    res = solve_compression(net, data.positions, substrate, deck.top_layer, deck.height_nm, deck.area_nm2,
+    res = solve_compression(net, data.positions, substrate, sample.top_layer, sample.height_nm, sample.area_nm2,
                             strain=STRAIN, solver=c.solver, drop_loose=c.drop_loose,
                             clamp_top=LOADINGS[c.loading].glued, sense=LOADINGS[c.loading].sense, say=say)
     E_GPa = res.modulus_MPa / 1e3
