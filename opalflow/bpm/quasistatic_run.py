@@ -50,8 +50,8 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
         state = json.loads((out / STATE).read_text())
     s = scene_of(spec).structure(spec, say)
     loading = LOADINGS[c.loading]
-    sample, net, info, record = network_run(spec, s, out, t0, launcher="in-process (quasi-static)",
-                                          resume=STATE if resume else "")
+    sample, net, info, record, written = network_run(spec, s, out, t0, launcher="in-process (quasi-static)",
+                                                   resume=STATE if resume else "")
     data = sample.structure
     say(f"quasi-static ({loading.title}): {s.n_particles} particles, {s.n_bonds} bonds, to strain {c.strain_max:g}")
     try:
@@ -67,6 +67,8 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
     except KeyboardInterrupt:
         record.end(out, "interrupted")
         raise Interrupted(out, None) from None
+    finally:
+        written.result()                         # data.lmp, written while the events ran, is whole
     got = summary_of(res)
     materials = np.array(sample.bins.materials)[data.bond_types - 1]
     broken = ~res.alive
