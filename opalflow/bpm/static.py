@@ -577,20 +577,17 @@ def _energy_error(drops: list[float], window: int) -> float:
 
 def _bond_parts(net: BondNetwork, sel: slice, part: str = "all"):
     """A = a_r n n^T + a_s P, C = a_s L / 2 [n]x, R = a_s L^2 / 4 P and B = kb P + kt n n^T of the bonds in
-    ``sel`` (each (m, 3, 3)): the pieces of the 12 x 12 bond matrix; ``part`` "translation": (A,) alone,
-    "rotation": (R, B) (each piece is a pass over the bonds: a third of the block-amg set-up)."""
+    ``sel`` (each (m, 3, 3)): the pieces of the 12 x 12 bond matrix; ``part`` "rotation": (R, B) alone (each
+    piece is a pass over the bonds; K_uu's A: :func:`_translation_blocks`)."""
     n, L = net.n[sel], net.L[sel]
     nn = n[:, :, None] * n[:, None, :]
     P = np.eye(3)[None] - nn
     a_s = net.a_s[sel][:, None, None]
-    if part != "rotation":
-        A = net.a_r[sel][:, None, None] * nn + a_s * P
-        if part == "translation":
-            return (A,)
     R = (0.25 * L**2)[:, None, None] * a_s * P
     B = net.bend[sel][:, None, None] * P + net.twist[sel][:, None, None] * nn
     if part == "rotation":
         return R, B
+    A = net.a_r[sel][:, None, None] * nn + a_s * P
     N = np.zeros((len(L), 3, 3))
     N[:, 0, 1], N[:, 0, 2], N[:, 1, 2] = -n[:, 2], n[:, 1], -n[:, 0]
     N[:, 1, 0], N[:, 2, 0], N[:, 2, 1] = n[:, 2], -n[:, 1], n[:, 0]
@@ -599,7 +596,7 @@ def _bond_parts(net: BondNetwork, sel: slice, part: str = "all"):
 
 
 def diagonal_blocks(net: BondNetwork, part: str = "all", chunk: int = 1_000_000) -> np.ndarray:
-    """The diagonal blocks of K, (N, 6, 6) (``part`` "translation" or "rotation": their 3 x 3 parts): K_ii and
+    """The diagonal blocks of K, (N, 6, 6) (``part`` "rotation": their 3 x 3 rotational parts): K_ii and
     K_jj of :func:`pair_blocks` summed over each particle's bonds, in chunks of bonds to bound the memory."""
     size = 6 if part == "all" else 3
     out = np.zeros((net.n_particles, size, size))
@@ -630,24 +627,65 @@ def _jacobi_inverse(blocks: np.ndarray, free: np.ndarray) -> np.ndarray:
 def block_layout(net: BondNetwork):
     """Where the blocks of K lie in a block sparse row (BSR) matrix of one block per particle pair:
     (indptr, indices, pos), ``pos`` the storage slot of each particle's diagonal block (first N), each bond's
-    (i, j) block (next M) and its (j, i) block (last M), rows and columns in order (a canonical matrix)."""
-    n, m = net.n_particles, len(net.L)
-    rows = np.concatenate([np.arange(n), net.i, net.j])
-    cols = np.concatenate([np.arange(n), net.j, net.i])
-    order = np.lexsort((cols, rows))
+    (i, j) block (next M) and its (j, i) block (last M), rows and columns in order (a canonical matrix; two
+    bonds between one pair in bond order).  :func:`_layout`: a counting sort by row and an insertion sort
+    of each row's few columns (0.1 s at 1.8 M bonds where numpy's lexsort of all entries took 0.8)."""
+    return _layout(net.n_particles, net.i, net.j)
+
+
+@njit(cache=True, nogil=True)
+def _layout(n, i, j):
+    m = len(i)
+    indptr = np.zeros(n + 1, np.int64)
+    for b in range(m):
+        indptr[i[b] + 1] += 1
+        indptr[j[b] + 1] += 1
+    for r in range(n):
+        indptr[r + 1] += indptr[r] + 1            # (+1: the diagonal block)
+    cols = np.empty(n + 2 * m, np.int32)
+    entry = np.empty(n + 2 * m, np.int64)
+    fill = indptr[:-1].copy()
+    for r in range(n):
+        cols[fill[r]], entry[fill[r]] = r, r
+        fill[r] += 1
+    for b in range(m):
+        for row, col, e in ((i[b], j[b], n + b), (j[b], i[b], n + m + b)):
+            cols[fill[row]], entry[fill[row]] = col, e
+            fill[row] += 1
     pos = np.empty(n + 2 * m, np.int64)
-    pos[order] = np.arange(n + 2 * m)
-    indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=n))])
-    return indptr, cols[order].astype(np.int32), pos
+    for r in range(n):
+        for s in range(indptr[r] + 1, indptr[r + 1]):      # insertion sort by column (stable)
+            c, e, k = cols[s], entry[s], s
+            while k > indptr[r] and cols[k - 1] > c:
+                cols[k], entry[k] = cols[k - 1], entry[k - 1]
+                k -= 1
+            cols[k], entry[k] = c, e
+        for s in range(indptr[r], indptr[r + 1]):
+            pos[entry[s]] = s
+    return indptr, cols, pos
+
+
+@njit(cache=True, nogil=True)
+def _translation_blocks(i, j, nv, a_r, a_s, fu, pos, data, diag):
+    """K_uu's blocks straight into their slots (``pos`` of :func:`block_layout`): each bond's A = a_r n n^T +
+    a_s P (:func:`_bond_parts`) to both diagonal blocks, -A (masked by ``fu``) off the diagonal.  One pass
+    (0.3 s at 1.8 M bonds where the chunks of numpy blocks took 1.6)."""
+    n, m = diag.shape[0], len(i)
+    for b in range(m):
+        p, q = i[b], j[b]
+        for r in range(3):
+            for c in range(3):
+                nn = nv[b, r] * nv[b, c]
+                v = a_r[b] * nn + a_s[b] * ((1.0 if r == c else 0.0) - nn)
+                diag[p, r, c] += v
+                diag[q, r, c] += v
+                data[pos[n + b], r, c] = -v * fu[p, r] * fu[q, c]
+                data[pos[n + m + b], r, c] = -v * fu[q, r] * fu[p, c]
 
 
 def pair_blocks(net: BondNetwork, sel=slice(None), part: str = "all"):
     """The blocks of the bonds in ``sel``: (K_ii, K_jj, K_ij, K_ji), each (m, 6, 6), the blocks of
-    :func:`bond_blocks` (``part`` "translation": their 3 x 3 translational parts, A and -A; "rotation": the
-    rotational ones, R + B and R - B)."""
-    if part == "translation":
-        (A,) = _bond_parts(net, sel, part)
-        return A, A, -A, -A
+    :func:`bond_blocks` (``part`` "rotation": their 3 x 3 rotational parts, R + B and R - B)."""
     if part == "rotation":
         R, B = _bond_parts(net, sel, part)
         return R + B, R + B, R - B, R - B
@@ -670,16 +708,20 @@ def block_matrix(net: BondNetwork, free=None, *, part: str = "all", dtype=np.flo
     data = np.zeros((n + 2 * m, size, size), dtype)
     diag = np.zeros((n, size, size))
     fu = None if free is None else free.reshape(n, size).astype(float)
-    for start in range(0, m, chunk):
-        sel = slice(start, min(start + chunk, m))
-        i, j = net.i[sel], net.j[sel]
-        Kii, Kjj, Kij, Kji = pair_blocks(net, sel, part)
-        _add_diagonal(diag, i, j, Kii, Kjj)
-        if fu is not None:
-            Kij = Kij * fu[i][:, :, None] * fu[j][:, None, :]
-            Kji = Kji * fu[j][:, :, None] * fu[i][:, None, :]
-        data[pos[n + sel.start:n + sel.stop]] = Kij
-        data[pos[n + m + sel.start:n + m + sel.stop]] = Kji
+    if part == "translation":          # (block-amg's K_uu, the paper's sample: one numba pass)
+        _translation_blocks(net.i, net.j, net.n, net.a_r, net.a_s, np.ones((n, 3)) if fu is None else fu, pos,
+                            data, diag)
+    else:
+        for start in range(0, m, chunk):
+            sel = slice(start, min(start + chunk, m))
+            i, j = net.i[sel], net.j[sel]
+            Kii, Kjj, Kij, Kji = pair_blocks(net, sel, part)
+            _add_diagonal(diag, i, j, Kii, Kjj)
+            if fu is not None:
+                Kij = Kij * fu[i][:, :, None] * fu[j][:, None, :]
+                Kji = Kji * fu[j][:, :, None] * fu[i][:, None, :]
+            data[pos[n + sel.start:n + sel.stop]] = Kij
+            data[pos[n + m + sel.start:n + m + sel.stop]] = Kji
     if fu is not None:
         kept = diag[:, np.arange(size), np.arange(size)].copy()
         diag *= fu[:, :, None] * fu[:, None, :]
