@@ -75,15 +75,18 @@ class BondNetwork:
         """The strain energy of the bonds split by deformation mode (totals, in the network's units):
         stretching 1/2 a_r (n . du)^2, shear 1/2 a_s |s|^2 with s = P du + L/2 n x (theta_i + theta_j) (the
         shear force is a_s s and the shear torque L/2 n x a_s s), bending 1/2 kb |P dtheta|^2 and twisting
-        1/2 kt (n . dtheta)^2; they sum to 1/2 x^T K x (module docstring)."""
-        i, j, n = self.i, self.j, self.n
-        du = u[i] - u[j] if stretch is None else u[i] - u[j] + stretch
-        n_du = np.einsum("ij,ij->i", n, du)
-        shear = du - n_du[:, None] * n + (0.5 * self.L)[:, None] * np.cross(n, theta[i] + theta[j])
-        d_t = theta[i] - theta[j]
+        1/2 kt (n . dtheta)^2; they sum to 1/2 x^T K x (module docstring).  The first two from the bond force
+        F = a_r (n . du) n + a_s s (:meth:`bond_forces`): (n . F)^2 / (2 a_r) and |P F|^2 / (2 a_s)."""
+        n = self.n
+        F = self.bond_forces(u, theta, stretch)
+        Fr = np.einsum("ij,ij->i", n, F)
+        Fs = F - Fr[:, None] * n
+        d_t = theta[self.i] - theta[self.j]
         n_dt = np.einsum("ij,ij->i", n, d_t)
-        return {"stretching": float(0.5 * np.sum(self.a_r * n_du**2)),
-                "shear": float(0.5 * np.sum(self.a_s * np.einsum("ij,ij->i", shear, shear))),
+
+        def over(a, b):         # (a bond of zero stiffness carries nothing)
+            return float(np.sum(np.divide(a, b, out=np.zeros_like(a), where=b > 0)))
+        return {"stretching": 0.5 * over(Fr**2, self.a_r), "shear": 0.5 * over(np.einsum("ij,ij->i", Fs, Fs), self.a_s),
                 "bending": float(0.5 * np.sum(self.bend * (np.einsum("ij,ij->i", d_t, d_t) - n_dt**2))),
                 "twisting": float(0.5 * np.sum(self.twist * n_dt**2))}
 
