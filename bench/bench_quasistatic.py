@@ -153,6 +153,7 @@ def scale_row(folder: Path, peak_GiB: float | None, wall_s: float | None = None)
     spec = json.loads((folder / "run.json").read_text())["spec"]
     row = {"diameter_nm": spec["packing"]["diameter_nm"], "resolver": spec["compression"]["resolver"],
            "tolerance": spec["compression"]["event_tolerance"],
+           "resolve_rtol": spec["compression"].get("resolve_rtol", 1e-6),
            "peak_memory_GiB": round(peak_GiB, 2) if peak_GiB else None}
     if not (folder / "summary.json").exists():
         state = json.loads((folder / "quasistatic_state.json").read_text())
@@ -188,7 +189,7 @@ def _time_output(path: str) -> tuple[float, float]:
     return peak, wall
 
 
-def scale(out: Path, diameters: list[float], resolver: str, tolerance: float, record: list[str]) -> None:
+def scale(out: Path, diameters: list[float], resolver: str, tolerance: float, rtol: float, record: list[str]) -> None:
     path = RESULTS / "quasistatic_scale.json"
     old = json.loads(path.read_text()) if path.exists() else {}
     rows = [r for r in old.get("rows", []) if "diameter_nm" in r]
@@ -197,7 +198,7 @@ def scale(out: Path, diameters: list[float], resolver: str, tolerance: float, re
         cmd = [sys.executable, "-m", "opalflow", "run", "opal_fcc", "--out", str(folder), "--set",
                f"packing.diameter_nm={d:g}", "--set", f"packing.tile_nm={0 if d > 47 else 380}",
                *[x for kv in SCALE_SETS for x in ("--set", kv)], "--set", f"compression.resolver={resolver}",
-               "--set", f"compression.event_tolerance={tolerance}"]
+               "--set", f"compression.event_tolerance={tolerance}", "--set", f"compression.resolve_rtol={rtol}"]
         proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL)
         _, status, usage = os.wait4(proc.pid, 0)
         if os.waitstatus_to_exitcode(status):
@@ -230,6 +231,7 @@ def main(argv=None) -> None:
     p.add_argument("--diameters", type=float, nargs="*", default=[60.0, 45.0], help="scale: particle diameters (nm)")
     p.add_argument("--resolver", default="amg", help="scale: compression.resolver")
     p.add_argument("--tolerance", type=float, default=0.05, help="scale: compression.event_tolerance")
+    p.add_argument("--rtol", type=float, default=1e-6, help="scale: compression.resolve_rtol")
     p.add_argument("--record", nargs="*", default=[], help="scale: finished run folders to add, DIR[:TIME_OUTPUT]")
     a = p.parse_args(argv)
     from threadpoolctl import threadpool_limits
@@ -238,7 +240,7 @@ def main(argv=None) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(a.out or tmp)
         if a.part == "scale":
-            scale(out, a.diameters, a.resolver, a.tolerance, a.record)
+            scale(out, a.diameters, a.resolver, a.tolerance, a.rtol, a.record)
         else:
             {"dynamic": dynamic, "resolvers": resolvers, "compare": compare}[a.part](out)
 

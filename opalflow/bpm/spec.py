@@ -83,6 +83,7 @@ class CompressionSpec:
     event_tolerance: float = 0.0     # quasistatic: break every bond within this fraction of the next one's limit
     stop_fraction: float = 0.5       # quasistatic: stop when the stress has fallen below this fraction of the peak
     events_max: int = 100_000        # quasistatic: at most this many events
+    resolve_rtol: float = 1e-6       # quasistatic, amg and block-amg: each re-solve to this residual (of |b|)
 
 
 @dataclass
@@ -202,6 +203,8 @@ class BpmWorkflow(WorkflowSpec):
               "must be in [0, 0.5] (bonds within this fraction of the next limit break in one event)")
         check(0 <= c.stop_fraction < 1, "compression.stop_fraction", c.stop_fraction, "must be in [0, 1)")
         check(1 <= c.events_max <= 10**8, "compression.events_max", c.events_max, "must be in [1, 1e8]")
+        check(1e-12 <= c.resolve_rtol <= 1e-2, "compression.resolve_rtol", c.resolve_rtol,
+              "must be in [1e-12, 1e-2] (the iterative re-solves' relative residual)")
         self._apply_calibration()
         check(0 < c.restart_every_strain <= 1, "compression.restart_every_strain", c.restart_every_strain,
               "must be in (0, 1] (restart files every this much strain; >= strain_max: none)")
