@@ -210,13 +210,18 @@ def scale(out: Path, diameters: list[float], resolver: str, tolerance: float, rt
         rows.append(scale_row(Path(folder), *(_time_output(timing) if timing else (None, None))))
         print(json.dumps(rows[-1]), flush=True)
     rows.sort(key=lambda r: -r["diameter_nm"])
-    law = {}
-    whole = [r for r in rows if r.get("complete") and r.get("n_particles")]
-    if len({r["n_particles"] for r in whole}) >= 2:
+    law = {}            # per setting (re-solve, event tolerance, residual): a law needs two sizes run alike
+    settings = sorted({(r["resolver"], r["tolerance"], r.get("resolve_rtol", 1e-6)) for r in rows})
+    for setting in settings:
+        whole = [r for r in rows if r.get("complete") and r.get("n_particles")
+                 and (r["resolver"], r["tolerance"], r.get("resolve_rtol", 1e-6)) == setting]
+        if len({r["n_particles"] for r in whole}) < 2:
+            continue
         x = np.log([r["n_particles"] for r in whole])
-        for key in ("events", "broken_bonds_at_peak", "wall_s", "s_per_event"):
+        fit = law[f"{setting[0]}, tolerance {setting[1]:g}, rtol {setting[2]:g}"] = {"diameters_nm": [r["diameter_nm"] for r in whole]}
+        for key in ("events", "broken_bonds_at_peak", "wall_s", "s_per_event", "strength_MPa"):
             slope, icpt = np.polyfit(x, np.log([max(r[key], 1e-9) for r in whole]), 1)
-            law[key] = {"exponent": float(slope), "at_paper_scale": float(np.exp(icpt) * PAPER_PARTICLES ** slope)}
+            fit[key] = {"exponent": float(slope), "at_paper_scale": float(np.exp(icpt) * PAPER_PARTICLES ** slope)}
     before = old.get("before") or {k: v for k, v in old.items() if k in ("direct", "amg")}
     path.write_text(json.dumps({"machine": machine(), "sample": "opal_fcc (the paper's standard sample) at coarser "
                                 "particle diameters", "sets": SCALE_SETS, "rows": rows,
