@@ -5,6 +5,7 @@ own designs, on the same samples.
     python bench/bench_quasistatic.py resolvers    # re-solve designs: direct (Cholesky + Woodbury) vs amg
     python bench/bench_quasistatic.py compare      # quasi-static vs the dynamic runs extrapolated to zero rate
     python bench/bench_quasistatic.py scale [--diameters 60 45] [--record DIR[:TIME]]   # the paper's sample coarser
+    python bench/bench_quasistatic.py tolerance    # bonds an event and re-solve residual against the exact sequence
 
 ``dynamic``: quickstart and opal_quick compressed by the plate with ``smooth no`` (bonds break at full
 load, the quasi-static rule) at four plate speeds past their peaks, LAMMPS's ``smooth yes`` (opalflow's
@@ -18,8 +19,10 @@ particle diameters, each the whole command ``python -m opalflow run opal_fcc --s
 re-solve and event tolerance given; ``--record DIR[:TIME]`` adds a run of that command instead (its folder,
 and the ``/usr/bin/time -v`` output for its memory and wall time; a run stopped before its end gives its
 events so far); the cost law: events, broken bonds and wall time against particles (power laws through
-the complete rows), extrapolated to the paper's d = 15 nm.
-Results: bench/results/quasistatic_dynamic.json, _resolvers.json, _compare.json, _scale.json.
+the complete rows of one setting), extrapolated to the paper's d = 15 nm.  ``tolerance``: quickstart at
+d = 40 nm, whole runs: the factor at event tolerances 0 (the exact sequence), 0.05, 0.1, 0.2, and amg at
+0.05 and 0.1 with re-solves to 1e-5 and 1e-4 |b|: events, strength against the exact one, CG iterations.
+Results: bench/results/quasistatic_dynamic.json, _resolvers.json, _compare.json, _scale.json, _tolerance.json.
 One BLAS thread (threadpoolctl), as the run layer's jobs.
 """
 from __future__ import annotations
@@ -229,9 +232,39 @@ def scale(out: Path, diameters: list[float], resolver: str, tolerance: float, rt
                                indent=1) + "\n")
 
 
+#: (re-solve, event tolerance, re-solve residual) of ``tolerance``: the exact sequence, the factor at three
+#: tolerances, and amg at two tolerances and two residuals
+TOLERANCE_PLAN = [("direct", 0.0, 1e-6), ("direct", 0.05, 1e-6), ("direct", 0.1, 1e-6), ("direct", 0.2, 1e-6),
+                  ("amg", 0.05, 1e-5), ("amg", 0.1, 1e-5), ("amg", 0.05, 1e-4), ("amg", 0.1, 1e-4)]
+
+
+def tolerance(out: Path) -> None:
+    """Several bonds an event and looser re-solves against the exact sequence (the factor, one bond an
+    event): quickstart at d = 40 nm (9 412 particles), whole runs, ``bonds.smooth = false``."""
+    import opalflow
+
+    path = RESULTS / "quasistatic_tolerance.json"
+    rows = []
+    for resolver, tol, rtol in TOLERANCE_PLAN:
+        sets = ["packing.diameter_nm=40", "compression.method=quasistatic", "bonds.smooth=false",
+                "compression.snapshot_strains=[]", f"compression.resolver={resolver}",
+                f"compression.event_tolerance={tol}", f"compression.resolve_rtol={rtol}"]
+        s = opalflow.run("quickstart", out / f"{resolver}-{tol:g}-{rtol:g}", set=sets, quiet=True)
+        q = s["quasistatic"]
+        rows.append({"resolver": resolver, "tolerance": tol, "resolve_rtol": rtol, "events": q["events"],
+                     "broken_bonds": s["broken_bonds"], "strength_MPa": s["strength_MPa"],
+                     "strain_at_peak": s["strain_at_peak"], "cg_iterations": q["cg_iterations"],
+                     "events_s": q["events_s"], "wall_s": s["wall_s"]})
+        exact = rows[0]["strength_MPa"]
+        rows[-1]["strength_vs_exact"] = rows[-1]["strength_MPa"] / exact - 1
+        print(json.dumps(rows[-1]), flush=True)
+        path.write_text(json.dumps({"machine": machine(), "workflow": "quickstart", "diameter_nm": 40,
+                                    "rows": rows}, indent=1) + "\n")
+
+
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("part", choices=["dynamic", "resolvers", "compare", "scale"])
+    p.add_argument("part", choices=["dynamic", "resolvers", "compare", "scale", "tolerance"])
     p.add_argument("--out", default="", help="folder for the runs (default: a temporary one)")
     p.add_argument("--diameters", type=float, nargs="*", default=[60.0, 45.0], help="scale: particle diameters (nm)")
     p.add_argument("--resolver", default="amg", help="scale: compression.resolver")
@@ -247,7 +280,7 @@ def main(argv=None) -> None:
         if a.part == "scale":
             scale(out, a.diameters, a.resolver, a.tolerance, a.rtol, a.record)
         else:
-            {"dynamic": dynamic, "resolvers": resolvers, "compare": compare}[a.part](out)
+            {"dynamic": dynamic, "resolvers": resolvers, "compare": compare, "tolerance": tolerance}[a.part](out)
 
 
 if __name__ == "__main__":
