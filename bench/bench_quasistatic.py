@@ -247,7 +247,7 @@ def tolerance(out: Path) -> None:
     rows = []
     for resolver, tol, rtol in TOLERANCE_PLAN:
         sets = ["packing.diameter_nm=40", "compression.method=quasistatic", "bonds.smooth=false",
-                "compression.snapshot_strains=[]", f"compression.resolver={resolver}",
+                "compression.drop_loose=true", "compression.snapshot_strains=[]", f"compression.resolver={resolver}",
                 f"compression.event_tolerance={tol}", f"compression.resolve_rtol={rtol}"]
         s = opalflow.run("quickstart", out / f"{resolver}-{tol:g}-{rtol:g}", set=sets, quiet=True)
         q = s["quasistatic"]
