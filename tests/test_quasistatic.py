@@ -92,7 +92,7 @@ def test_every_resolver_breaks_the_same_bonds(quick, tmp_path, resolver):
 
 
 def test_a_looser_resolve_costs_fewer_iterations_within_a_percent(quick, tmp_path):
-    """compression.resolve_rtol = 1e-4 (the setting of the README's d = 30 nm runs): amg's re-solves take
+    """compression.resolve_rtol = 1e-4 (the fast setting of the README's d = 30 nm rows): amg's re-solves take
     under half the CG iterations of 1e-6, the strength and strain at peak within 1 % of the factor's."""
     _, direct = quick
     runs = {rtol: opalflow.run("quickstart", tmp_path / f"rtol{rtol:g}", quiet=True,
