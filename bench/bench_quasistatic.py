@@ -221,7 +221,8 @@ def scale(out: Path, diameters: list[float], resolver: str, tolerance: float, rt
         if len({r["n_particles"] for r in whole}) < 2:
             continue
         x = np.log([r["n_particles"] for r in whole])
-        fit = law[f"{setting[0]}, tolerance {setting[1]:g}, rtol {setting[2]:g}"] = {"diameters_nm": [r["diameter_nm"] for r in whole]}
+        fit = {"diameters_nm": [r["diameter_nm"] for r in whole]}
+        law[f"{setting[0]}, tolerance {setting[1]:g}, rtol {setting[2]:g}"] = fit
         for key in ("events", "broken_bonds_at_peak", "wall_s", "s_per_event", "strength_MPa"):
             slope, icpt = np.polyfit(x, np.log([max(r[key], 1e-9) for r in whole]), 1)
             fit[key] = {"exponent": float(slope), "at_paper_scale": float(np.exp(icpt) * PAPER_PARTICLES ** slope)}

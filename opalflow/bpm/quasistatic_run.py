@@ -58,8 +58,8 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
         res = solve_fracture(net, strengths_of(data, sample.coefficients), data.positions, data.groups["substrate"],
                              sample.top_layer, sample.height_nm, sample.area_nm2, clamp_top=loading.glued,
                              sense=loading.sense, strain_max=c.strain_max, stop_fraction=c.stop_fraction,
-                             events_max=c.events_max, tolerance=c.event_tolerance, resolver=c.resolver, rtol=c.resolve_rtol,
-                             state=state,
+                             events_max=c.events_max, tolerance=c.event_tolerance, resolver=c.resolver,
+                             rtol=c.resolve_rtol, state=state,
                              checkpoint=lambda st: write_json_atomic(out / STATE, st), should_stop=stop_requested,
                              say=say)
     except Stopped as exc:                       # a scheduler's signal: the state is saved, a requeue resumes
