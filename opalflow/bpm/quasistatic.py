@@ -32,12 +32,15 @@ Re-solves (measured in bench/bench_quasistatic.py, kept: ``auto``):
   loose;
 - ``amg``: the smoothed-aggregation AMG of the intact network (particles aggregated, six dofs each, as the
   static solver's ``amg``) as the preconditioner of CG on the damaged one (:class:`IterativeResolver`: the
-  numba bond operator, no matrix kept for it), warm-started from the last solution, to an absolute residual of ``rtol`` |b| (1e-6: quickstart at d = 40 nm, first 60 events, 8.4
-  iterations an event; strength within 2e-5 of the factor's at d = 60 nm; 1e-9 took 21 an event); fits
-  samples the factor does not;
-- ``block-amg``: the same CG with the static solver's block-amg preconditioner of the intact one: nothing assembled but K_uu in float32, what fits the paper's
-  sample, at ~3x the iterations of ``amg`` (the preconditioner leaves out the coupling of translations and
-  rotations that a broken bond's load mostly is; 31 an event at d = 40 nm) and about half the cost of each;
+  numba bond operator, no matrix kept for it), warm-started from the last solution, to an absolute residual
+  of ``rtol`` |b| (``compression.resolve_rtol``, 1e-6: quickstart at d = 40 nm, first 60 events, 8.4
+  iterations an event; strength within 2e-5 of the factor's at d = 60 nm; 1e-9 took 21 an event; 1e-5 keeps
+  the factor's strength within 0.7 %, bench/results/quasistatic_tolerance.json); fits samples the factor
+  does not;
+- ``block-amg``: the same CG with the static solver's block-amg preconditioner of the intact one: nothing
+  assembled but K_uu in float32, what fits the paper's sample, at ~3x the iterations of ``amg`` (the
+  preconditioner leaves out the coupling of translations and rotations that a broken bond's load mostly
+  is; 31 an event at d = 40 nm) and about half the cost of each;
 - ``auto``: ``direct`` up to DIRECT_MAX_DOFS free degrees of freedom (the static solver's bound; the
   factor's fill grows fast in 3D), ``amg`` above.
 """
