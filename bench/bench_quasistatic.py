@@ -19,7 +19,8 @@ particle diameters, each the whole command ``python -m opalflow run opal_fcc --s
 re-solve and event tolerance given; ``--record DIR[:TIME]`` adds a run of that command instead (its folder,
 and the ``/usr/bin/time -v`` output for its memory and wall time; a run stopped before its end gives its
 events so far); the cost law: events, broken bonds and wall time against particles (power laws through
-the complete rows of one setting), extrapolated to the paper's d = 15 nm.  ``tolerance``: quickstart at
+the complete rows of one setting), extrapolated to the paper's d = 15 nm; a new row replaces those of its
+size and setting, which are kept under ``superseded`` (older code).  ``tolerance``: quickstart at
 d = 40 nm, whole runs: the factor at event tolerances 0 (the exact sequence), 0.05, 0.1, 0.2, and amg at
 0.05 and 0.1 with re-solves to 1e-5 and 1e-4 |b|: events, strength against the exact one, CG iterations.
 Results: bench/results/quasistatic_dynamic.json, _resolvers.json, _compare.json, _scale.json, _tolerance.json.
@@ -153,11 +154,12 @@ SCALE_SETS = ["compression.method=quasistatic", "compression.drop_loose=true", "
 def scale_row(folder: Path, peak_GiB: float | None, wall_s: float | None = None) -> dict:
     """One row of ``scale`` from a run folder: a finished one (summary.json), or one stopped before its end
     (its quasistatic_state.json: the events so far, ``complete`` false; ``wall_s`` from the time output)."""
-    spec = json.loads((folder / "run.json").read_text())["spec"]
+    run = json.loads((folder / "run.json").read_text())
+    spec = run["spec"]
     row = {"diameter_nm": spec["packing"]["diameter_nm"], "resolver": spec["compression"]["resolver"],
            "tolerance": spec["compression"]["event_tolerance"],
            "resolve_rtol": spec["compression"].get("resolve_rtol", 1e-6),
-           "peak_memory_GiB": round(peak_GiB, 2) if peak_GiB else None}
+           "peak_memory_GiB": round(peak_GiB, 2) if peak_GiB else None, "created": run["provenance"]["created"]}
     if not (folder / "summary.json").exists():
         state = json.loads((folder / "quasistatic_state.json").read_text())
         events = state["events"]
@@ -196,6 +198,15 @@ def scale(out: Path, diameters: list[float], resolver: str, tolerance: float, rt
     path = RESULTS / "quasistatic_scale.json"
     old = json.loads(path.read_text()) if path.exists() else {}
     rows = [r for r in old.get("rows", []) if "diameter_nm" in r]
+    superseded = old.get("superseded", [])
+
+    def add(row: dict) -> None:
+        """``row`` replaces the rows of its size and setting (they move to ``superseded``: older code)."""
+        key = lambda r: (r["diameter_nm"], r["resolver"], r["tolerance"], r.get("resolve_rtol", 1e-6))  # noqa: E731
+        superseded.extend(r for r in rows if key(r) == key(row))
+        rows[:] = [r for r in rows if key(r) != key(row)] + [row]
+        print(json.dumps(row), flush=True)
+
     for d in diameters:
         folder = out / f"fcc-{d:g}"
         cmd = [sys.executable, "-m", "opalflow", "run", "opal_fcc", "--out", str(folder), "--set",
@@ -206,12 +217,10 @@ def scale(out: Path, diameters: list[float], resolver: str, tolerance: float, rt
         _, status, usage = os.wait4(proc.pid, 0)
         if os.waitstatus_to_exitcode(status):
             raise SystemExit(f"{' '.join(cmd)} failed")
-        rows.append(scale_row(folder, usage.ru_maxrss / 2**20))
-        print(json.dumps(rows[-1]), flush=True)
+        add(scale_row(folder, usage.ru_maxrss / 2**20))
     for item in record:
         folder, _, timing = item.partition(":")
-        rows.append(scale_row(Path(folder), *(_time_output(timing) if timing else (None, None))))
-        print(json.dumps(rows[-1]), flush=True)
+        add(scale_row(Path(folder), *(_time_output(timing) if timing else (None, None))))
     rows.sort(key=lambda r: -r["diameter_nm"])
     law = {}            # per setting (re-solve, event tolerance, residual): a law needs two sizes run alike
     settings = sorted({(r["resolver"], r["tolerance"], r.get("resolve_rtol", 1e-6)) for r in rows})
@@ -229,7 +238,8 @@ def scale(out: Path, diameters: list[float], resolver: str, tolerance: float, rt
     before = old.get("before") or {k: v for k, v in old.items() if k in ("direct", "amg")}
     path.write_text(json.dumps({"machine": machine(), "sample": "opal_fcc (the paper's standard sample) at coarser "
                                 "particle diameters", "sets": SCALE_SETS, "rows": rows,
-                                "cost_law_vs_particles": law, "paper_particles": PAPER_PARTICLES, "before": before},
+                                "cost_law_vs_particles": law, "paper_particles": PAPER_PARTICLES, "before": before,
+                                "superseded": superseded},
                                indent=1) + "\n")
 
 
