@@ -91,6 +91,20 @@ def test_every_resolver_breaks_the_same_bonds(quick, tmp_path, resolver):
         assert np.array_equal(a["quasistatic/broken_bond_index"][()], b["quasistatic/broken_bond_index"][()])
 
 
+def test_auto_takes_what_fits_the_size(quick, tmp_path, monkeypatch):
+    """compression.resolver = auto: the factor up to DIRECT_MAX_DOFS free dofs (the quickstart), amg up to
+    AMG_MAX_BONDS bonds, block-amg above (the paper's 17.5 M bonds; here the bounds lowered to the quickstart)."""
+    from opalflow.bpm import quasistatic
+
+    _, direct = quick
+    assert direct["quasistatic"]["resolver"] == "direct"
+    monkeypatch.setattr(quasistatic, "DIRECT_MAX_DOFS", 100)
+    for bound, expected in ((10**9, "amg"), (1000, "block-amg")):
+        monkeypatch.setattr(quasistatic, "AMG_MAX_BONDS", bound)
+        got = opalflow.run("quickstart", tmp_path / expected, set=[*QUICK, "compression.events_max=2"], quiet=True)
+        assert got["quasistatic"]["resolver"] == expected
+
+
 def test_a_looser_resolve_costs_fewer_iterations_within_a_percent(quick, tmp_path):
     """compression.resolve_rtol = 1e-4 (the fast setting of the README's d = 30 nm rows): amg's re-solves take
     under half the CG iterations of 1e-6, the strength and strain at peak within 1 % of the factor's."""
