@@ -248,8 +248,9 @@ def test_porosity_study_by_quasistatic_jobs_fits_the_strength(tmp_path):
 def test_coating_study_by_quasistatic_jobs_gives_the_strength_ratio(tmp_path):
     """The coating study with study.method = "quasistatic": each coating's strength against the uncoated
     sample's (the paper's Fig. 9: titania's stiffer and stronger bonds raise it)."""
-    spec = load_spec(WORKFLOWS / "coating_strength.toml", ["study.base=opal_quick", 'study.set=["compression.strain_max=0.03",'
-                     '"compression.snapshot_strains=[]","bonds.smooth=false","compression.event_tolerance=0.2"]'])
+    spec = load_spec(WORKFLOWS / "coating_strength.toml", [
+        "study.base=opal_quick", 'study.set=["compression.strain_max=0.03","compression.snapshot_strains=[]",'
+        '"bonds.smooth=false","compression.event_tolerance=0.2"]'])
     summary = studies.run(spec, tmp_path, say=lambda m: None)
     rows = {r["case"]: r for r in summary["table"]}
     assert set(rows) == {"uncoated", "low", "mean", "high"}
