@@ -93,14 +93,15 @@ def test_every_resolver_breaks_the_same_bonds(quick, tmp_path, resolver):
 
 def test_auto_takes_what_fits_the_size(quick, tmp_path, monkeypatch):
     """compression.resolver = auto: the factor up to DIRECT_MAX_DOFS free dofs (the quickstart), amg up to
-    AMG_MAX_BONDS bonds, block-amg above (the paper's 17.5 M bonds; here the bounds lowered to the quickstart)."""
+    RESOLVE_AMG_MAX_BONDS bonds, block-amg above (the paper's 17.5 M bonds; here the bounds lowered to the
+    quickstart)."""
     from opalflow.bpm import quasistatic
 
     _, direct = quick
     assert direct["quasistatic"]["resolver"] == "direct"
     monkeypatch.setattr(quasistatic, "DIRECT_MAX_DOFS", 100)
     for bound, expected in ((10**9, "amg"), (1000, "block-amg")):
-        monkeypatch.setattr(quasistatic, "AMG_MAX_BONDS", bound)
+        monkeypatch.setattr(quasistatic, "RESOLVE_AMG_MAX_BONDS", bound)
         got = opalflow.run("quickstart", tmp_path / expected, set=[*QUICK, "compression.events_max=2"], quiet=True)
         assert got["quasistatic"]["resolver"] == expected
 

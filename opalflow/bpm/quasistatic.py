@@ -42,7 +42,7 @@ Re-solves (measured in bench/bench_quasistatic.py, kept: ``auto``):
   preconditioner leaves out the coupling of translations and rotations that a broken bond's load mostly
   is; 31 an event at d = 40 nm) and about half the cost of each;
 - ``auto``: ``direct`` up to DIRECT_MAX_DOFS free degrees of freedom (the static solver's bound; the
-  factor's fill grows fast in 3D), ``amg`` up to AMG_MAX_BONDS bonds, ``block-amg`` above (what fits).
+  factor's fill grows fast in 3D), ``amg`` up to RESOLVE_AMG_MAX_BONDS bonds, ``block-amg`` above (what fits).
 """
 from __future__ import annotations
 
@@ -62,10 +62,11 @@ from opalflow.bpm.stiffness import BondNetwork
 from opalflow.spec import InputError
 
 
-#: ``auto`` takes ``amg`` up to this many bonds, ~9 GiB: a run with its 6 x 6 hierarchy (and the reversed copies
-#: of :func:`opalflow.bpm.static.v_cycle`) peaked at 4.15 GiB at 1.81 M bonds (the paper's sample at d = 30 nm);
+#: ``auto`` takes ``amg`` up to this many bonds, ~9 GiB (a bound of memory, where the static solver's
+#: AMG_MAX_BONDS is one of speed): a run with its 6 x 6 hierarchy (and the reversed copies of
+#: :func:`opalflow.bpm.static.v_cycle`) peaked at 4.15 GiB at 1.81 M bonds (the paper's sample at d = 30 nm);
 #: the paper's own 17.5 M bonds would need ~40 GiB: ``block-amg`` above
-AMG_MAX_BONDS = 4_000_000
+RESOLVE_AMG_MAX_BONDS = 4_000_000
 
 
 @dataclass
@@ -373,7 +374,7 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
     loose = loose_of(alive)
     free, x_p, loaded = constraints(loose)
     if resolver == "auto":
-        resolver = "direct" if free.sum() <= DIRECT_MAX_DOFS else "amg" if m <= AMG_MAX_BONDS else "block-amg"
+        resolver = "direct" if free.sum() <= DIRECT_MAX_DOFS else "amg" if m <= RESOLVE_AMG_MAX_BONDS else "block-amg"
     solver = _resolver(resolver, net, alive, free, positions, rtol)
     setup = time.perf_counter() - t0
 
