@@ -16,7 +16,7 @@ whole runs at d = 40 nm with event tolerances 0, 0.01, 0.05 (and amg at 0.05): e
 time, factorisations or CG iterations.  ``scale``: the paper's standard sample (``opal_fcc``) at coarser
 particle diameters, each the whole command ``python -m opalflow run opal_fcc --set packing.diameter_nm=D
 --set compression.method=quasistatic ...`` in a child process (peak memory from its rusage), with the
-re-solve and event tolerance given; ``--record DIR[:TIME]`` adds a run of that command instead (its folder,
+re-solve, event tolerance and local step given; ``--record DIR[:TIME]`` adds a run of that command instead (its folder,
 and the ``/usr/bin/time -v`` output for its memory and wall time; a run stopped before its end gives its
 events so far); the cost law: events, broken bonds and wall time against particles (power laws through
 the complete rows of one setting), extrapolated to the paper's d = 15 nm; a new row replaces those of its
@@ -159,6 +159,7 @@ def scale_row(folder: Path, peak_GiB: float | None, wall_s: float | None = None)
     row = {"diameter_nm": spec["packing"]["diameter_nm"], "resolver": spec["compression"]["resolver"],
            "tolerance": spec["compression"]["event_tolerance"],
            "resolve_rtol": spec["compression"].get("resolve_rtol", 1e-6),
+           "local_rtol": spec["compression"].get("local_rtol", 0.0),
            "peak_memory_GiB": round(peak_GiB, 2) if peak_GiB else None, "created": run["provenance"]["created"]}
     if not (folder / "summary.json").exists():
         state = json.loads((folder / "quasistatic_state.json").read_text())
@@ -179,7 +180,7 @@ def scale_row(folder: Path, peak_GiB: float | None, wall_s: float | None = None)
             "strength_MPa": s["strength_MPa"], "strain_at_peak": s["strain_at_peak"],
             "youngs_modulus_GPa": s["youngs_modulus_GPa"], "stopped": q["stopped"], "setup_s": q["setup_s"],
             "events_s": q["events_s"], "s_per_event": round(q["events_s"] / max(q["events"], 1), 2),
-            "cg_iterations": q["cg_iterations"], "wall_s": s["wall_s"]}
+            "cg_iterations": q["cg_iterations"], "settled_locally": q.get("settled_locally", 0), "wall_s": s["wall_s"]}
 
 
 def _time_output(path: str) -> tuple[float, float]:
@@ -194,7 +195,13 @@ def _time_output(path: str) -> tuple[float, float]:
     return peak, wall
 
 
-def scale(out: Path, diameters: list[float], resolver: str, tolerance: float, rtol: float, record: list[str]) -> None:
+def _setting(r: dict) -> tuple:
+    """A row's setting: (re-solve, event tolerance, re-solve residual, local step's residual)."""
+    return r["resolver"], r["tolerance"], r.get("resolve_rtol", 1e-6), r.get("local_rtol", 0.0)
+
+
+def scale(out: Path, diameters: list[float], resolver: str, tolerance: float, rtol: float, local_rtol: float,
+          record: list[str]) -> None:
     path = RESULTS / "quasistatic_scale.json"
     old = json.loads(path.read_text()) if path.exists() else {}
     rows = [r for r in old.get("rows", []) if "diameter_nm" in r]
@@ -202,7 +209,7 @@ def scale(out: Path, diameters: list[float], resolver: str, tolerance: float, rt
 
     def add(row: dict) -> None:
         """``row`` replaces the rows of its size and setting (they move to ``superseded``: older code)."""
-        key = lambda r: (r["diameter_nm"], r["resolver"], r["tolerance"], r.get("resolve_rtol", 1e-6))  # noqa: E731
+        key = lambda r: (r["diameter_nm"], *_setting(r))  # noqa: E731
         superseded.extend(r for r in rows if key(r) == key(row))
         rows[:] = [r for r in rows if key(r) != key(row)] + [row]
         print(json.dumps(row), flush=True)
@@ -212,7 +219,8 @@ def scale(out: Path, diameters: list[float], resolver: str, tolerance: float, rt
         cmd = [sys.executable, "-m", "opalflow", "run", "opal_fcc", "--out", str(folder), "--set",
                f"packing.diameter_nm={d:g}", "--set", f"packing.tile_nm={0 if d > 47 else 380}",
                *[x for kv in SCALE_SETS for x in ("--set", kv)], "--set", f"compression.resolver={resolver}",
-               "--set", f"compression.event_tolerance={tolerance}", "--set", f"compression.resolve_rtol={rtol}"]
+               "--set", f"compression.event_tolerance={tolerance}", "--set", f"compression.resolve_rtol={rtol}",
+               "--set", f"compression.local_rtol={local_rtol}"]
         proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL)
         _, status, usage = os.wait4(proc.pid, 0)
         if os.waitstatus_to_exitcode(status):
@@ -222,16 +230,15 @@ def scale(out: Path, diameters: list[float], resolver: str, tolerance: float, rt
         folder, _, timing = item.partition(":")
         add(scale_row(Path(folder), *(_time_output(timing) if timing else (None, None))))
     rows.sort(key=lambda r: -r["diameter_nm"])
-    law = {}            # per setting (re-solve, event tolerance, residual): a law needs two sizes run alike
-    settings = sorted({(r["resolver"], r["tolerance"], r.get("resolve_rtol", 1e-6)) for r in rows})
-    for setting in settings:
-        whole = [r for r in rows if r.get("complete") and r.get("n_particles")
-                 and (r["resolver"], r["tolerance"], r.get("resolve_rtol", 1e-6)) == setting]
+    law = {}            # per setting (:func:`_setting`): a law needs two sizes run alike
+    for setting in sorted({_setting(r) for r in rows}):
+        whole = [r for r in rows if r.get("complete") and r.get("n_particles") and _setting(r) == setting]
         if len({r["n_particles"] for r in whole}) < 2:
             continue
         x = np.log([r["n_particles"] for r in whole])
         fit = {"diameters_nm": [r["diameter_nm"] for r in whole]}
-        law[f"{setting[0]}, tolerance {setting[1]:g}, rtol {setting[2]:g}"] = fit
+        law[f"{setting[0]}, tolerance {setting[1]:g}, rtol {setting[2]:g}"
+            + (f", local_rtol {setting[3]:g}" if setting[3] else "")] = fit
         for key in ("events", "broken_bonds_at_peak", "wall_s", "s_per_event", "strength_MPa"):
             slope, icpt = np.polyfit(x, np.log([max(r[key], 1e-9) for r in whole]), 1)
             fit[key] = {"exponent": float(slope), "at_paper_scale": float(np.exp(icpt) * PAPER_PARTICLES ** slope)}
@@ -281,6 +288,7 @@ def main(argv=None) -> None:
     p.add_argument("--resolver", default="amg", help="scale: compression.resolver")
     p.add_argument("--tolerance", type=float, default=0.05, help="scale: compression.event_tolerance")
     p.add_argument("--rtol", type=float, default=1e-6, help="scale: compression.resolve_rtol")
+    p.add_argument("--local-rtol", type=float, default=0.0, help="scale: compression.local_rtol")
     p.add_argument("--record", nargs="*", default=[], help="scale: finished run folders to add, DIR[:TIME_OUTPUT]")
     a = p.parse_args(argv)
     from threadpoolctl import threadpool_limits
@@ -289,7 +297,7 @@ def main(argv=None) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(a.out or tmp)
         if a.part == "scale":
-            scale(out, a.diameters, a.resolver, a.tolerance, a.rtol, a.record)
+            scale(out, a.diameters, a.resolver, a.tolerance, a.rtol, a.local_rtol, a.record)
         else:
             {"dynamic": dynamic, "resolvers": resolvers, "compare": compare, "tolerance": tolerance}[a.part](out)
 

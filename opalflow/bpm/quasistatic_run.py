@@ -59,7 +59,7 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
                              sample.top_layer, sample.height_nm, sample.area_nm2, clamp_top=loading.glued,
                              sense=loading.sense, strain_max=c.strain_max, stop_fraction=c.stop_fraction,
                              events_max=c.events_max, tolerance=c.event_tolerance, resolver=c.resolver,
-                             rtol=c.resolve_rtol, state=state,
+                             rtol=c.resolve_rtol, local_rtol=c.local_rtol, state=state,
                              checkpoint=lambda st: write_json_atomic(out / STATE, st), should_stop=stop_requested,
                              say=say)
     except Stopped as exc:                       # a scheduler's signal: the state is saved, a requeue resumes
@@ -88,6 +88,7 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
                         "events_s": round(res.seconds - res.setup_seconds, 3),
                         "factorizations": res.factorizations,
                         "cg_iterations": int(sum(e.iterations for e in res.events)) if res.resolver != "direct" else 0,
+                        "local_rtol": c.local_rtol, "settled_locally": int(sum(e.settled for e in res.events)),
                         "loose_particles": res.loose,
                         "peak_memory_MiB": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0},
         **info.get("structure", {}),
@@ -208,6 +209,8 @@ def _report(spec, info, summary, res, loading) -> str:
               f"Re-solves `{q['resolver']}`: set-up {q['setup_s']:.1f} s, events {q['events_s']:.1f} s, "
               f"{q['factorizations']} factorisations" + (f", {q['cg_iterations']} CG iterations" if q["cg_iterations"]
                                                          else "")
+              + (f"; {q['settled_locally']} events settled by the local step alone (local_rtol {q['local_rtol']:g})"
+                 if q["local_rtol"] else "")
               + f"; structure built in {summary['build_s']:.1f} s; wall {summary['wall_s']:.1f} s.", "",
               "Plots: stress_strain.png, fracture.png. Data: results.h5 (group `quasistatic`), fracture.peak.dump and "
               "fracture.end.dump (OVITO), summary.json."]

@@ -84,6 +84,7 @@ class CompressionSpec:
     stop_fraction: float = 0.5       # quasistatic: stop when the stress has fallen below this fraction of the peak
     events_max: int = 100_000        # quasistatic: at most this many events
     resolve_rtol: float = 1e-6       # quasistatic, amg and block-amg: each re-solve to this residual (of |b|)
+    local_rtol: float = 0.0          # quasistatic: events settle by a local solve while the residual stays below this
 
 
 @dataclass
@@ -205,6 +206,9 @@ class BpmWorkflow(WorkflowSpec):
         check(1 <= c.events_max <= 10**8, "compression.events_max", c.events_max, "must be in [1, 1e8]")
         check(1e-12 <= c.resolve_rtol <= 1e-2, "compression.resolve_rtol", c.resolve_rtol,
               "must be in [1e-12, 1e-2] (the iterative re-solves' relative residual)")
+        check(c.local_rtol == 0 or c.resolve_rtol <= c.local_rtol <= 1e-2, "compression.local_rtol", c.local_rtol,
+              f"must be 0 (every event re-solved) or in [compression.resolve_rtol = {c.resolve_rtol:g}, 1e-2] (the "
+              "residual, of |b|, up to which an event settles by a local solve)")
         self._apply_calibration()
         check(0 < c.restart_every_strain <= 1, "compression.restart_every_strain", c.restart_every_strain,
               "must be in (0, 1] (restart files every this much strain; >= strain_max: none)")
