@@ -6,6 +6,7 @@ own designs, on the same samples.
     python bench/bench_quasistatic.py compare      # quasi-static vs the dynamic runs extrapolated to zero rate
     python bench/bench_quasistatic.py scale [--diameters 60 45] [--record DIR[:TIME]]   # the paper's sample coarser
     python bench/bench_quasistatic.py tolerance    # bonds an event and re-solve residual against the exact sequence
+    python bench/bench_quasistatic.py local        # the local step's depth and bound against every event re-solved
 
 ``dynamic``: quickstart and opal_quick compressed by the plate with ``smooth no`` (bonds break at full
 load, the quasi-static rule) at four plate speeds past their peaks, LAMMPS's ``smooth yes`` (opalflow's
@@ -23,7 +24,10 @@ the complete rows of one setting), extrapolated to the paper's d = 15 nm; a new 
 size and setting, which are kept under ``superseded`` (older code).  ``tolerance``: quickstart at
 d = 40 nm, whole runs: the factor at event tolerances 0 (the exact sequence), 0.05, 0.1, 0.2, and amg at
 0.05 and 0.1 with re-solves to 1e-5 and 1e-4 |b|: events, strength against the exact one, CG iterations.
-Results: bench/results/quasistatic_dynamic.json, _resolvers.json, _compare.json, _scale.json, _tolerance.json.
+``local``: the paper's sample at d = 45 nm, the local step 2, 3 and 4 bonds deep at ``local_rtol`` 1e-4 and
+3e-5 against every event re-solved: events settled locally, strength, CG iterations, time.
+Results: bench/results/quasistatic_dynamic.json, _resolvers.json, _compare.json, _scale.json, _tolerance.json,
+_local.json.
 One BLAS thread (threadpoolctl), as the run layer's jobs.
 """
 from __future__ import annotations
@@ -280,9 +284,39 @@ def tolerance(out: Path) -> None:
                                     "rows": rows}, indent=1) + "\n")
 
 
+#: (bonds deep, local_rtol) of ``local``: every event re-solved, then the local step at two depths and bounds
+LOCAL_PLAN = [(4, 0.0), (2, 1e-4), (4, 1e-4), (3, 3e-5), (4, 3e-5)]
+
+
+def local(out: Path) -> None:
+    """The local step (opalflow.bpm.quasistatic.LocalSettle) against every event re-solved: the paper's sample
+    at d = 45 nm, ``amg`` to 1e-5 |b|, event tolerance 0.05, the patch depth (LOCAL_HOPS) and the bound
+    (``compression.local_rtol``) varied; whole runs in this process, one after the other."""
+    import opalflow
+    from opalflow.bpm import quasistatic
+
+    path = RESULTS / "quasistatic_local.json"
+    rows = []
+    for hops, local_rtol in LOCAL_PLAN:
+        quasistatic.LOCAL_HOPS = hops
+        sets = ["packing.diameter_nm=45", "packing.tile_nm=380", *SCALE_SETS, "compression.resolver=amg",
+                "compression.event_tolerance=0.05", "compression.resolve_rtol=1e-5",
+                f"compression.local_rtol={local_rtol}", "compression.snapshot_strains=[]"]
+        s = opalflow.run("opal_fcc", out / f"local-{hops}-{local_rtol:g}", set=sets, quiet=True)
+        q = s["quasistatic"]
+        rows.append({"hops": hops, "local_rtol": local_rtol, "events": q["events"],
+                     "settled_locally": q["settled_locally"], "broken_bonds": s["broken_bonds"],
+                     "strength_MPa": s["strength_MPa"], "strain_at_peak": s["strain_at_peak"],
+                     "cg_iterations": q["cg_iterations"], "events_s": q["events_s"], "wall_s": s["wall_s"]})
+        rows[-1]["strength_vs_every_event_resolved"] = rows[-1]["strength_MPa"] / rows[0]["strength_MPa"] - 1
+        print(json.dumps(rows[-1]), flush=True)
+        path.write_text(json.dumps({"machine": machine(), "workflow": "opal_fcc", "diameter_nm": 45,
+                                    "rows": rows}, indent=1) + "\n")
+
+
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("part", choices=["dynamic", "resolvers", "compare", "scale", "tolerance"])
+    p.add_argument("part", choices=["dynamic", "resolvers", "compare", "scale", "tolerance", "local"])
     p.add_argument("--out", default="", help="folder for the runs (default: a temporary one)")
     p.add_argument("--diameters", type=float, nargs="*", default=[60.0, 45.0], help="scale: particle diameters (nm)")
     p.add_argument("--resolver", default="amg", help="scale: compression.resolver")
@@ -299,7 +333,8 @@ def main(argv=None) -> None:
         if a.part == "scale":
             scale(out, a.diameters, a.resolver, a.tolerance, a.rtol, a.local_rtol, a.record)
         else:
-            {"dynamic": dynamic, "resolvers": resolvers, "compare": compare, "tolerance": tolerance}[a.part](out)
+            {"dynamic": dynamic, "resolvers": resolvers, "compare": compare, "tolerance": tolerance,
+             "local": local}[a.part](out)
 
 
 if __name__ == "__main__":

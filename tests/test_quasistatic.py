@@ -207,7 +207,8 @@ def test_tension_on_a_packing_without_bonds_is_refused(tmp_path, capsys):
 def test_local_step_keeps_the_internal_force_and_relaxes_its_patch():
     """LocalSettle (compression.local_rtol): a broken bond's force leaves f = K x, the particles within
     LOCAL_HOPS intact bonds of it move so that their free dofs are in equilibrium (residual at round-off), no
-    other particle moves, and f stays K x of the damaged network (kept up to date, not recomputed)."""
+    other particle moves, f stays K x of the damaged network (kept up to date, not recomputed), and every bond
+    with an end that moved is among those it returns (whose B the event loop renews)."""
     import scipy.sparse as sp
     from scipy.sparse.csgraph import shortest_path
 
@@ -229,7 +230,7 @@ def test_local_step_keeps_the_internal_force_and_relaxes_its_patch():
                                   twist=net.twist * alive)
     assert np.allclose(force, damaged.matvec(x), rtol=0, atol=1e-12 * np.abs(force).max())
     before = x.copy()
-    assert settle(x, force, broken, alive, free)
+    touched = settle(x, force, broken, alive, free)
     assert np.allclose(force, damaged.matvec(x), rtol=0, atol=1e-10 * np.abs(force).max())
     graph = sp.coo_matrix((np.ones(m - 1), (net.i[alive], net.j[alive])), shape=(n, n))
     ends = [net.i[broken[0]], net.j[broken[0]]]
@@ -237,6 +238,8 @@ def test_local_step_keeps_the_internal_force_and_relaxes_its_patch():
     patch = np.repeat(hops <= LOCAL_HOPS, 6)
     moved = np.repeat((x != before).reshape(n, 6).any(axis=1), 6)
     assert moved.any() and not np.any(moved & ~patch)
+    ends_moved = moved.reshape(n, 6)[:, 0]
+    assert set(np.flatnonzero(alive & (ends_moved[net.i] | ends_moved[net.j]))) <= set(touched)   # (B kept there)
     assert np.abs(force[patch & free]).max() < 1e-9 * np.abs(force).max()
     assert np.abs(force[~patch & free]).max() > 1e-3 * np.abs(force).max()      # (the rest untouched)
 

@@ -68,7 +68,8 @@ from opalflow.spec import InputError
 #: ``auto`` takes ``amg`` up to this many bonds, ~9 GiB (a bound of memory, where the static solver's
 #: AMG_MAX_BONDS is one of speed): a run with its 6 x 6 hierarchy (and the reversed copies of
 #: :func:`opalflow.bpm.static.v_cycle`) peaked at 4.15 GiB at 1.81 M bonds (the paper's sample at d = 30 nm);
-#: the paper's own 17.5 M bonds would need ~40 GiB: ``block-amg`` above
+#: at the paper's own 17.5 M bonds its K alone is 9.8 GiB (15.9 GiB while assembled), with the copy and the
+#: hierarchy past 20: ``block-amg`` above
 RESOLVE_AMG_MAX_BONDS = 4_000_000
 
 
@@ -80,6 +81,10 @@ class Strengths:
     fs_c: np.ndarray
     tb_c: np.ndarray
     tt_c: np.ndarray
+
+    def part(self, bonds: np.ndarray) -> "Strengths":
+        """The strengths of ``bonds`` alone."""
+        return Strengths(self.fr_c[bonds], self.fs_c[bonds], self.tb_c[bonds], self.tt_c[bonds])
 
 
 def breaking_index(net: BondNetwork, x: np.ndarray, c: Strengths) -> np.ndarray:
@@ -296,9 +301,9 @@ def _resolver(name: str, net: BondNetwork, alive: np.ndarray, free: np.ndarray, 
 
 
 #: an event's broken bonds settle first by a local solve over the particles within this many intact bonds of
-#: them (:class:`LocalSettle`); measured on the paper's sample at d = 45 nm (amg, tolerance 0.05, re-solves to
-#: 1e-5, ``local_rtol`` 3e-5) against every event re-solved: strength 12.586 MPa there, +11 % with 2 bonds,
-#: -0.38 % with 3, -0.15 % with 4 (bench/results/quasistatic_local.json)
+#: them (:class:`LocalSettle`); measured on the paper's sample at d = 45 nm (amg, event tolerance 0.05,
+#: re-solves to 1e-5) against every event re-solved (bench/results/quasistatic_local.json): 2 bonds deep at
+#: ``local_rtol`` 1e-4 moves the strength by +11 %, 4 by -1.7 %; at 3e-5, 3 bonds -0.38 %, 4 bonds -0.15 %
 LOCAL_HOPS = 4
 #: ... and only while the patch has at most this many particles: an event that breaks bonds in many places at
 #: once is re-solved globally instead of factorising a patch of its size (the factor's fill grows fast in 3D)
@@ -326,20 +331,21 @@ class LocalSettle:
         force.reshape(-1, 6)[parts] -= sub.matvec(x.reshape(-1, 6)[parts]).reshape(-1, 6)
 
     def __call__(self, x: np.ndarray, force: np.ndarray, broken: np.ndarray, alive: np.ndarray,
-                 free: np.ndarray) -> bool:
-        """x and force (6 N,) in place: the patch around ``broken`` relaxed with everything else held; false
-        (nothing done) where the patch would pass :data:`LOCAL_MAX_PARTICLES`."""
+                 free: np.ndarray) -> np.ndarray | None:
+        """x and force (6 N,) in place: the patch around ``broken`` relaxed with everything else held.  Returns
+        the bonds whose ends may have moved (the intact ones touching the patch), None (nothing done) where
+        the patch would pass :data:`LOCAL_MAX_PARTICLES`."""
         seeds = np.unique(np.concatenate([self.net.i[broken], self.net.j[broken]]))
         patch, bonds = self.adjacency.patch(alive, seeds, LOCAL_HOPS)
         if len(patch) > LOCAL_MAX_PARTICLES:
-            return False
+            return None
         parts, sub = _subnetwork(self.net, bonds)
         movable = free.reshape(-1, 6)[parts] & np.isin(parts, patch)[:, None]
         r = np.where(movable, -force.reshape(-1, 6)[parts], 0.0).ravel()
         d = np.where(movable.ravel(), Factor(block_matrix(sub, movable.ravel())[0]).solve(r), 0.0)
         x.reshape(-1, 6)[parts] += d.reshape(-1, 6)
         force.reshape(-1, 6)[parts] += sub.matvec(d).reshape(-1, 6)
-        return True
+        return bonds
 
 
 class Adjacency:
@@ -551,6 +557,7 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
             checkpoint({"events": [e.__dict__ for e in events], "modulus_MPa": modulus})
 
     stopped = "events_max"
+    touched = None
     last_said = time.perf_counter()
     last_saved = time.perf_counter()
     try:
@@ -558,8 +565,12 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
             if stress_unit <= 0 or not loaded.any():
                 stopped = "no load path"
                 break
-            B = breaking_index(net, x.reshape(n, 6), strengths)
-            B[~alive] = -np.inf
+            if touched is None:         # (after a global re-solve: every bond; after a local step: its bonds)
+                B = breaking_index(net, x.reshape(n, 6), strengths)
+                B[~alive] = -np.inf
+            else:
+                parts, sub = _subnetwork(net, touched)
+                B[touched] = breaking_index(sub, x.reshape(n, 6)[parts], strengths.part(touched))
             worst = float(B.max(initial=-np.inf))
             if worst <= 0:
                 stopped = "no bond loaded towards breaking"
@@ -583,12 +594,13 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
                     loose = new_loose
                     free, x_p, loaded = constraints(loose)
             solver.remove(broken, free)
-            if (settle and not came_loose and settle(x, force, broken, alive, free)
-                    and np.linalg.norm(force[free]) <= local_rtol * b_norm):
+            B[broken] = -np.inf
+            touched = settle(x, force, broken, alive, free) if settle and not came_loose else None
+            if touched is not None and np.linalg.norm(force[free]) <= local_rtol * b_norm:
                 stress_unit, its, settled = stress_of(force), 0, True
             else:
                 x, force, stress_unit, its, b_norm = solve(x)
-                settled = False
+                touched, settled = None, False
             events.append(Event(strain, stress, strain * stress_unit, broken.tolist(), its, settled))
             now = time.perf_counter()
             stop = should_stop()
