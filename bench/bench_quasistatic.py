@@ -156,8 +156,9 @@ SCALE_SETS = ["compression.method=quasistatic", "compression.drop_loose=true", "
 
 
 def scale_row(folder: Path, peak_GiB: float | None, wall_s: float | None = None) -> dict:
-    """One row of ``scale`` from a run folder: a finished one (summary.json), or one stopped before its end
-    (its quasistatic_state.json: the events so far, ``complete`` false; ``wall_s`` from the time output)."""
+    """One row of ``scale`` from a run folder: a finished one (summary.json; ``complete`` false where it stopped
+    at ``compression.events_max``, a probe of its first events), or one stopped before its end (its
+    quasistatic_state.json: the events so far, ``complete`` false; ``wall_s`` from the time output)."""
     run = json.loads((folder / "run.json").read_text())
     spec = run["spec"]
     row = {"diameter_nm": spec["packing"]["diameter_nm"], "resolver": spec["compression"]["resolver"],
@@ -179,7 +180,8 @@ def scale_row(folder: Path, peak_GiB: float | None, wall_s: float | None = None)
                 "s_per_event": round(wall_s / len(events), 2) if wall_s else None}
     s = json.loads((folder / "summary.json").read_text())
     q = s["quasistatic"]
-    return {**row, "complete": True, "n_particles": s["n_particles"], "n_bonds": s["n_bonds"], "events": q["events"],
+    return {**row, "resolver": q["resolver"], "complete": q["stopped"] != "events_max",
+            "n_particles": s["n_particles"], "n_bonds": s["n_bonds"], "events": q["events"],
             "broken_bonds": s["broken_bonds"], "broken_bonds_at_peak": s.get("broken_bonds_at_peak"),
             "strength_MPa": s["strength_MPa"], "strain_at_peak": s["strain_at_peak"],
             "youngs_modulus_GPa": s["youngs_modulus_GPa"], "stopped": q["stopped"], "setup_s": q["setup_s"],
