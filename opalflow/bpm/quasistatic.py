@@ -500,7 +500,9 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
     below ``stop_fraction`` of the peak, when no path carries load, or after ``events_max`` events.
     ``state`` (``{"events": [...], "modulus_MPa": E}``, given to ``checkpoint(state)`` every ``checkpoint_s``
     seconds, before :class:`Stopped` is raised when ``should_stop()`` turns true, and on Ctrl-C): continue a
-    killed run from its events (the broken bonds are theirs); the result is the same.
+    killed run from its events (the broken bonds are theirs); the result is the same (with an iterative
+    re-solve or the local step it restarts from a global re-solve: the same to the re-solve's tolerance, not to
+    the digit).
     """
     if resolver not in RESOLVERS:
         raise InputError(f"compression.resolver = {resolver!r}: must be one of {', '.join(RESOLVERS)}")
