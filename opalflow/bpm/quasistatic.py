@@ -55,12 +55,11 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
 from numba import njit
 
 from opalflow.bpm.spec import RESOLVERS
 from opalflow.bpm.static import (DIRECT_MAX_DOFS, Factor, Stop, block_amg_preconditioner, block_matrix, bond_blocks,
-                                  particle_amg, pcg)
+                                  loose_particles, particle_amg, pcg)
 from opalflow.bpm.stiffness import BondNetwork
 from opalflow.spec import InputError
 
@@ -513,11 +512,7 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
     anchored = fixed | (top if clamp_top else np.zeros(n, bool))
 
     def loose_of(alive):
-        from scipy.sparse.csgraph import connected_components
-
-        i, j = net.i[alive], net.j[alive]
-        label = connected_components(sp.coo_matrix((np.ones(len(i)), (i, j)), shape=(n, n)), directed=False)[1]
-        return ~np.isin(label, np.unique(label[anchored]))
+        return loose_particles(net.part(alive), anchored)
 
     def constraints(loose):
         pres = np.zeros((n, 6), bool)
