@@ -165,6 +165,7 @@ def scale_row(folder: Path, peak_GiB: float | None, wall_s: float | None = None)
            "tolerance": spec["compression"]["event_tolerance"],
            "resolve_rtol": spec["compression"].get("resolve_rtol", 1e-6),
            "local_rtol": spec["compression"].get("local_rtol", 0.0),
+           "breaking": spec["bonds"].get("breaking", "lammps"),
            "peak_memory_GiB": round(peak_GiB, 2) if peak_GiB else None, "created": run["provenance"]["created"]}
     if not (folder / "summary.json").exists():
         state = json.loads((folder / "quasistatic_state.json").read_text())
@@ -202,12 +203,13 @@ def _time_output(path: str) -> tuple[float, float]:
 
 
 def _setting(r: dict) -> tuple:
-    """A row's setting: (re-solve, event tolerance, re-solve residual, local step's residual)."""
-    return r["resolver"], r["tolerance"], r.get("resolve_rtol", 1e-6), r.get("local_rtol", 0.0)
+    """A row's setting: (re-solve, event tolerance, re-solve residual, local step's residual, breaking rule)."""
+    return (r["resolver"], r["tolerance"], r.get("resolve_rtol", 1e-6), r.get("local_rtol", 0.0),
+            r.get("breaking", "lammps"))
 
 
 def scale(out: Path, diameters: list[float], resolver: str, tolerance: float, rtol: float, local_rtol: float,
-          record: list[str]) -> None:
+          breaking: str, record: list[str]) -> None:
     path = RESULTS / "quasistatic_scale.json"
     old = json.loads(path.read_text()) if path.exists() else {}
     rows = [r for r in old.get("rows", []) if "diameter_nm" in r]
@@ -226,7 +228,7 @@ def scale(out: Path, diameters: list[float], resolver: str, tolerance: float, rt
                f"packing.diameter_nm={d:g}", "--set", f"packing.tile_nm={0 if d > 47 else 380}",
                *[x for kv in SCALE_SETS for x in ("--set", kv)], "--set", f"compression.resolver={resolver}",
                "--set", f"compression.event_tolerance={tolerance}", "--set", f"compression.resolve_rtol={rtol}",
-               "--set", f"compression.local_rtol={local_rtol}"]
+               "--set", f"compression.local_rtol={local_rtol}", "--set", f'bonds.breaking="{breaking}"']
         proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL)
         _, status, usage = os.wait4(proc.pid, 0)
         if os.waitstatus_to_exitcode(status):
@@ -244,7 +246,8 @@ def scale(out: Path, diameters: list[float], resolver: str, tolerance: float, rt
         x = np.log([r["n_particles"] for r in whole])
         fit = {"diameters_nm": [r["diameter_nm"] for r in whole]}
         law[f"{setting[0]}, tolerance {setting[1]:g}, rtol {setting[2]:g}"
-            + (f", local_rtol {setting[3]:g}" if setting[3] else "")] = fit
+            + (f", local_rtol {setting[3]:g}" if setting[3] else "")
+            + (f", breaking {setting[4]}" if setting[4] != "lammps" else "")] = fit
         for key in ("events", "broken_bonds_at_peak", "wall_s", "s_per_event", "strength_MPa"):
             slope, icpt = np.polyfit(x, np.log([max(r[key], 1e-9) for r in whole]), 1)
             fit[key] = {"exponent": float(slope), "at_paper_scale": float(np.exp(icpt) * PAPER_PARTICLES ** slope)}
@@ -325,6 +328,7 @@ def main(argv=None) -> None:
     p.add_argument("--tolerance", type=float, default=0.05, help="scale: compression.event_tolerance")
     p.add_argument("--rtol", type=float, default=1e-6, help="scale: compression.resolve_rtol")
     p.add_argument("--local-rtol", type=float, default=0.0, help="scale: compression.local_rtol")
+    p.add_argument("--breaking", default="lammps", help="scale: bonds.breaking (the breaking rule)")
     p.add_argument("--record", nargs="*", default=[], help="scale: finished run folders to add, DIR[:TIME_OUTPUT]")
     a = p.parse_args(argv)
     from threadpoolctl import threadpool_limits
@@ -333,7 +337,7 @@ def main(argv=None) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(a.out or tmp)
         if a.part == "scale":
-            scale(out, a.diameters, a.resolver, a.tolerance, a.rtol, a.local_rtol, a.record)
+            scale(out, a.diameters, a.resolver, a.tolerance, a.rtol, a.local_rtol, a.breaking, a.record)
         else:
             {"dynamic": dynamic, "resolvers": resolvers, "compare": compare, "tolerance": tolerance,
              "local": local}[a.part](out)

@@ -16,6 +16,20 @@ bond), Tb = kb P (theta_i - theta_j), Tt = kt n.(theta_i - theta_j).  ``smooth y
 1 - B^4 before the bond breaks (it carries nothing at B = 1); the linear method cannot follow that and
 breaks bonds at full load, as ``smooth no`` (``bonds.smooth = false``) and as the paper's bonds do.
 
+The paper's own rule (Dosta et al. eqs. 16-17, ``bonds.breaking``; LAMMPS has no such bond style, so only
+this method can apply it) checks the normal and the shear stress of the bond's section apart, each the sum of
+a force's and a moment's part: a bond breaks when
+
+    max(|Fr| / Fcr + |Tb| / Tcb, |Fs| / Fcs + |Tt| / Tct) >= 1                          (``"dosta"``),
+
+|Fr| as printed (a compressed bond breaks too), or with the normal condition only while the bond is
+stretched (``"dosta_tension"``: MUSEN's ``CModelSBElastic::CalculateSBForce`` breaks in the normal
+condition only for strain > 0 unless its COMPRESSIVE_BREAK is set, default 0).  With the critical values of
+:class:`opalflow.materials.BondCoefficients` (Fcr = sigma A, Tcb = sigma I / r_b, ...) the two sums are the
+normal and the shear stress of eqs. 16-17 over the strengths; LAMMPS's B is their sum for a stretched bond,
+so LAMMPS breaks a bond loaded both ways at up to half the paper's load.  Each rule is positively
+homogeneous in the strain, so the events below hold for all three.
+
 Under a prescribed strain e of the top layer the linear network's B of every bond is e B_1 (B_1 at unit
 strain; Fr is linear in e and the magnitudes grow with e > 0), so the next bond to break is the one with
 the largest B_1, at e = 1 / max B_1.  An event breaks it (and, with ``tolerance`` > 0, every bond with B_1
@@ -57,7 +71,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from opalflow.bpm.spec import RESOLVERS
+from opalflow.bpm.spec import BREAKING_RULES, RESOLVERS
 from opalflow.bpm.static import (DIRECT_MAX_DOFS, Factor, Stop, block_amg_preconditioner, block_matrix, bond_blocks,
                                   loose_particles, particle_amg, pcg)
 from opalflow.bpm.stiffness import BondNetwork
@@ -74,31 +88,34 @@ RESOLVE_AMG_MAX_BONDS = 4_000_000
 
 @dataclass
 class Strengths:
-    """Each bond's critical normal and shear force and bending and twisting torque (pN, pN nm)."""
+    """Each bond's critical normal and shear force and bending and twisting torque (pN, pN nm), and the
+    breaking rule that weighs them (one of :data:`opalflow.bpm.spec.BREAKING_RULES`, module docstring)."""
 
     fr_c: np.ndarray
     fs_c: np.ndarray
     tb_c: np.ndarray
     tt_c: np.ndarray
+    rule: str = "lammps"
 
     def part(self, bonds: np.ndarray) -> "Strengths":
         """The strengths of ``bonds`` alone."""
-        return Strengths(self.fr_c[bonds], self.fs_c[bonds], self.tb_c[bonds], self.tt_c[bonds])
+        return Strengths(self.fr_c[bonds], self.fs_c[bonds], self.tb_c[bonds], self.tt_c[bonds], self.rule)
 
 
 def breaking_index(net: BondNetwork, x: np.ndarray, c: Strengths) -> np.ndarray:
-    """LAMMPS's B of every bond (not clipped) for displacements and rotations x (N, 6) (module docstring):
-    the bond forces from the numba operator (:meth:`BondNetwork.bond_forces`), the rest in one numba pass
-    (:func:`_breaking_index`; at 1.8 M bonds 0.08 s where numpy's gathers and norms took 0.7, once an event)."""
+    """The breaking index of every bond (LAMMPS's B, not clipped, or the paper's, by ``c.rule``) for
+    displacements and rotations x (N, 6) (module docstring): the bond forces from the numba operator
+    (:meth:`BondNetwork.bond_forces`), the rest in one numba pass (:func:`_breaking_index`; at 1.8 M bonds
+    0.08 s where numpy's gathers and norms took 0.7, once an event)."""
     F = net.bond_forces(x[:, :3], x[:, 3:])
     out = np.empty(len(net.L))
     _breaking_index(net.i, net.j, net.n, net.bend, net.twist, F, np.ascontiguousarray(x[:, 3:]), c.fr_c, c.fs_c,
-                    c.tb_c, c.tt_c, out)
+                    c.tb_c, c.tt_c, BREAKING_RULES.index(c.rule), out)
     return out
 
 
 @njit(cache=True, nogil=True)
-def _breaking_index(i, j, n, bend, twist, F, theta, fr_c, fs_c, tb_c, tt_c, out):
+def _breaking_index(i, j, n, bend, twist, F, theta, fr_c, fs_c, tb_c, tt_c, rule, out):
     for b in range(len(out)):
         p, q = i[b], j[b]
         fr = n[b, 0] * F[b, 0] + n[b, 1] * F[b, 1] + n[b, 2] * F[b, 2]
@@ -106,7 +123,13 @@ def _breaking_index(i, j, n, bend, twist, F, theta, fr_c, fs_c, tb_c, tt_c, out)
         tw = n[b, 0] * d0 + n[b, 1] * d1 + n[b, 2] * d2
         fs = math.sqrt((F[b, 0] - fr * n[b, 0]) ** 2 + (F[b, 1] - fr * n[b, 1]) ** 2 + (F[b, 2] - fr * n[b, 2]) ** 2)
         bt = math.sqrt((d0 - tw * n[b, 0]) ** 2 + (d1 - tw * n[b, 1]) ** 2 + (d2 - tw * n[b, 2]) ** 2)
-        out[b] = fr / fr_c[b] + fs / fs_c[b] + bend[b] * bt / tb_c[b] + twist[b] * abs(tw) / tt_c[b]
+        shear = fs / fs_c[b] + twist[b] * abs(tw) / tt_c[b]
+        if rule == 0:                            # lammps: one sum, the signed normal force
+            out[b] = fr / fr_c[b] + bend[b] * bt / tb_c[b] + shear
+        elif rule == 1 or fr > 0:                # dosta (eqs. 16-17), dosta_tension while stretched
+            out[b] = max(abs(fr) / fr_c[b] + bend[b] * bt / tb_c[b], shear)
+        else:                                    # dosta_tension, a compressed bond: the shear condition alone
+            out[b] = shear
 
 
 class StiffnessMatrix:

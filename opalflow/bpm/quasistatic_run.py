@@ -32,11 +32,17 @@ from opalflow.spec import SpecError
 from opalflow.store import h5_bytes, new_figure, put, save_figure, write_json_atomic
 
 STATE = "quasistatic_state.json"
+#: each breaking rule (``bonds.breaking``) as the report states it
+RULE_TEXT = {"lammps": "LAMMPS's rule B = Fr/Fcr + |Fs|/Fcs + |Tb|/Tcb + |Tt|/Tct >= 1",
+             "dosta": "the paper's rule (eqs. 16-17) max(|Fr|/Fcr + |Tb|/Tcb, |Fs|/Fcs + |Tt|/Tct) >= 1",
+             "dosta_tension": "the paper's rule (eqs. 16-17) with the normal condition only while a bond is stretched "
+                              "(MUSEN's default)"}
 
 
-def strengths_of(data, coefficients) -> Strengths:
-    """Each bond's critical forces and torques, from its type's bpm/rotational coefficients."""
-    return Strengths(*(per_bond(data, coefficients, k) for k in ("fr_c", "fs_c", "tb_c", "tt_c")))
+def strengths_of(data, coefficients, rule: str = "lammps") -> Strengths:
+    """Each bond's critical forces and torques, from its type's bpm/rotational coefficients, and the
+    breaking rule (``bonds.breaking``)."""
+    return Strengths(*(per_bond(data, coefficients, k) for k in ("fr_c", "fs_c", "tb_c", "tt_c")), rule)
 
 
 def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=print) -> dict:
@@ -55,7 +61,8 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
     data = sample.structure
     say(f"quasi-static ({loading.title}): {s.n_particles} particles, {s.n_bonds} bonds, to strain {c.strain_max:g}")
     try:
-        res = solve_fracture(net, strengths_of(data, sample.coefficients), data.positions, data.groups["substrate"],
+        res = solve_fracture(net, strengths_of(data, sample.coefficients, spec.bonds.breaking), data.positions,
+                             data.groups["substrate"],
                              sample.top_layer, sample.height_nm, sample.area_nm2, clamp_top=loading.glued,
                              sense=loading.sense, strain_max=c.strain_max, stop_fraction=c.stop_fraction,
                              events_max=c.events_max, tolerance=c.event_tolerance, resolver=c.resolver,
@@ -192,8 +199,8 @@ def _report(spec, info, summary, res, loading) -> str:
     q = summary["quasistatic"]
     lines = [f"# {spec.name}: quasi-static {loading.title}", "",
              f"{info['n_particles']} particles, {info['n_bonds']} bonds; the bond network linearised from LAMMPS's "
-             "bpm/rotational, bonds broken one event at a time by LAMMPS's rule B = Fr/Fcr + |Fs|/Fcs + |Tb|/Tcb + "
-             "|Tt|/Tct >= 1 at full load (as `smooth no`; opalflow/bpm/quasistatic.py); substrate fixed, top layer "
+             f"bpm/rotational, bonds broken one event at a time by {RULE_TEXT[spec.bonds.breaking]} at full load "
+             "(as `smooth no`; opalflow/bpm/quasistatic.py); substrate fixed, top layer "
              f"({info['top_layer_particles']} particles) {'pushed down' if loading.sense > 0 else 'pulled up'}"
              + (", glued to the wall" if loading.glued else ", its x, y and rotations free") + ".", "",
              *sample_lines(info), "| quantity | value | reference | error |", "|---|---|---|---|"]

@@ -40,6 +40,14 @@ class BondsSpec:
     #: LAMMPS's ``smooth``: a bond's force and torque scaled by 1 - B^4 (B its breaking index), so it fades out
     #: before it breaks; false breaks it at full load (the paper's bonds, the quasi-static method's rule)
     smooth: bool = True
+    #: when a bond breaks (:data:`BREAKING_RULES`; the quasi-static method alone can apply the paper's rules)
+    breaking: str = "lammps"
+
+
+#: bond breaking rules (opalflow.bpm.quasistatic's docstring): LAMMPS's bpm/rotational (one sum of four
+#: ratios, the signed normal force), the paper's eqs. 16-17 as printed (normal and shear stress apart, |F_n|),
+#: and the same with the normal condition only while the bond is stretched (MUSEN's default)
+BREAKING_RULES = ("lammps", "dosta", "dosta_tension")
 
 
 @dataclass
@@ -198,6 +206,11 @@ class BpmWorkflow(WorkflowSpec):
               "a tree-like network of them is a mechanism with no static stiffness)")
         check(not (c.method == "quasistatic" and not b.breakable), "bonds.breakable", b.breakable,
               "must be true with compression.method = \"quasistatic\" (it breaks bonds; \"static\" gives E alone)")
+        check(b.breaking in BREAKING_RULES, "bonds.breaking", b.breaking,
+              f"must be one of {', '.join(BREAKING_RULES)}")
+        check(b.breaking == "lammps" or c.method == "quasistatic", "bonds.breaking", b.breaking,
+              f"must be \"lammps\" with compression.method = \"{c.method}\" (LAMMPS's bpm/rotational has its own "
+              "rule alone; the paper's rules need \"quasistatic\")")
         check(c.resolver in RESOLVERS, "compression.resolver", c.resolver,
               f"must be one of {', '.join(RESOLVERS)} (quasistatic method)")
         check(0 <= c.event_tolerance <= 0.5, "compression.event_tolerance", c.event_tolerance,
