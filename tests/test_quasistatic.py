@@ -50,7 +50,7 @@ def test_sc_lattice_in_tension_dynamic_run_of_the_tension_loading(tmp_path):
     assert smooth["strength_MPa"] / s["strength_MPa"] == pytest.approx(0.8 * 5 ** -0.25, rel=0.05)
 
 
-@pytest.mark.parametrize("rule", ["dosta", "dosta_tension"])
+@pytest.mark.parametrize("rule", ["dosta", "musen"])
 def test_sc_lattice_in_tension_breaks_at_the_bond_strength_by_the_papers_rules(tmp_path, rule):
     """Pulled along its bonds a bond carries its normal force alone: the paper's rules (eqs. 16-17) break it where
     LAMMPS's does, at sigma_b pi r_b^2 / a^2."""
@@ -63,9 +63,8 @@ def test_sc_lattice_in_tension_breaks_at_the_bond_strength_by_the_papers_rules(t
 def test_breaking_rules_weigh_the_bond_loads_as_written():
     """breaking_index by rule against the four load ratios computed here (quickstart's network, random
     displacements and rotations): LAMMPS's one sum with the signed normal force; the paper's eqs. 16-17 as
-    the larger of the normal (|Fr| and bending) and the shear (shear force and twisting) ratio; and with the
-    normal condition only for stretched bonds.  For a stretched bond LAMMPS's index is the sum of the paper's
-    two, so never below the paper's."""
+    the larger of the normal (|Fr| and bending) and the shear (shear force and twisting) ratio; MUSEN's with
+    Fr signed.  LAMMPS's index is the sum of MUSEN's two, so never below MUSEN's where both are positive."""
     from opalflow.bpm.quasistatic import Strengths, breaking_index
     from tests.test_static import scene
 
@@ -82,14 +81,16 @@ def test_breaking_rules_weigh_the_bond_loads_as_written():
     bt = np.linalg.norm(d - tw[:, None] * net.n, axis=1)
     shear = fs / c[1] + net.twist * np.abs(tw) / c[3]
     normal = net.bend * bt / c[2]
-    got = {rule: breaking_index(net, x, Strengths(*c, rule)) for rule in ("lammps", "dosta", "dosta_tension")}
+    got = {rule: breaking_index(net, x, Strengths(*c, rule)) for rule in ("lammps", "dosta", "musen")}
     assert np.allclose(got["lammps"], fr / c[0] + normal + shear, rtol=1e-12)
     assert np.allclose(got["dosta"], np.maximum(np.abs(fr) / c[0] + normal, shear), rtol=1e-12)
-    assert np.allclose(got["dosta_tension"], np.where(fr > 0, np.maximum(fr / c[0] + normal, shear), shear), rtol=1e-12)
+    assert np.allclose(got["musen"], np.maximum(fr / c[0] + normal, shear), rtol=1e-12)
     stretched = fr > 0
     assert 0 < stretched.sum() < m
-    assert np.all(got["lammps"][stretched] >= got["dosta"][stretched])
-    assert np.all(got["dosta"] >= got["dosta_tension"]) and np.any(got["dosta"] > got["dosta_tension"])
+    assert np.array_equal(got["dosta"][stretched], got["musen"][stretched])
+    assert np.all(got["dosta"] >= got["musen"]) and np.any(got["dosta"] > got["musen"])
+    both = fr / c[0] + normal > 0
+    assert np.all(got["lammps"][both] >= got["musen"][both]) and np.any(got["lammps"] < got["musen"])
 
 
 def test_eq_10_4_calibration_measured_in_tension(tmp_path):
@@ -216,7 +217,7 @@ def test_a_new_loading_is_one_class_and_one_registry_line():
     (["compression.method=quasistatic", "bonds.breakable=true", "compression.local_rtol=1e-7"],
      "compression.local_rtol"),
     (['bonds.breaking="dosta"'], "bonds.breaking"),
-    (["compression.method=quasistatic", "bonds.breakable=true", 'bonds.breaking="musen"'], "bonds.breaking"),
+    (["compression.method=quasistatic", "bonds.breakable=true", 'bonds.breaking="potyondy"'], "bonds.breaking"),
 ])
 def test_refusals_are_one_line_and_write_nothing(tmp_path, capsys, sets, field):
     out = tmp_path / "no"

@@ -22,13 +22,15 @@ a force's and a moment's part: a bond breaks when
 
     max(|Fr| / Fcr + |Tb| / Tcb, |Fs| / Fcs + |Tt| / Tct) >= 1                          (``"dosta"``),
 
-|Fr| as printed (a compressed bond breaks too), or with the normal condition only while the bond is
-stretched (``"dosta_tension"``: MUSEN's ``CModelSBElastic::CalculateSBForce`` breaks in the normal
-condition only for strain > 0 unless its COMPRESSIVE_BREAK is set, default 0).  With the critical values of
-:class:`opalflow.materials.BondCoefficients` (Fcr = sigma A, Tcb = sigma I / r_b, ...) the two sums are the
-normal and the shear stress of eqs. 16-17 over the strengths; LAMMPS's B is their sum for a stretched bond,
-so LAMMPS breaks a bond loaded both ways at up to half the paper's load.  Each rule is positively
-homogeneous in the strain, so the events below hold for all three.
+|Fr| as printed (a compressed bond breaks too), or with the normal force signed (``"musen"``: the code the
+paper ran, MUSEN's GPU kernel ``CUDA_CalcSBForce_E_kernel`` of Models/SolidBonds/BondModelElastic/
+ModelSBElastic.cu, its "standard breakage criteria": the normal force's length turned negative in
+compression, then maxStress1 + maxStress2 >= NormalStrength or maxTorque1 + maxTorque2 >= TangentialStrength;
+Potyondy and Cundall's parallel bond, Int. J. Rock Mech. 41:1329, 2004, eqs. 6-7, is the same).  With the
+critical values of :class:`opalflow.materials.BondCoefficients` (Fcr = sigma A, Tcb = sigma I / r_b, ...) the
+two sums are the normal and the shear stress of eqs. 16-17 over the strengths; LAMMPS's B is their sum, so
+LAMMPS breaks a bond loaded both ways at up to half the paper's load.  Each rule is positively homogeneous
+in the strain, so the events below hold for all three.
 
 Under a prescribed strain e of the top layer the linear network's B of every bond is e B_1 (B_1 at unit
 strain; Fr is linear in e and the magnitudes grow with e > 0), so the next bond to break is the one with
@@ -126,10 +128,8 @@ def _breaking_index(i, j, n, bend, twist, F, theta, fr_c, fs_c, tb_c, tt_c, rule
         shear = fs / fs_c[b] + twist[b] * abs(tw) / tt_c[b]
         if rule == 0:                            # lammps: one sum, the signed normal force
             out[b] = fr / fr_c[b] + bend[b] * bt / tb_c[b] + shear
-        elif rule == 1 or fr > 0:                # dosta (eqs. 16-17), dosta_tension while stretched
-            out[b] = max(abs(fr) / fr_c[b] + bend[b] * bt / tb_c[b], shear)
-        else:                                    # dosta_tension, a compressed bond: the shear condition alone
-            out[b] = shear
+        else:                                    # dosta (eqs. 16-17, |Fr|), musen (Fr signed)
+            out[b] = max((abs(fr) if rule == 1 else fr) / fr_c[b] + bend[b] * bt / tb_c[b], shear)
 
 
 class StiffnessMatrix:

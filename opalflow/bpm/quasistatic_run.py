@@ -35,8 +35,8 @@ STATE = "quasistatic_state.json"
 #: each breaking rule (``bonds.breaking``) as the report states it
 RULE_TEXT = {"lammps": "LAMMPS's rule B = Fr/Fcr + |Fs|/Fcs + |Tb|/Tcb + |Tt|/Tct >= 1",
              "dosta": "the paper's rule (eqs. 16-17) max(|Fr|/Fcr + |Tb|/Tcb, |Fs|/Fcs + |Tt|/Tct) >= 1",
-             "dosta_tension": "the paper's rule (eqs. 16-17) with the normal condition only while a bond is stretched "
-                              "(MUSEN's default)"}
+             "musen": "the paper's rule (eqs. 16-17) as its code MUSEN computes it, max(Fr/Fcr + |Tb|/Tcb, "
+                      "|Fs|/Fcs + |Tt|/Tct) >= 1 with Fr signed"}
 
 
 def strengths_of(data, coefficients, rule: str = "lammps") -> Strengths:

@@ -46,8 +46,8 @@ class BondsSpec:
 
 #: bond breaking rules (opalflow.bpm.quasistatic's docstring): LAMMPS's bpm/rotational (one sum of four
 #: ratios, the signed normal force), the paper's eqs. 16-17 as printed (normal and shear stress apart, |F_n|),
-#: and the same with the normal condition only while the bond is stretched (MUSEN's default)
-BREAKING_RULES = ("lammps", "dosta", "dosta_tension")
+#: and as the paper's code MUSEN computes them (the normal force signed)
+BREAKING_RULES = ("lammps", "dosta", "musen")
 
 
 @dataclass
