@@ -7,6 +7,7 @@ own designs, on the same samples.
     python bench/bench_quasistatic.py scale [--diameters 60 45] [--record DIR[:TIME]]   # the paper's sample coarser
     python bench/bench_quasistatic.py tolerance    # bonds an event and re-solve residual against the exact sequence
     python bench/bench_quasistatic.py local        # the local step's depth and bound against every event re-solved
+    python bench/bench_quasistatic.py verify --record DIR [--at K ...]   # a run's events against global re-solves
 
 ``dynamic``: quickstart and opal_quick compressed by the plate with ``smooth no`` (bonds break at full
 load, the quasi-static rule) at four plate speeds past their peaks, LAMMPS's ``smooth yes`` (opalflow's
@@ -25,9 +26,12 @@ size and setting, which are kept under ``superseded`` (older code).  ``tolerance
 d = 40 nm, whole runs: the factor at event tolerances 0 (the exact sequence), 0.05, 0.1, 0.2, and amg at
 0.05 and 0.1 with re-solves to 1e-5 and 1e-4 |b|: events, strength against the exact one, CG iterations.
 ``local``: the paper's sample at d = 45 nm, the local step 2, 3 and 4 bonds deep at ``local_rtol`` 1e-4 and
-3e-5 against every event re-solved: events settled locally, strength, CG iterations, time.
+3e-5 against every event re-solved: events settled locally, strength, CG iterations, time.  ``verify``: a
+finished run (the paper's d = 15 nm with the local step, where every event re-solved would take hours)
+checked at a few events: from its broken bonds there, the next event by a global re-solve to 1e-7 |b|
+against its own (:func:`verify`).
 Results: bench/results/quasistatic_dynamic.json, _resolvers.json, _compare.json, _scale.json, _tolerance.json,
-_local.json.
+_local.json, _verify_RUN.json.
 One BLAS thread (threadpoolctl), as the run layer's jobs.
 """
 from __future__ import annotations
@@ -319,9 +323,61 @@ def local(out: Path) -> None:
                                     "rows": rows}, indent=1) + "\n")
 
 
+def _events_of(folder: Path) -> list[dict]:
+    """A finished run's events (results.h5, group quasistatic) as the event loop's state keeps them."""
+    import h5py
+
+    with h5py.File(folder / "results.h5") as h:
+        g = h["quasistatic"]
+        cuts = np.cumsum(g["bonds_per_event"][()])[:-1]
+        bonds = np.split(g["broken_bond_index"][()], cuts)
+        return [{"strain": float(e), "stress_MPa": float(s), "stress_after_MPa": float(a), "bonds": b.tolist()}
+                for e, s, a, b in zip(g["strain"][()], g["stress_MPa"][()], g["stress_after_MPa"][()], bonds)]
+
+
+def verify(run: Path, at: list[int], out: Path, rtol: float = 1e-7) -> None:
+    """A run with the local step (or loose re-solves) checked where it went: from its own broken bonds
+    before event k, the next event found by a global re-solve to ``rtol`` |b| (the run resumed from those
+    events with ``compression.local_rtol = 0``, ``events_max = k + 1``): its strain, stress and bonds
+    against the run's own event k.  ``at``: the events (default: a quarter, half way and the peak)."""
+    import opalflow
+
+    summary = json.loads((run / "summary.json").read_text())
+    record = json.loads((run / "run.json").read_text())
+    events = _events_of(run)
+    peak = int(np.argmax([e["stress_MPa"] for e in events]))
+    rows = []
+    path = RESULTS / f"quasistatic_verify_{run.name}.json"
+    for k in at or [peak // 4, peak // 2, peak]:
+        folder = out / f"at-{k}"
+        folder.mkdir(parents=True)
+        spec = record["spec"]
+        spec["compression"].update(local_rtol=0.0, resolve_rtol=rtol, events_max=k + 1)
+        (folder / "run.json").write_text(json.dumps({**record, "spec": spec}))
+        (folder / "quasistatic_state.json").write_text(json.dumps(
+            {"events": events[:k], "modulus_MPa": summary["youngs_modulus_GPa"] * 1e3}))
+        t = time.perf_counter()
+        opalflow.run(None, folder, resume=True, quiet=True)
+        got = _events_of(folder)[k]
+        mine = events[k]
+        a, b = set(got["bonds"]), set(mine["bonds"])
+        rows.append({"event": k + 1, "peak_event": peak + 1, "strain": mine["strain"], "strain_resolved": got["strain"],
+                     "strain_error": mine["strain"] / got["strain"] - 1, "stress_MPa": mine["stress_MPa"],
+                     "stress_resolved_MPa": got["stress_MPa"], "stress_error": mine["stress_MPa"] / got["stress_MPa"] - 1,
+                     "bonds": len(b), "bonds_resolved": len(a), "bonds_shared": len(a & b),
+                     "wall_s": round(time.perf_counter() - t, 1)})
+        print(json.dumps(rows[-1]), flush=True)
+        path.write_text(json.dumps({"machine": machine(), "run": str(run), "strength_MPa": summary["strength_MPa"],
+                                    "setting": {k: record["spec"]["compression"].get(k) for k in
+                                                ("resolver", "resolve_rtol", "local_rtol", "event_tolerance")},
+                                    "breaking": record["spec"]["bonds"].get("breaking", "lammps"),
+                                    "n_particles": summary["n_particles"], "resolve_rtol": rtol, "rows": rows},
+                                   indent=1) + "\n")
+
+
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("part", choices=["dynamic", "resolvers", "compare", "scale", "tolerance", "local"])
+    p.add_argument("part", choices=["dynamic", "resolvers", "compare", "scale", "tolerance", "local", "verify"])
     p.add_argument("--out", default="", help="folder for the runs (default: a temporary one)")
     p.add_argument("--diameters", type=float, nargs="*", default=[60.0, 45.0], help="scale: particle diameters (nm)")
     p.add_argument("--resolver", default="amg", help="scale: compression.resolver")
@@ -329,7 +385,9 @@ def main(argv=None) -> None:
     p.add_argument("--rtol", type=float, default=1e-6, help="scale: compression.resolve_rtol")
     p.add_argument("--local-rtol", type=float, default=0.0, help="scale: compression.local_rtol")
     p.add_argument("--breaking", default="lammps", help="scale: bonds.breaking (the breaking rule)")
-    p.add_argument("--record", nargs="*", default=[], help="scale: finished run folders to add, DIR[:TIME_OUTPUT]")
+    p.add_argument("--record", nargs="*", default=[], help="scale: finished run folders to add, DIR[:TIME_OUTPUT]; "
+                   "verify: the run to check")
+    p.add_argument("--at", type=int, nargs="*", default=[], help="verify: event indices (0-based) to check")
     a = p.parse_args(argv)
     from threadpoolctl import threadpool_limits
 
@@ -338,6 +396,8 @@ def main(argv=None) -> None:
         out = Path(a.out or tmp)
         if a.part == "scale":
             scale(out, a.diameters, a.resolver, a.tolerance, a.rtol, a.local_rtol, a.breaking, a.record)
+        elif a.part == "verify":
+            verify(Path(a.record[0]), a.at, out)
         else:
             {"dynamic": dynamic, "resolvers": resolvers, "compare": compare, "tolerance": tolerance,
              "local": local}[a.part](out)
