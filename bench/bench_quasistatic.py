@@ -31,7 +31,7 @@ finished run (the paper's d = 15 nm with the local step, where every event re-so
 checked at a few events: from its broken bonds there, the next event by a global re-solve to 1e-7 |b|
 against its own (:func:`verify`).
 Results: bench/results/quasistatic_dynamic.json, _resolvers.json, _compare.json, _scale.json, _tolerance.json,
-_local.json, _verify_RUN.json.
+_local.json, _verify_dD_RULE.json.
 One BLAS thread (threadpoolctl), as the run layer's jobs.
 """
 from __future__ import annotations
@@ -347,7 +347,8 @@ def verify(run: Path, at: list[int], out: Path, rtol: float = 1e-7) -> None:
     events = _events_of(run)
     peak = int(np.argmax([e["stress_MPa"] for e in events]))
     rows = []
-    path = RESULTS / f"quasistatic_verify_{run.name}.json"
+    path = RESULTS / (f"quasistatic_verify_d{record['spec']['packing']['diameter_nm']:g}_"
+                      f"{record['spec']['bonds'].get('breaking', 'lammps')}.json")
     for k in at or [peak // 4, peak // 2, peak]:
         folder = out / f"at-{k}"
         folder.mkdir(parents=True)
