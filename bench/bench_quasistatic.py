@@ -352,7 +352,7 @@ def verify(run: Path, at: list[int], out: Path, rtol: float = 1e-7) -> None:
     for k in at or [peak // 4, peak // 2, peak]:
         folder = out / f"at-{k}"
         folder.mkdir(parents=True)
-        spec = record["spec"]
+        spec = json.loads(json.dumps(record["spec"]))
         spec["compression"].update(local_rtol=0.0, resolve_rtol=rtol, events_max=k + 1)
         (folder / "run.json").write_text(json.dumps({**record, "spec": spec}))
         (folder / "quasistatic_state.json").write_text(json.dumps(
