@@ -57,7 +57,9 @@ class BondCoefficients:
     strength.  With the mapping above LAMMPS's B is the sum of the two ratios of
     eqs. 16 and 17 for a bond in tension, so a bond loaded in tension and shear
     breaks earlier than in the paper (by up to a factor 2 in load when both ratios
-    are equal), and a bond in pure compression never breaks by its normal force.
+    are equal), and a bond in pure compression never breaks by its normal force
+    (the paper's code, MUSEN, counts F_n signed as well; the quasi-static method
+    applies either rule: ``bonds.breaking``, :mod:`opalflow.bpm.quasistatic`).
     Bonds that break fade out with w = 1 - B^4 (``smooth yes``) instead of the
     paper's 1 ns of stiffness decaying by 1 % per 1e-11 s; both avoid a jump in
     force, LAMMPS's within the step the bond breaks.
