@@ -54,7 +54,7 @@ class LatticeWorkflow(BpmWorkflow):
         lat = self.lattice
         check(lat.arrangement in LATTICES, "lattice.arrangement", lat.arrangement,
               f"must be one of {', '.join(LATTICES)}")
-        check(0 < lat.spacing_nm <= 1e5, "lattice.spacing_nm", lat.spacing_nm, "must be in (0, 1e5] nm")
+        check(1e-3 <= lat.spacing_nm <= 1e5, "lattice.spacing_nm", lat.spacing_nm, "must be in [1e-3, 1e5] nm")
         if lat.periodic_z:
             check(self.compression.method == "static", "lattice.periodic_z", lat.periodic_z,
                   "needs compression.method = \"static\" (a sample periodic in z has no substrate to compress on)")
