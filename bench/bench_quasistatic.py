@@ -364,7 +364,8 @@ def verify(run: Path, at: list[int], out: Path, rtol: float = 1e-7) -> None:
         a, b = set(got["bonds"]), set(mine["bonds"])
         rows.append({"event": k + 1, "peak_event": peak + 1, "strain": mine["strain"], "strain_resolved": got["strain"],
                      "strain_error": mine["strain"] / got["strain"] - 1, "stress_MPa": mine["stress_MPa"],
-                     "stress_resolved_MPa": got["stress_MPa"], "stress_error": mine["stress_MPa"] / got["stress_MPa"] - 1,
+                     "stress_resolved_MPa": got["stress_MPa"],
+                     "stress_error": mine["stress_MPa"] / got["stress_MPa"] - 1,
                      "bonds": len(b), "bonds_resolved": len(a), "bonds_shared": len(a & b),
                      "wall_s": round(time.perf_counter() - t, 1)})
         print(json.dumps(rows[-1]), flush=True)
