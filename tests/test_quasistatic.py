@@ -60,6 +60,15 @@ def test_sc_lattice_in_tension_breaks_at_the_bond_strength_by_the_papers_rules(t
     assert "the paper's rule (eqs. 16-17)" in (tmp_path / rule / "report.md").read_text()
 
 
+def test_a_network_that_holds_to_strain_max_says_so(tmp_path):
+    """The simple-cubic lattice compressed along its bonds: pressed bonds never break by LAMMPS's rule, so no
+    event happens; the strength is NaN and the headline says why instead of printing it."""
+    s = opalflow.run("lattice_sc", tmp_path / "c", set=["compression.method=quasistatic", "bonds.breakable=true"],
+                     quiet=True)
+    assert s["quasistatic"]["events"] == 0 and math.isnan(s["strength_MPa"])
+    assert "no bond reached its limit up to strain" in s["headline"] and "nan" not in s["headline"]
+
+
 def test_breaking_rules_weigh_the_bond_loads_as_written():
     """breaking_index by rule against the four load ratios computed here (quickstart's network, random
     displacements and rotations): LAMMPS's one sum with the signed normal force; the paper's eqs. 16-17 as

@@ -101,7 +101,9 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
         **info.get("structure", {}),
         "headline": f"E = {E:.4g} GPa, strength = {got['strength_MPa']:.4g} MPa (strain at peak "
                     f"{got['strain_at_peak']:.4f}; quasi-static, {got['events']} events, {got['broken_bonds']} "
-                    f"bonds broken)",
+                    f"bonds broken)" if got["events"] else
+                    f"E = {E:.4g} GPa, no strength: no bond reached its limit up to strain {c.strain_max:g} "
+                    "(quasi-static)",
     }
     summary["reference"] = reference_errors(summary, info["references"])
     record.sessions[-1].last_step = got["events"]
