@@ -346,9 +346,13 @@ def verify(run: Path, at: list[int], out: Path, rtol: float = 1e-7) -> None:
     record = json.loads((run / "run.json").read_text())
     events = _events_of(run)
     peak = int(np.argmax([e["stress_MPa"] for e in events]))
+    rule = record["spec"]["bonds"].get("breaking", "lammps")
+    path = RESULTS / f"quasistatic_verify_d{record['spec']['packing']['diameter_nm']:g}_{rule}.json"
+    head = {"machine": machine(), "run": str(run), "strength_MPa": summary["strength_MPa"],
+            "setting": {key: record["spec"]["compression"].get(key)
+                        for key in ("resolver", "resolve_rtol", "local_rtol", "event_tolerance")},
+            "breaking": rule, "n_particles": summary["n_particles"], "resolve_rtol": rtol}
     rows = []
-    path = RESULTS / (f"quasistatic_verify_d{record['spec']['packing']['diameter_nm']:g}_"
-                      f"{record['spec']['bonds'].get('breaking', 'lammps')}.json")
     for k in at or [peak // 4, peak // 2, peak]:
         folder = out / f"at-{k}"
         folder.mkdir(parents=True)
@@ -369,12 +373,7 @@ def verify(run: Path, at: list[int], out: Path, rtol: float = 1e-7) -> None:
                      "bonds": len(b), "bonds_resolved": len(a), "bonds_shared": len(a & b),
                      "wall_s": round(time.perf_counter() - t, 1)})
         print(json.dumps(rows[-1]), flush=True)
-        path.write_text(json.dumps({"machine": machine(), "run": str(run), "strength_MPa": summary["strength_MPa"],
-                                    "setting": {k: record["spec"]["compression"].get(k) for k in
-                                                ("resolver", "resolve_rtol", "local_rtol", "event_tolerance")},
-                                    "breaking": record["spec"]["bonds"].get("breaking", "lammps"),
-                                    "n_particles": summary["n_particles"], "resolve_rtol": rtol, "rows": rows},
-                                   indent=1) + "\n")
+        path.write_text(json.dumps({**head, "rows": rows}, indent=1) + "\n")       # (after every point)
 
 
 def main(argv=None) -> None:

@@ -112,7 +112,7 @@ def breaking_index(net: BondNetwork, x: np.ndarray, c: Strengths) -> np.ndarray:
     F = net.bond_forces(x[:, :3], x[:, 3:])
     out = np.empty(len(net.L))
     _breaking_index(net.i, net.j, net.n, net.bend, net.twist, F, np.ascontiguousarray(x[:, 3:]), c.fr_c, c.fs_c,
-                    c.tb_c, c.tt_c, BREAKING_RULES.index(c.rule), out)
+                    c.tb_c, c.tt_c, list(BREAKING_RULES).index(c.rule), out)
     return out
 
 

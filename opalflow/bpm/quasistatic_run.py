@@ -22,7 +22,7 @@ from opalflow.analysis import fracture
 from opalflow.bpm.loading import LOADINGS
 from opalflow.bpm.quasistatic import Stopped, Strengths, solve_fracture, summary_of
 from opalflow.bpm.scene import scene_of
-from opalflow.bpm.spec import BpmWorkflow
+from opalflow.bpm.spec import BREAKING_RULES, BpmWorkflow
 from opalflow.bpm.report import reference_errors, sample_lines
 from opalflow.bpm.static_run import network_run, particle_stress
 from opalflow.bpm.stiffness import per_bond
@@ -32,11 +32,6 @@ from opalflow.spec import SpecError
 from opalflow.store import h5_bytes, new_figure, put, save_figure, write_json_atomic
 
 STATE = "quasistatic_state.json"
-#: each breaking rule (``bonds.breaking``) as the report states it
-RULE_TEXT = {"lammps": "LAMMPS's rule B = Fr/Fcr + |Fs|/Fcs + |Tb|/Tcb + |Tt|/Tct >= 1",
-             "dosta": "the paper's rule (eqs. 16-17) max(|Fr|/Fcr + |Tb|/Tcb, |Fs|/Fcs + |Tt|/Tct) >= 1",
-             "musen": "the paper's rule (eqs. 16-17) as its code MUSEN computes it, max(Fr/Fcr + |Tb|/Tcb, "
-                      "|Fs|/Fcs + |Tt|/Tct) >= 1 with Fr signed"}
 
 
 def strengths_of(data, coefficients, rule: str = "lammps") -> Strengths:
@@ -201,8 +196,8 @@ def _report(spec, info, summary, res, loading) -> str:
     q = summary["quasistatic"]
     lines = [f"# {spec.name}: quasi-static {loading.title}", "",
              f"{info['n_particles']} particles, {info['n_bonds']} bonds; the bond network linearised from LAMMPS's "
-             f"bpm/rotational, bonds broken one event at a time by {RULE_TEXT[spec.bonds.breaking]} at full load "
-             "(as `smooth no`; opalflow/bpm/quasistatic.py); substrate fixed, top layer "
+             f"bpm/rotational, bonds broken one event at a time by {BREAKING_RULES[spec.bonds.breaking]} at full "
+             "load (as `smooth no`; opalflow/bpm/quasistatic.py); substrate fixed, top layer "
              f"({info['top_layer_particles']} particles) {'pushed down' if loading.sense > 0 else 'pulled up'}"
              + (", glued to the wall" if loading.glued else ", its x, y and rotations free") + ".", "",
              *sample_lines(info), "| quantity | value | reference | error |", "|---|---|---|---|"]

@@ -44,10 +44,13 @@ class BondsSpec:
     breaking: str = "lammps"
 
 
-#: bond breaking rules (opalflow.bpm.quasistatic's docstring): LAMMPS's bpm/rotational (one sum of four
-#: ratios, the signed normal force), the paper's eqs. 16-17 as printed (normal and shear stress apart, |F_n|),
-#: and as the paper's code MUSEN computes them (the normal force signed)
-BREAKING_RULES = ("lammps", "dosta", "musen")
+#: bond breaking rules (opalflow.bpm.quasistatic's docstring), each as a report states it: LAMMPS's
+#: bpm/rotational (one sum of four ratios, the signed normal force), the paper's eqs. 16-17 as printed (normal
+#: and shear stress apart, |F_n|), and as the paper's code MUSEN computes them (the normal force signed)
+BREAKING_RULES = {"lammps": "LAMMPS's rule B = Fr/Fcr + |Fs|/Fcs + |Tb|/Tcb + |Tt|/Tct >= 1",
+                  "dosta": "the paper's rule (eqs. 16-17) max(|Fr|/Fcr + |Tb|/Tcb, |Fs|/Fcs + |Tt|/Tct) >= 1",
+                  "musen": "the paper's rule (eqs. 16-17) as its code MUSEN computes it, max(Fr/Fcr + |Tb|/Tcb, "
+                           "|Fs|/Fcs + |Tt|/Tct) >= 1 with Fr signed"}
 
 
 @dataclass
