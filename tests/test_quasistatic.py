@@ -58,6 +58,27 @@ def test_sc_lattice_in_tension_breaks_at_the_bond_strength_by_the_papers_rules(t
                                                           f'bonds.breaking="{rule}"'], quiet=True)
     assert s["strength_MPa"] == pytest.approx(sc_strength(), rel=1e-3)
     assert "the paper's rule (eqs. 16-17)" in (tmp_path / rule / "report.md").read_text()
+    # pulled along their axis, the bonds break by the normal check, each in its length bin
+    assert s["broken_bonds_by_check"] == {"normal + bending": {"silica 1.000-1.000": s["broken_bonds"]},
+                                          "shear + twist": {}}
+
+
+def test_each_broken_bond_names_its_check_and_length_bin(quick):
+    """results.h5 stores, for every broken bond in order, the check that broke it and its length; the summary's
+    counts by check and bin add up to the bonds broken, in all and before the peak; the report tables them."""
+    import h5py
+
+    root, q = quick
+    counts = {name: sum(by_bin.values()) for name, by_bin in q["broken_bonds_by_check"].items()}
+    assert sum(counts.values()) == q["broken_bonds"] and set(counts) == {"normal + bending", "shear + twist"}
+    assert sum(sum(b.values()) for b in q["broken_bonds_by_check_at_peak"].values()) == q["broken_bonds_at_peak"]
+    with h5py.File(root / "direct" / "results.h5") as h:
+        g = h["quasistatic"]
+        check, length = g["broken_bond_check"][:], g["broken_bond_length_nm"][:]
+        assert len(check) == len(length) == len(g["broken_bond_index"]) == q["broken_bonds"]
+    assert np.bincount(check, minlength=2).tolist() == [counts["normal + bending"], counts["shear + twist"]]
+    assert np.all((length > 0.99 * 60) & (length < 1.75 * 60))
+    assert "| length bin | normal + bending | shear + twist |" in (root / "direct" / "report.md").read_text()
 
 
 def test_a_network_that_holds_to_strain_max_says_so(tmp_path):
@@ -74,7 +95,7 @@ def test_breaking_rules_weigh_the_bond_loads_as_written():
     displacements and rotations): LAMMPS's one sum with the signed normal force; the paper's eqs. 16-17 as
     the larger of the normal (|Fr| and bending) and the shear (shear force and twisting) ratio; MUSEN's with
     Fr signed.  LAMMPS's index is the sum of MUSEN's two, so never below MUSEN's where both are positive."""
-    from opalflow.bpm.quasistatic import Strengths, breaking_index
+    from opalflow.bpm.quasistatic import Strengths, bond_checks, breaking_index
     from tests.test_static import scene
 
     _, _, net = scene("quickstart")
@@ -91,6 +112,9 @@ def test_breaking_rules_weigh_the_bond_loads_as_written():
     shear = fs / c[1] + net.twist * np.abs(tw) / c[3]
     normal = net.bend * bt / c[2]
     got = {rule: breaking_index(net, x, Strengths(*c, rule)) for rule in ("lammps", "dosta", "musen")}
+    checks = bond_checks(net, x, Strengths(*c, "musen"))
+    assert np.allclose(checks[0], fr / c[0] + normal, rtol=1e-12) and np.allclose(checks[1], shear, rtol=1e-12)
+    assert np.allclose(bond_checks(net, x, Strengths(*c, "dosta"))[0], np.abs(fr) / c[0] + normal, rtol=1e-12)
     assert np.allclose(got["lammps"], fr / c[0] + normal + shear, rtol=1e-12)
     assert np.allclose(got["dosta"], np.maximum(np.abs(fr) / c[0] + normal, shear), rtol=1e-12)
     assert np.allclose(got["musen"], np.maximum(fr / c[0] + normal, shear), rtol=1e-12)

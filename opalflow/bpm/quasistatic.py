@@ -68,12 +68,12 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numba import njit
 
-from opalflow.bpm.spec import BREAKING_RULES, RESOLVERS
+from opalflow.bpm.spec import RESOLVERS
 from opalflow.bpm.static import (DIRECT_MAX_DOFS, Factor, Stop, block_amg_preconditioner, block_matrix, bond_blocks,
                                   loose_particles, particle_amg, pcg)
 from opalflow.bpm.stiffness import BondNetwork
@@ -107,29 +107,39 @@ class Strengths:
 def breaking_index(net: BondNetwork, x: np.ndarray, c: Strengths) -> np.ndarray:
     """The breaking index of every bond (LAMMPS's B, not clipped, or the paper's, by ``c.rule``) for
     displacements and rotations x (N, 6) (module docstring): the bond forces from the numba operator
-    (:meth:`BondNetwork.bond_forces`), the rest in one numba pass (:func:`_breaking_index`; at 1.8 M bonds
+    (:meth:`BondNetwork.bond_forces`), the rest in one numba pass (:func:`_bond_checks`; at 1.8 M bonds
     0.08 s where numpy's gathers and norms took 0.7, once an event)."""
+    normal, shear = bond_checks(net, x, c)
+    return normal + shear if c.rule == "lammps" else np.maximum(normal, shear)
+
+
+def bond_checks(net: BondNetwork, x: np.ndarray, c: Strengths) -> tuple[np.ndarray, np.ndarray]:
+    """The two checks of every bond for x (N, 6), each a load over its strength (Dosta et al. eqs. 16-17):
+    the normal one, Fr / Fcr + |Tb| / Tcb (|Fr| with the rule ``"dosta"``, Fr signed otherwise), and the
+    shear one, |Fs| / Fcs + |Tt| / Tct.  LAMMPS's B is their sum, the paper's rules their larger: the
+    larger is the check that breaks a bond (:data:`CHECKS`)."""
     F = net.bond_forces(x[:, :3], x[:, 3:])
-    out = np.empty(len(net.L))
-    _breaking_index(net.i, net.j, net.n, net.bend, net.twist, F, np.ascontiguousarray(x[:, 3:]), c.fr_c, c.fs_c,
-                    c.tb_c, c.tt_c, list(BREAKING_RULES).index(c.rule), out)
-    return out
+    normal, shear = np.empty(len(net.L)), np.empty(len(net.L))
+    _bond_checks(net.i, net.j, net.n, net.bend, net.twist, F, np.ascontiguousarray(x[:, 3:]), c.fr_c, c.fs_c,
+                 c.tb_c, c.tt_c, c.rule == "dosta", normal, shear)
+    return normal, shear
+
+
+#: a broken bond's check (:func:`bond_checks`, the larger of the two at its event), as results.h5 stores it
+CHECKS = ("normal + bending", "shear + twist")
 
 
 @njit(cache=True, nogil=True)
-def _breaking_index(i, j, n, bend, twist, F, theta, fr_c, fs_c, tb_c, tt_c, rule, out):
-    for b in range(len(out)):
+def _bond_checks(i, j, n, bend, twist, F, theta, fr_c, fs_c, tb_c, tt_c, absolute, normal, shear):
+    for b in range(len(normal)):
         p, q = i[b], j[b]
         fr = n[b, 0] * F[b, 0] + n[b, 1] * F[b, 1] + n[b, 2] * F[b, 2]
         d0, d1, d2 = theta[p, 0] - theta[q, 0], theta[p, 1] - theta[q, 1], theta[p, 2] - theta[q, 2]
         tw = n[b, 0] * d0 + n[b, 1] * d1 + n[b, 2] * d2
         fs = math.sqrt((F[b, 0] - fr * n[b, 0]) ** 2 + (F[b, 1] - fr * n[b, 1]) ** 2 + (F[b, 2] - fr * n[b, 2]) ** 2)
         bt = math.sqrt((d0 - tw * n[b, 0]) ** 2 + (d1 - tw * n[b, 1]) ** 2 + (d2 - tw * n[b, 2]) ** 2)
-        shear = fs / fs_c[b] + twist[b] * abs(tw) / tt_c[b]
-        if rule == 0:                            # lammps: one sum, the signed normal force
-            out[b] = fr / fr_c[b] + bend[b] * bt / tb_c[b] + shear
-        else:                                    # dosta (eqs. 16-17, |Fr|), musen (Fr signed)
-            out[b] = max((abs(fr) if rule == 1 else fr) / fr_c[b] + bend[b] * bt / tb_c[b], shear)
+        normal[b] = (abs(fr) if absolute else fr) / fr_c[b] + bend[b] * bt / tb_c[b]
+        shear[b] = fs / fs_c[b] + twist[b] * abs(tw) / tt_c[b]
 
 
 class StiffnessMatrix:
@@ -482,6 +492,7 @@ class Event:
     bonds: list[int]
     iterations: int = 0
     settled: bool = False       # by the local step alone (no global re-solve)
+    checks: list[int] = field(default_factory=list)     # each broken bond's check (an index into CHECKS)
 
 
 @dataclass
@@ -603,6 +614,9 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
             if stress > peak_stress:
                 peak_stress, peak_alive, peak_x = stress, alive.copy(), strain * x.reshape(n, 6)
             broken = np.flatnonzero(B >= worst / (1.0 + tolerance))
+            ends, pair = _subnetwork(net, broken)
+            normal, shear = bond_checks(pair, x.reshape(n, 6)[ends], strengths.part(broken))
+            checks = (shear > normal).astype(int).tolist()
             if settle:
                 settle.release(x, force, broken)
             alive[broken] = False
@@ -621,7 +635,7 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
             else:
                 x, force, stress_unit, its, b_norm = solve(x)
                 touched, settled = None, False
-            events.append(Event(strain, stress, strain * stress_unit, broken.tolist(), its, settled))
+            events.append(Event(strain, stress, strain * stress_unit, broken.tolist(), its, settled, checks))
             now = time.perf_counter()
             stop = should_stop()
             if now - last_said > 10:

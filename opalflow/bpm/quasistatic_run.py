@@ -20,7 +20,7 @@ import numpy as np
 
 from opalflow.analysis import fracture
 from opalflow.bpm.loading import LOADINGS
-from opalflow.bpm.quasistatic import Stopped, Strengths, solve_fracture, summary_of
+from opalflow.bpm.quasistatic import CHECKS, Stopped, Strengths, solve_fracture, summary_of
 from opalflow.bpm.scene import scene_of
 from opalflow.bpm.spec import BREAKING_RULES, BpmWorkflow
 from opalflow.bpm.report import reference_errors, sample_lines
@@ -83,6 +83,8 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
         "strength_MPa": got["strength_MPa"], "strain_at_peak": got["strain_at_peak"],
         "broken_bonds": got["broken_bonds"], "broken_bonds_by_material": by_material,
         "broken_bonds_at_peak": got.get("broken_bonds_at_peak", 0),
+        "broken_bonds_by_check": broken_by_check(res, sample, peak_only=False),
+        "broken_bonds_by_check_at_peak": broken_by_check(res, sample, peak_only=True),
         "n_particles": s.n_particles, "n_bonds": s.n_bonds, "solid_fraction": info["solid_fraction"],
         "complete": True, "build_s": info["build_s"],
         "quasistatic": {"events": got["events"], "stopped": res.stopped, "resolver": res.resolver,
@@ -104,7 +106,7 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
     record.sessions[-1].last_step = got["events"]
 
     def files(stage):
-        stage("results.h5").write_bytes(h5_bytes(lambda h: _fill_h5(h, res, data, summary)))
+        stage("results.h5").write_bytes(h5_bytes(lambda h: _fill_h5(h, res, data, summary, sample)))
         _plot_curve(stage("stress_strain.png"), res, summary)
         frames = _frames(net, data, res)
         if frames:
@@ -117,6 +119,47 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
                      started=t0)
     (out / STATE).unlink(missing_ok=True)
     return summary
+
+
+def _length_bins(sample) -> tuple[np.ndarray, list[str]]:
+    """Each bond's length bin (the deck's bond type, :class:`opalflow.bpm.deck.BondBins`, 0-based) and each
+    bin's label: its material and range of L0 / d (d the mean particle diameter)."""
+    data = sample.structure
+    which = data.bond_types - 1
+    d = float(np.mean(data.diameters))
+    labels = []
+    for k, mat in enumerate(sample.bins.materials):
+        r0 = sample.bond_lengths[which == k]
+        labels.append(f"{mat} {r0.min() / d:.3f}-{r0.max() / d:.3f}" if len(r0) else f"{mat} -")
+    return which, labels
+
+
+def _broken_in_order(res) -> tuple[np.ndarray, np.ndarray]:
+    """(the broken bonds in the order they broke, the check that broke each: -1 where the state a run
+    resumed from kept none)."""
+    bonds = [np.asarray(e.bonds, np.int64) for e in res.events]
+    checks = [np.asarray(e.checks if len(e.checks) == len(e.bonds) else [-1] * len(e.bonds), np.int64)
+              for e in res.events]
+    return (np.concatenate(bonds) if bonds else np.zeros(0, np.int64),
+            np.concatenate(checks) if checks else np.zeros(0, np.int64))
+
+
+def broken_by_check(res, sample, *, peak_only: bool) -> dict:
+    """Broken bonds counted by the check that broke them (:data:`opalflow.bpm.quasistatic.CHECKS`: Dosta et
+    al. eqs. 16-17 apart, whatever the rule) and by length bin: ``{check: {bin label: count}}``, all events
+    or those before the peak event (``peak_only``)."""
+    bonds, checks = _broken_in_order(res)
+    if peak_only:
+        bonds, checks = (bonds[:sum(len(e.bonds) for e in res.events[:res.peak])],
+                         checks[:sum(len(e.bonds) for e in res.events[:res.peak])])
+    which, labels = _length_bins(sample)
+    out = {}
+    for k, name in enumerate(CHECKS + ("not recorded",)):
+        sel = checks == (k if k < len(CHECKS) else -1)
+        if sel.any() or k < len(CHECKS):
+            counts = np.bincount(which[bonds[sel]], minlength=len(labels))
+            out[name] = {label: int(c) for label, c in zip(labels, counts) if c}
+    return out
 
 
 def _broken_per_particle(net, alive: np.ndarray) -> np.ndarray:
@@ -158,7 +201,7 @@ def _write_dump(path: Path, data, snap: dict) -> None:
         np.savetxt(f, rows, fmt=["%d", "%d", "%.6f", "%.6f", "%.6f", "%.6f", "%d"])
 
 
-def _fill_h5(h, res, data, summary) -> None:
+def _fill_h5(h, res, data, summary, sample) -> None:
     h.attrs["method"] = "quasistatic"
     h.attrs["youngs_modulus_GPa"] = summary["youngs_modulus_GPa"]
     g = h.create_group("quasistatic")
@@ -170,6 +213,13 @@ def _fill_h5(h, res, data, summary) -> None:
     put(g, "bonds_per_event", np.array([len(e.bonds) for e in ev]), "1")
     put(g, "broken_bond_index", np.concatenate([e.bonds for e in ev]).astype(np.int64) if ev else np.zeros(0, int), "1",
         description="0-based bond index (data.lmp order) of the broken bonds, in order")
+    bonds, checks = _broken_in_order(res)
+    put(g, "broken_bond_check", checks.astype(np.int8), "1",
+        description="the check that broke each bond (as broken_bond_index): "
+                    + ", ".join(f"{k} {name}" for k, name in enumerate(CHECKS)) + ", -1 not recorded")
+    put(g, "broken_bond_length_nm", sample.bond_lengths[bonds], "nm", description="L0 of each broken bond")
+    put(g, "broken_bond_length_bin", (data.bond_types[bonds] - 1).astype(np.int32), "1",
+        description="length bin (data.lmp bond type - 1) of each broken bond")
     put(g, "intact", res.alive.astype(np.int8), "1", description="1 for each bond intact at the end")
     put(g, "position_nm", data.positions, "nm", ["x", "y", "z"])
 
@@ -192,6 +242,20 @@ def _plot_curve(path: Path, res, summary) -> None:
     save_figure(fig, path)
 
 
+def _check_table(summary) -> list[str]:
+    """Which check broke the bonds, by length bin, before the peak and in all (the summary's counts)."""
+    peak, total = summary["broken_bonds_by_check_at_peak"], summary["broken_bonds_by_check"]
+    names = [name for name in total]
+    labels = sorted({label for counts in total.values() for label in counts},
+                    key=lambda label: (label.split(" ")[0], label.split(" ")[-1]))
+    lines = ["Bonds broken by each check (Dosta et al. eqs. 16-17 apart; L0 / d by length bin), before the peak / in all:",
+             "", "| length bin | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
+    for label in labels:
+        lines.append(f"| {label} | " + " | ".join(f"{peak.get(n, {}).get(label, 0)} / {total[n].get(label, 0)}"
+                                               for n in names) + " |")
+    return lines
+
+
 def _report(spec, info, summary, res, loading) -> str:
     q = summary["quasistatic"]
     lines = [f"# {spec.name}: quasi-static {loading.title}", "",
@@ -209,7 +273,8 @@ def _report(spec, info, summary, res, loading) -> str:
                      + (f"{ref['value']:g} ({ref['source']}) | {100 * ref['error']:+.2f} % |" if ref else "- | - |"))
     lines += ["", f"{q['events']} events, {summary['broken_bonds']} bonds broken "
               f"({', '.join(f'{m}: {k}' for m, k in summary['broken_bonds_by_material'].items())}), "
-              f"{summary['broken_bonds_at_peak']} before the peak; stopped: {q['stopped']}.",
+              f"{summary['broken_bonds_at_peak']} before the peak; stopped: {q['stopped']}.", "",
+              *_check_table(summary), "",
               f"Re-solves `{q['resolver']}`: set-up {q['setup_s']:.1f} s, events {q['events_s']:.1f} s, "
               f"{q['factorizations']} factorisations" + (f", {q['cg_iterations']} CG iterations" if q["cg_iterations"]
                                                          else "")
