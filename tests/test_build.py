@@ -55,6 +55,40 @@ def test_bonds_are_all_pairs_within_cutoff(quick_structure, quick_spec):
     assert (dx > s.box_lengths[:2] / 2).any()
 
 
+def test_a_minimum_bond_length_leaves_the_closer_pairs_unbonded(quick_structure, quick_spec):
+    """bonds.min_length_factor f: the pairs at least f d apart within the cutoff, MUSEN's bonding by surface gap."""
+    from opalflow.bpm.bonds import find_bonds
+
+    s, d = quick_structure, quick_spec.packing.diameter_nm
+    kept = find_bonds(s.positions, s.diameters, s.box_lengths, s.periodic, 1.75, 1.005)
+    lengths = np.linalg.norm(s.minimum_image(s.positions[kept[:, 1]] - s.positions[kept[:, 0]]), axis=1)
+    assert np.all(lengths >= 1.005 * d) and 0 < len(kept) < s.n_bonds
+    near = s.bond_lengths() < 1.005 * d
+    assert len(kept) == s.n_bonds - near.sum()
+
+
+def test_network_statistics_of_a_simple_cubic_lattice():
+    """On the simple-cubic lattice (spacing d, all sides periodic) every number is known: 13 bonds a particle
+    within 1.75 d (6 at d, 12 at sqrt(2) d, 8 at sqrt(3) d, half each), 6 of 26 at contact, and g(r) in a
+    shell of +-2.5 % r is the shell's neighbours over the ideal gas's count there."""
+    from opalflow.bpm.bonds import SHELL, find_bonds, network_statistics
+
+    d, n = 10.0, 6
+    grid = np.stack(np.meshgrid(*[np.arange(n)] * 3, indexing="ij"), -1).reshape(-1, 3) * d + d / 2
+    box, diameters = np.full(3, n * d), np.full(len(grid), d)
+    bonds = find_bonds(grid, diameters, box, [True] * 3, 1.75)
+    st = network_statistics(grid, diameters, box, [True] * 3, bonds, np.pi / 6)
+    shell = 4 / 3 * np.pi * ((1 + SHELL) ** 3 - (1 - SHELL) ** 3)
+    assert st["bonds_per_particle"] == 13 and st["near_contact_bond_share"] == pytest.approx(6 / 26)
+    assert st["g_at_d"] == pytest.approx(6 / shell) and st["g_at_sqrt3_d"] == pytest.approx(8 / (shell * 3**1.5))
+
+
+def test_the_build_report_states_the_network(quick_structure, capsys):
+    st = structure_statistics(quick_structure)["network"]
+    assert 5 < st["bonds_per_particle"] < 12 and 0.05 < st["near_contact_bond_share"] < 0.5
+    assert st["g_at_d"] > 3 * st["g_at_sqrt3_d"] > 0     # the contact peak above the second shell
+
+
 def test_bond_types_by_material(coated_quick):
     _, s = coated_quick
     titania = s.groups["coating"]

@@ -251,6 +251,8 @@ def test_a_new_loading_is_one_class_and_one_registry_line():
      "compression.local_rtol"),
     (['bonds.breaking="dosta"'], "bonds.breaking"),
     (["compression.method=quasistatic", "bonds.breakable=true", 'bonds.breaking="potyondy"'], "bonds.breaking"),
+    (["bonds.min_length_factor=1.75"], "bonds.min_length_factor"),
+    (["bonds.min_length_factor=-0.1"], "bonds.min_length_factor"),
 ])
 def test_refusals_are_one_line_and_write_nothing(tmp_path, capsys, sets, field):
     out = tmp_path / "no"

@@ -97,6 +97,8 @@ class AggregationWorkflow(WorkflowSpec):
         self.aggregate.validate()
         check(1.0 <= self.bonds.cutoff_factor <= 1.1, "bonds.cutoff_factor", self.bonds.cutoff_factor,
               "must be in [1.0, 1.1] (bonds at contacts: centre distance within this factor of the contact distance)")
+        check(self.bonds.min_length_factor == 0, "bonds.min_length_factor", self.bonds.min_length_factor,
+              "must be 0 for an aggregate (its bonds are its contacts)")
 
 
 @dataclass
@@ -128,3 +130,5 @@ class AerogelWorkflow(BpmWorkflow):
                   "needs compression.method = \"static\" (the periodic cube has no walls to compress it between)")
         check(1.0 <= self.bonds.cutoff_factor <= 1.1, "bonds.cutoff_factor", self.bonds.cutoff_factor,
               "must be in [1.0, 1.1] (bonds at contacts: centre distance within this factor of the contact distance)")
+        check(self.bonds.min_length_factor == 0, "bonds.min_length_factor", self.bonds.min_length_factor,
+              "must be 0 for an aggregate (its bonds are its contacts)")

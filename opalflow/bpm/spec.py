@@ -33,6 +33,9 @@ class BondsSpec:
 
     model: str = "parallel"
     cutoff_factor: float = 1.75
+    #: pairs closer than this x (d_i + d_j) / 2 get no bond (0: every pair within the cutoff; 1: MUSEN's default,
+    #: overlapping pairs unbonded, touching by contacts only: opalflow.bpm.bonds)
+    min_length_factor: float = 0.0
     radius_factor: float = 1.0
     length_bins: int = 8
     breakable: bool = True
@@ -174,6 +177,8 @@ class BpmWorkflow(WorkflowSpec):
               f"must be one of {', '.join(CONTACT_LAWS)}")
         check(1.0 <= b.cutoff_factor <= 3.0, "bonds.cutoff_factor", b.cutoff_factor,
               "must be in [1.0, 3.0] (bond cutoff in particle diameters)")
+        check(0 <= b.min_length_factor < b.cutoff_factor, "bonds.min_length_factor", b.min_length_factor,
+              f"must be in [0, bonds.cutoff_factor = {b.cutoff_factor:g}) (the shortest bond in particle diameters)")
         check(0 < b.radius_factor <= 2.0, "bonds.radius_factor", b.radius_factor,
               "must be in (0, 2] (bond radius / particle radius)")
         check(1 <= b.length_bins <= 100, "bonds.length_bins", b.length_bins, "must be in [1, 100]")

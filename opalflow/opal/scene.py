@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-from opalflow.bpm.bonds import bond_types_by_material, find_bonds
+from opalflow.bpm.bonds import bond_types_by_material, describe_network, find_bonds, network_statistics
 from opalflow.bpm.scene import Scene
 from opalflow.materials import material
 from opalflow.opal import pores as pore_geometry
@@ -123,7 +123,7 @@ def build_opal(spec: OpalWorkflow, progress=None) -> tuple[Structure, dict]:
         densities[coated_k] = density_to_nano(material(spec.coating.material, spec.materials)["density_kg_m3"])
 
     t = time.perf_counter()
-    bonds = find_bonds(positions, diameters, box, periodic, spec.bonds.cutoff_factor)
+    bonds = find_bonds(positions, diameters, box, periodic, spec.bonds.cutoff_factor, spec.bonds.min_length_factor)
     bond_types = bond_types_by_material(bonds, coated_k)
     timings["bonds"] = time.perf_counter() - t
 
@@ -226,6 +226,7 @@ def structure_statistics(s: Structure) -> dict:
         "bond_length_nm": {"min": float(r0.min()) if len(r0) else 0.0,
                            "max": float(r0.max()) if len(r0) else 0.0},
     }
+    stats["network"] = network_statistics(s.positions, s.diameters, s.box_lengths, s.periodic, s.bonds, phi)
     pore_radius = m.get("pore_diameter_nm", 0.0) / 2
     windows = window_openings(s, pore_radius) if len(m["pore_centres_nm"]) else np.zeros(0)
     if len(windows):
@@ -244,7 +245,8 @@ STRUCTURE_KEYS = ("porosity", "total_porosity", "density_kg_m3")
 
 def _describe(stats: dict) -> str:
     return (f"{stats['n_particles']} particles, {stats['n_bonds']} bonds, porosity {stats['porosity']:.3f}, "
-            f"{stats['particles_per_um3']:.0f} particles/um^3, {stats['bonds_per_um3']:.0f} bonds/um^3")
+            f"{stats['particles_per_um3']:.0f} particles/um^3, {stats['bonds_per_um3']:.0f} bonds/um^3; "
+            + describe_network(stats["network"]))
 
 
 def opal_structure(spec: OpalWorkflow, progress=None) -> Structure:
