@@ -8,6 +8,7 @@ own designs, on the same samples.
     python bench/bench_quasistatic.py tolerance    # bonds an event and re-solve residual against the exact sequence
     python bench/bench_quasistatic.py local        # the local step's depth and bound against every event re-solved
     python bench/bench_quasistatic.py verify --record DIR [--at K ...]   # a run's events against global re-solves
+    python bench/bench_quasistatic.py bulk [--out DIR]   # the pore-free silica against the paper's 601 MPa / 21.9 GPa
 
 ``dynamic``: quickstart and opal_quick compressed by the plate with ``smooth no`` (bonds break at full
 load, the quasi-static rule) at four plate speeds past their peaks, LAMMPS's ``smooth yes`` (opalflow's
@@ -29,9 +30,12 @@ d = 40 nm, whole runs: the factor at event tolerances 0 (the exact sequence), 0.
 3e-5 against every event re-solved: events settled locally, strength, CG iterations, time.  ``verify``: a
 finished run (the paper's d = 15 nm with the local step, where every event re-solved would take hours)
 checked at a few events: from its broken bonds there, the next event by a global re-solve to 1e-7 |b|
-against its own (:func:`verify`).
+against its own (:func:`verify`).  ``bulk``: the pore-free silica block (:data:`BULK`), the paper's rule, bonds
+as built and with the pairs closer than 1.005 d unbonded (:data:`BULK_PLAN`): E, strength, strength / E and
+strain at peak against the paper's bulk (601 MPa, 21.9 GPa: 0.0274), the network statistics and the bonds each
+check broke before the peak (a finished run in ``--out`` is read, not re-run).
 Results: bench/results/quasistatic_dynamic.json, _resolvers.json, _compare.json, _scale.json, _tolerance.json,
-_local.json, _verify_dD_RULE.json.
+_local.json, _verify_dD_RULE.json, _bulk.json.
 One BLAS thread (threadpoolctl), as the run layer's jobs.
 """
 from __future__ import annotations
@@ -376,9 +380,56 @@ def verify(run: Path, at: list[int], out: Path, rtol: float = 1e-7) -> None:
         path.write_text(json.dumps({**head, "rows": rows}, indent=1) + "\n")       # (after every point)
 
 
+#: the pore-free block of workflows/bulk_silica.toml (400 x 693 x 400 nm above a two-layer substrate, periodic
+#: sides), quasi-static with the paper's code's rule, unsmoothed bonds, past its peak
+BULK = ['pores.arrangement="none"', 'boundary.sides="periodic"', "pores.diameter_nm=400.0", "pores.spacing_nm=400.0",
+        "pores.layers=1", "bonds.smooth=false", "compression.strain_max=0.15", 'compression.method="quasistatic"',
+        'bonds.breaking="musen"', "compression.snapshot_strains=[]"]
+#: (name, diameter nm, extra settings) of ``bulk``
+BULK_PLAN = [("bulk40_musen", 40.0, []), ("bulk40_musen_min1005", 40.0, ["bonds.min_length_factor=1.005"])]
+#: the paper's bulk silica (Dosta et al. section 3.1.2): E_macro and its fracture strength
+PAPER_BULK = {"youngs_modulus_GPa": 21.9, "strength_MPa": 601.0}
+
+
+def bulk(out: Path) -> None:
+    """The pore-free block of :data:`BULK_PLAN` against the paper's bulk (module docstring)."""
+    import opalflow
+    from opalflow.bpm.bonds import network_statistics
+    from opalflow.registry import load_spec
+    from opalflow.resources import WORKFLOWS
+    from opalflow.opal.scene import build_opal
+
+    rows = []
+    for name, d, extra in BULK_PLAN:
+        sets = [*BULK, f"packing.diameter_nm={d}", *extra]
+        folder = out / name
+        done = folder / "summary.json"
+        s = json.loads(done.read_text()) if done.exists() else opalflow.run("quickstart", folder, set=sets, quiet=True)
+        structure = build_opal(load_spec(WORKFLOWS / "quickstart.toml", sets))[0]
+        net = network_statistics(structure.positions, structure.diameters, structure.box_lengths, structure.periodic,
+                                 structure.bonds, structure.meta["packing_solid_fraction"])
+        ratio = s["strength_MPa"] / (1e3 * s["youngs_modulus_GPa"])
+        paper = PAPER_BULK["strength_MPa"] / (1e3 * PAPER_BULK["youngs_modulus_GPa"])
+        rows.append({"name": name, "diameter_nm": d, "set": sets, "n_particles": s["n_particles"],
+                     "n_bonds": s["n_bonds"], "box_nm": structure.box_lengths.tolist(), "network": net,
+                     "youngs_modulus_GPa": s["youngs_modulus_GPa"], "strength_MPa": s["strength_MPa"],
+                     "strain_at_peak": s["strain_at_peak"], "strength_over_E": ratio,
+                     "strength_over_E_vs_paper": ratio / paper - 1,
+                     "E_vs_paper": s["youngs_modulus_GPa"] / PAPER_BULK["youngs_modulus_GPa"] - 1,
+                     "strength_vs_paper": s["strength_MPa"] / PAPER_BULK["strength_MPa"] - 1,
+                     "events": s["quasistatic"]["events"], "broken_bonds_at_peak": s["broken_bonds_at_peak"],
+                     "broken_bonds_by_check_at_peak": s["broken_bonds_by_check_at_peak"], "wall_s": s["wall_s"]})
+        print(json.dumps({k: rows[-1][k] for k in ("name", "youngs_modulus_GPa", "strength_MPa", "strain_at_peak",
+                                                   "strength_over_E")}), flush=True)
+    (RESULTS / "quasistatic_bulk.json").write_text(json.dumps(
+        {"machine": machine(), "paper": {**PAPER_BULK, "strength_over_E": paper,
+                                         "source": "Dosta et al. section 3.1.2 (E_macro, bulk strength ~ E/35)"},
+         "rows": rows}, indent=1) + "\n")
+
+
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("part", choices=["dynamic", "resolvers", "compare", "scale", "tolerance", "local", "verify"])
+    p.add_argument("part", choices=["dynamic", "resolvers", "compare", "scale", "tolerance", "local", "verify", "bulk"])
     p.add_argument("--out", default="", help="folder for the runs (default: a temporary one)")
     p.add_argument("--diameters", type=float, nargs="*", default=[60.0, 45.0], help="scale: particle diameters (nm)")
     p.add_argument("--resolver", default="amg", help="scale: compression.resolver")
@@ -401,7 +452,7 @@ def main(argv=None) -> None:
             verify(Path(a.record[0]), a.at, out)
         else:
             {"dynamic": dynamic, "resolvers": resolvers, "compare": compare, "tolerance": tolerance,
-             "local": local}[a.part](out)
+             "local": local, "bulk": bulk}[a.part](out)
 
 
 if __name__ == "__main__":
