@@ -126,6 +126,32 @@ def test_breaking_rules_weigh_the_bond_loads_as_written():
     assert np.all(got["lammps"][both] >= got["musen"][both]) and np.any(got["lammps"] < got["musen"])
 
 
+def test_contacts_press_in_compression_and_open_in_tension(tmp_path):
+    """The simple-cubic lattice with its nearest-neighbour bonds left out (bonds.min_length_factor; the sqrt(2) a
+    and sqrt(3) a bonds hold it) has touching unbonded neighbours.  Compressed under periodic sides (uniaxial
+    strain, affine), each column of contacts is a chain of springs k_n one spacing a apart: E grows by k_n / a,
+    whatever the friction (nothing slips); pulled, the contacts open and E is the bonds' alone."""
+    from opalflow.bpm.contacts import hertz_mindlin_springs
+    from opalflow.materials import contact_properties
+
+    base = ["compression.method=quasistatic", "bonds.breakable=true", "bonds.cutoff_factor=1.75",
+            "bonds.min_length_factor=1.1", "contacts.enabled=true", "compression.strain_max=0.004"]
+    E = {}
+    for loading in ("plate", "tension"):
+        for mode in ("off", "frictionless", "sticking"):
+            s = opalflow.run("lattice_sc", tmp_path / f"{loading}-{mode}", quiet=True,
+                             set=[*base, f"compression.loading={loading}", f'contacts.quasistatic="{mode}"'])
+            E[loading, mode] = s["youngs_modulus_GPa"]
+    silica = contact_properties("silica")
+    k_n = hertz_mindlin_springs(silica, silica, np.array([10.0]), np.array([10.0]), 0.01)[0][0]    # a = d = 20 nm
+    assert E["plate", "frictionless"] - E["plate", "off"] == pytest.approx(k_n / 20.0 / 1e3, rel=1e-6)
+    assert E["plate", "sticking"] == pytest.approx(E["plate", "frictionless"], rel=1e-9)
+    assert E["tension", "frictionless"] == pytest.approx(E["tension", "off"], rel=1e-9)
+    assert E["tension", "sticking"] == pytest.approx(E["tension", "off"], rel=1e-9)
+    report = (tmp_path / "plate-sticking" / "report.md").read_text()
+    assert 'Contacts (`contacts.quasistatic = "sticking"`' in report
+
+
 def test_eq_10_4_calibration_measured_in_tension(tmp_path):
     """Roy and Hossain eqs. 10.3-10.4 (opalflow.bpm.spec.first_estimate): a simple-cubic array calibrated to
     E = 3 GPa and sigma_t = 40 MPa has that E and that tensile strength."""
@@ -252,6 +278,11 @@ def test_a_new_loading_is_one_class_and_one_registry_line():
     (['bonds.breaking="dosta"'], "bonds.breaking"),
     (["compression.method=quasistatic", "bonds.breakable=true", 'bonds.breaking="potyondy"'], "bonds.breaking"),
     (["bonds.min_length_factor=1.75"], "bonds.min_length_factor"),
+    (['contacts.quasistatic="sticking"'], "contacts.quasistatic"),
+    (["compression.method=quasistatic", "bonds.breakable=true", "contacts.enabled=true",
+      'contacts.quasistatic="coulomb"'], "contacts.quasistatic"),
+    (["compression.method=quasistatic", "bonds.breakable=true", "contacts.enabled=true",
+      'contacts.quasistatic="sticking"', "compression.local_rtol=1e-4"], "compression.local_rtol"),
     (["bonds.min_length_factor=-0.1"], "bonds.min_length_factor"),
 ])
 def test_refusals_are_one_line_and_write_nothing(tmp_path, capsys, sets, field):

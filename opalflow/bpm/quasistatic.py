@@ -73,6 +73,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
+from opalflow.bpm.contacts import Contacts, joined
 from opalflow.bpm.spec import RESOLVERS
 from opalflow.bpm.static import (DIRECT_MAX_DOFS, Factor, Stop, block_amg_preconditioner, block_matrix, bond_blocks,
                                   loose_particles, particle_amg, pcg)
@@ -149,7 +150,7 @@ class StiffnessMatrix:
 
     def __init__(self, net: BondNetwork):
         self.net = net
-        self.K, self.pos = block_matrix(net)
+        self.K, self.pos = block_matrix(net, sum_duplicates=False)     # (each element's blocks where pos says)
 
     def _add(self, data: np.ndarray, bonds: np.ndarray, blocks: np.ndarray, sign: float) -> None:
         n, m = self.net.n_particles, len(self.net.L)
@@ -170,9 +171,16 @@ class StiffnessMatrix:
         if len(bonds):
             self._add(self.K.data, bonds, bond_blocks(self.net.part(bonds)), -1.0)
 
+    def restore(self, bonds: np.ndarray) -> None:
+        """Put removed bonds (contacts that close) back."""
+        bonds = np.asarray(bonds, np.int64)
+        if len(bonds):
+            self._add(self.K.data, bonds, bond_blocks(self.net.part(bonds)), 1.0)
+
     def free_part(self, free: np.ndarray):
         """K_ff (CSR) on the free dofs."""
         K = self.K.tocsr()
+        K.sum_duplicates()
         return K[free][:, free]
 
 
@@ -254,6 +262,12 @@ class DirectResolver:
         self.S[np.arange(R, R + k), np.arange(R, R + k)] += cinv
         self.update_s += time.perf_counter() - t
 
+    def add(self, bonds: np.ndarray) -> None:
+        """Put elements back (contacts that close): the factor is renewed."""
+        if len(bonds):
+            self.km.restore(bonds)
+            self._factor(self.free)
+
     def _ut(self, v: np.ndarray) -> np.ndarray:
         """U^T v for v (n,) or (n, k)."""
         R = self.R
@@ -287,7 +301,7 @@ class IterativeResolver:
 
     def __init__(self, name: str, net: BondNetwork, alive: np.ndarray, free: np.ndarray, positions: np.ndarray,
                  rtol: float):
-        self.name, self.rtol, self.free = name, rtol, free.copy()
+        self.name, self.rtol, self.free, self.whole = name, rtol, free.copy(), net
         self.net = dataclasses.replace(net, a_r=net.a_r * alive, a_s=net.a_s * alive, bend=net.bend * alive,
                                        twist=net.twist * alive)
         self._precondition = PRECONDITIONERS[name](self.net, free, positions)
@@ -299,6 +313,11 @@ class IterativeResolver:
         for coefficient in (self.net.a_r, self.net.a_s, self.net.bend, self.net.twist):
             coefficient[bonds] = 0.0
         self.free = free.copy()
+
+    def add(self, bonds: np.ndarray) -> None:
+        """Put elements back (contacts that close)."""
+        for name in ("a_r", "a_s", "bend", "twist"):
+            getattr(self.net, name)[bonds] = getattr(self.whole, name)[bonds]
 
     def solve(self, b: np.ndarray, x0: np.ndarray) -> tuple[np.ndarray, int]:
         m = self.free.astype(float)
@@ -330,6 +349,10 @@ def _resolver(name: str, net: BondNetwork, alive: np.ndarray, free: np.ndarray, 
     km = StiffnessMatrix(net)
     km.remove(np.flatnonzero(~alive))
     return DirectResolver(km, free)
+
+
+#: rounds of the contacts' active set in one solve (:func:`solve_fracture`)
+CONTACT_ITERATIONS = 50
 
 
 #: an event's broken bonds settle first by a local solve over the particles within this many intact bonds of
@@ -493,6 +516,7 @@ class Event:
     iterations: int = 0
     settled: bool = False       # by the local step alone (no global re-solve)
     checks: list[int] = field(default_factory=list)     # each broken bond's check (an index into CHECKS)
+    contacts: int = 0                                   # contacts pressing after the event (contacts.quasistatic)
 
 
 @dataclass
@@ -520,7 +544,7 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
                    strain_max: float = 0.04, stop_fraction: float = 0.5, events_max: int = 100_000,
                    tolerance: float = 0.0, resolver: str = "auto", rtol: float = 1e-6, local_rtol: float = 0.0,
                    state: dict | None = None, checkpoint=None, checkpoint_s: float = 5.0, should_stop=lambda: False,
-                   say=print) -> FractureResult:
+                   contacts: Contacts | None = None, say=print) -> FractureResult:
     """The event loop of the module docstring under the loading of
     :func:`opalflow.bpm.static.solve_compression` (``fixed``: substrate; ``top``: the top layer, pushed in
     z in the loading's ``sense``, held in its other dofs with ``clamp_top``).
@@ -528,6 +552,10 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
     With ``local_rtol`` > 0 an event settles by :class:`LocalSettle` alone while the residual it leaves stays
     below ``local_rtol`` |b|; past it (and whenever particles come loose) the network is re-solved globally,
     to ``rtol`` |b|.
+
+    With ``contacts`` (:mod:`opalflow.bpm.contacts`; not with the local step) the touching pairs no intact bond joins press on each other:
+    after every global solve the contacts in tension open and those pressed close, and the network is solved
+    again until none changes (at most :data:`CONTACT_ITERATIONS` rounds; each event's re-solves count them).
 
     Stops when the next event would lie beyond ``strain_max``, when the stress after an event has fallen
     below ``stop_fraction`` of the peak, when no path carries load, or after ``events_max`` events.
@@ -561,7 +589,9 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
     free, x_p, loaded = constraints(loose)
     if resolver == "auto":
         resolver = "direct" if free.sum() <= DIRECT_MAX_DOFS else "amg" if m <= RESOLVE_AMG_MAX_BONDS else "block-amg"
-    solver = _resolver(resolver, net, alive, free, positions, rtol)
+    whole = joined(net, contacts.net) if contacts else net
+    engaged = contacts.usable(alive, loose) if contacts else np.zeros(0, bool)
+    solver = _resolver(resolver, whole, np.concatenate([alive, engaged]), free, positions, rtol)
     adjacency = Adjacency(net)
     settle = LocalSettle(net, adjacency) if local_rtol > 0 else None
     setup = time.perf_counter() - t0
@@ -569,12 +599,30 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
     def stress_of(force):
         return -sense * float(np.sum(force.reshape(n, 6)[loaded, 2])) / area      # per unit strain, > 0
 
-    def solve(x_prev):
-        """(x, the internal force K x, the stress per unit strain, CG iterations, |b|)."""
+    def linear_solve(x_prev):
         b = np.where(free, -solver.matvec(x_p), x_p)
         x, its = solver.solve(b, x_prev)
         force = solver.matvec(x)
         return x, force, stress_of(force), its, float(np.linalg.norm(b))
+
+    def solve(x_prev):
+        """(x, the internal force K x, the stress per unit strain, CG iterations, |b|): the linear solve, and with
+        contacts the active set: those in tension open, those pressed close, solved again until none changes."""
+        x, force, stress, its, b_norm = linear_solve(x_prev)
+        for _ in range(CONTACT_ITERATIONS if contacts else 0):
+            usable = contacts.usable(alive, loose)
+            stretch = contacts.stretch(x.reshape(n, 6))
+            tol = 1e-9 * float(np.abs(x).max())          # (a pair that neither presses nor separates stays)
+            opening = np.flatnonzero(engaged & ((stretch > tol) | ~usable))
+            closing = np.flatnonzero(~engaged & usable & (stretch < -tol))
+            if not len(opening) and not len(closing):
+                break
+            engaged[opening], engaged[closing] = False, True
+            solver.remove(m + opening, free)
+            solver.add(m + closing)
+            x, force, stress, more, b_norm = linear_solve(x)
+            its += more
+        return x, force, stress, its, b_norm
 
     x, force, stress_unit, its, b_norm = solve(x_p.copy())
     modulus = float(state["modulus_MPa"]) if state else stress_unit
@@ -635,7 +683,8 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
             else:
                 x, force, stress_unit, its, b_norm = solve(x)
                 touched, settled = None, False
-            events.append(Event(strain, stress, strain * stress_unit, broken.tolist(), its, settled, checks))
+            events.append(Event(strain, stress, strain * stress_unit, broken.tolist(), its, settled, checks,
+                                int(engaged.sum())))
             now = time.perf_counter()
             stop = should_stop()
             if now - last_said > 10:

@@ -19,7 +19,10 @@ from pathlib import Path
 import numpy as np
 
 from opalflow.analysis import fracture
+from opalflow.bpm.contacts import Contacts, contact_elements, describe as describe_contacts
+from opalflow.bpm.deck import particle_material
 from opalflow.bpm.loading import LOADINGS
+from opalflow.materials import contact_properties
 from opalflow.bpm.quasistatic import CHECKS, Stopped, Strengths, solve_fracture, summary_of
 from opalflow.bpm.scene import scene_of
 from opalflow.bpm.spec import BREAKING_RULES, BpmWorkflow
@@ -40,6 +43,17 @@ def strengths_of(data, coefficients, rule: str = "lammps") -> Strengths:
     return Strengths(*(per_bond(data, coefficients, k) for k in ("fr_c", "fs_c", "tb_c", "tt_c")), rule)
 
 
+def contacts_of(spec: BpmWorkflow, data) -> Contacts | None:
+    """The contacts of ``contacts.quasistatic`` (None: off) between the particles of ``data``, each particle of its
+    type's material (the substrate's is the matrix's)."""
+    k = spec.contacts
+    if k.quasistatic == "off":
+        return None
+    properties = [contact_properties(particle_material(name, spec.material)) for name in data.type_names]
+    return contact_elements(data.positions, data.diameters, data.box_lengths, data.periodic, data.bonds, properties,
+                            data.types - 1, k.quasistatic, k.reference_strain)
+
+
 def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=print) -> dict:
     """Build the scene, run the event loop, write the results (see the module docstring)."""
     t0 = time.perf_counter()
@@ -54,7 +68,10 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
     sample, net, info, record, written = network_run(spec, s, out, t0, launcher="in-process (quasi-static)",
                                                    resume=STATE if resume else "")
     data = sample.structure
-    say(f"quasi-static ({loading.title}): {s.n_particles} particles, {s.n_bonds} bonds, to strain {c.strain_max:g}")
+    contacts = contacts_of(spec, data)
+    say(f"quasi-static ({loading.title}): {s.n_particles} particles, {s.n_bonds} bonds, to strain {c.strain_max:g}"
+        + (f"; contacts: {describe_contacts(contacts, spec.contacts.quasistatic, spec.contacts.reference_strain)}"
+           if contacts else ""))
     try:
         res = solve_fracture(net, strengths_of(data, sample.coefficients, spec.bonds.breaking), data.positions,
                              data.groups["substrate"],
@@ -63,7 +80,7 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
                              events_max=c.events_max, tolerance=c.event_tolerance, resolver=c.resolver,
                              rtol=c.resolve_rtol, local_rtol=c.local_rtol, state=state,
                              checkpoint=lambda st: write_json_atomic(out / STATE, st), should_stop=stop_requested,
-                             say=say)
+                             contacts=contacts, say=say)
     except Stopped as exc:                       # a scheduler's signal: the state is saved, a requeue resumes
         record.end(out, "interrupted", last_step=exc.events)
         raise Preempted(out, exc.events) from None
@@ -94,6 +111,10 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
                         "cg_iterations": int(sum(e.iterations for e in res.events)) if res.resolver != "direct" else 0,
                         "local_rtol": c.local_rtol, "settled_locally": int(sum(e.settled for e in res.events)),
                         "loose_particles": res.loose,
+                        "contacts": spec.contacts.quasistatic,
+                        "contact_pairs": len(contacts.bond) if contacts else 0,
+                        "contacts_pressing_at_peak": res.events[max(res.peak - 1, 0)].contacts if res.events else 0,
+                        "contacts_pressing_at_end": res.events[-1].contacts if res.events else 0,
                         "peak_memory_MiB": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0},
         **info.get("structure", {}),
         "headline": f"E = {E:.4g} GPa, strength = {got['strength_MPa']:.4g} MPa (strain at peak "
@@ -264,7 +285,13 @@ def _report(spec, info, summary, res, loading) -> str:
              "load (as `smooth no`; opalflow/bpm/quasistatic.py); substrate fixed, top layer "
              f"({info['top_layer_particles']} particles) {'pushed down' if loading.sense > 0 else 'pulled up'}"
              + (", glued to the wall" if loading.glued else ", its x, y and rotations free") + ".", "",
-             *sample_lines(info), "| quantity | value | reference | error |", "|---|---|---|---|"]
+             *sample_lines(info),
+             *([f"Contacts (`contacts.quasistatic = \"{q['contacts']}\"`, opalflow/bpm/contacts.py): "
+                f"{q['contact_pairs']} touching pairs, linear Hertz-Mindlin springs at "
+                f"{100 * spec.contacts.reference_strain:g} % overlap, in compression only; pressing just before the "
+                f"peak: {q['contacts_pressing_at_peak']}, at the end: {q['contacts_pressing_at_end']}.", ""]
+               if q["contacts"] != "off" else []),
+             "| quantity | value | reference | error |", "|---|---|---|---|"]
     for key, label in (("youngs_modulus_GPa", "Young's modulus, first branch (GPa)"),
                        ("strength_MPa", "strength (MPa)"), ("strain_at_peak", "strain at peak")):
         ref = summary["reference"].get(key) or (summary["reference"].get("youngs_modulus_specimen_GPa")

@@ -12,6 +12,7 @@ import math
 from dataclasses import dataclass, field
 
 from opalflow.bpm.bonds import BOND_MODELS
+from opalflow.bpm.contacts import CONTACT_FRICTION
 from opalflow.bpm.loading import CONTACT_LAWS, LOADINGS
 from opalflow.materials import OVERRIDABLE, material_names
 from opalflow.spec import WorkflowSpec, check, check_name, is_number
@@ -65,6 +66,11 @@ class ContactsSpec:
     model: str = "hertz"             # hertz: hertz/material + mindlin; linear: hooke + linear_history
     friction: float | None = None
     restitution: float | None = None
+    #: contacts in the quasi-static method (opalflow.bpm.contacts): "off", or linear Hertz-Mindlin springs between
+    #: touching unbonded pairs, in compression only, "frictionless" (mu = 0) or "sticking" (no slip limit)
+    quasistatic: str = "off"
+    #: ... their springs are Hertz's secant and Mindlin's tangent at this overlap / contact distance
+    reference_strain: float = 0.01
 
 
 #: how a compression is computed: a LAMMPS run, the linear solve of opalflow.bpm.static (E, no strength), or
@@ -189,6 +195,16 @@ class BpmWorkflow(WorkflowSpec):
         if k.restitution is not None:
             check(0 < k.restitution <= 1, "contacts.restitution", k.restitution,
                   "must be in (0, 1] (coefficient of restitution)")
+        check(k.quasistatic in ("off", *CONTACT_FRICTION), "contacts.quasistatic", k.quasistatic,
+              f"must be one of off, {', '.join(CONTACT_FRICTION)}")
+        check(0 < k.reference_strain <= 0.2, "contacts.reference_strain", k.reference_strain,
+              "must be in (0, 0.2] (overlap / contact distance where the Hertz-Mindlin springs are taken)")
+        if k.quasistatic != "off":
+            check(self.compression.method == "quasistatic" and k.enabled, "contacts.quasistatic", k.quasistatic,
+                  "needs compression.method = \"quasistatic\" and contacts.enabled = true (the dynamic method's "
+                  "contacts are LAMMPS's pair style; the static one has none)")
+            check(self.compression.local_rtol == 0, "compression.local_rtol", self.compression.local_rtol,
+                  "must be 0 with contacts.quasistatic (the local step takes no contacts)")
         c = self.compression
         check(0 < c.strain_max <= 0.5, "compression.strain_max", c.strain_max, "must be in (0, 0.5]")
         check(0 < c.plate_speed_m_s <= 100, "compression.plate_speed_m_s", c.plate_speed_m_s,

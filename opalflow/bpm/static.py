@@ -706,12 +706,14 @@ def pair_blocks(net: BondNetwork, sel=slice(None), part: str = "all"):
     return two(A, C, -C, RB), two(A, -C, C, RB), two(-A, C, C, RmB), two(-A, -C, -C, RmB)
 
 
-def block_matrix(net: BondNetwork, free=None, *, part: str = "all", dtype=np.float64, chunk: int = 1_000_000):
+def block_matrix(net: BondNetwork, free=None, *, part: str = "all", dtype=np.float64, chunk: int = 1_000_000,
+                 sum_duplicates: bool = True):
     """K as a BSR matrix of 6 x 6 blocks (``part`` "translation": K_uu, 3 x 3 blocks, what the block-amg
     preconditioner needs), written straight into its slots (:func:`block_layout`; no
     coordinate list: the paper-scale memory is the blocks alone).  ``free`` (N, size) bool: the prescribed
     dofs are decoupled, their diagonal kept (K x = b with b zero there gives x zero there: the boundary
-    conditions without slicing, the block structure intact for AMG and the factor)."""
+    conditions without slicing, the block structure intact for AMG and the factor).  ``sum_duplicates`` false
+    keeps two elements between one pair in two blocks, where ``pos`` says (for edits in place)."""
     import scipy.sparse as sp
 
     n, m, size = net.n_particles, len(net.L), 6 if part == "all" else 3
@@ -740,7 +742,8 @@ def block_matrix(net: BondNetwork, free=None, *, part: str = "all", dtype=np.flo
         diag[:, np.arange(size), np.arange(size)] += np.where(fu > 0, 0.0, np.where(kept != 0, kept, 1.0))
     data[pos[:n]] = diag
     K = sp.bsr_matrix((data, cols, indptr), shape=(size * n, size * n))
-    K.sum_duplicates()          # two bonds between one pair (periodic images of a small box)
+    if sum_duplicates:
+        K.sum_duplicates()      # two bonds between one pair (periodic images of a small box, a bond and its contact)
     return K, pos
 
 
