@@ -8,7 +8,7 @@ own designs, on the same samples.
     python bench/bench_quasistatic.py tolerance    # bonds an event and re-solve residual against the exact sequence
     python bench/bench_quasistatic.py local        # the local step's depth and bound against every event re-solved
     python bench/bench_quasistatic.py verify --record DIR [--at K ...]   # a run's events against global re-solves
-    python bench/bench_quasistatic.py bulk [--out DIR]   # the pore-free silica against the paper's 601 MPa / 21.9 GPa
+    python bench/bench_quasistatic.py gap [--out DIR] [--only NAME ...]   # bulk and opal: bonds, contacts, one at a time
 
 ``dynamic``: quickstart and opal_quick compressed by the plate with ``smooth no`` (bonds break at full
 load, the quasi-static rule) at four plate speeds past their peaks, LAMMPS's ``smooth yes`` (opalflow's
@@ -30,12 +30,14 @@ d = 40 nm, whole runs: the factor at event tolerances 0 (the exact sequence), 0.
 3e-5 against every event re-solved: events settled locally, strength, CG iterations, time.  ``verify``: a
 finished run (the paper's d = 15 nm with the local step, where every event re-solved would take hours)
 checked at a few events: from its broken bonds there, the next event by a global re-solve to 1e-7 |b|
-against its own (:func:`verify`).  ``bulk``: the pore-free silica block (:data:`BULK`), the paper's rule, bonds
-as built and with the pairs closer than 1.005 d unbonded (:data:`BULK_PLAN`): E, strength, strength / E and
-strain at peak against the paper's bulk (601 MPa, 21.9 GPa: 0.0274), the network statistics and the bonds each
-check broke before the peak (a finished run in ``--out`` is read, not re-run).
+against its own (:func:`verify`).  ``gap``: the strength gap to the paper, one thing changed at a time
+(:data:`GAP_PLAN`): the pore-free silica block (:data:`BULK`, d = 40 nm) and the paper's sample at d = 45 nm
+(:data:`FCC45`), the paper's rule, bonds as built, without the pairs closer than 1.005 d, and with contacts
+(``contacts.quasistatic``, both friction bounds): E, strength, strength / E and strain at peak against the
+paper's (bulk 601 MPa / 21.9 GPa, the sample 41.1 MPa / 1.7 GPa), the network statistics, the bonds each check
+broke before the peak, the contacts pressing there (a finished run in ``--out`` is read, not re-run).
 Results: bench/results/quasistatic_dynamic.json, _resolvers.json, _compare.json, _scale.json, _tolerance.json,
-_local.json, _verify_dD_RULE.json, _bulk.json.
+_local.json, _verify_dD_RULE.json, _gap.json.
 One BLAS thread (threadpoolctl), as the run layer's jobs.
 """
 from __future__ import annotations
@@ -384,52 +386,76 @@ def verify(run: Path, at: list[int], out: Path, rtol: float = 1e-7) -> None:
 #: sides), quasi-static with the paper's code's rule, unsmoothed bonds, past its peak
 BULK = ['pores.arrangement="none"', 'boundary.sides="periodic"', "pores.diameter_nm=400.0", "pores.spacing_nm=400.0",
         "pores.layers=1", "bonds.smooth=false", "compression.strain_max=0.15", 'compression.method="quasistatic"',
-        'bonds.breaking="musen"', "compression.snapshot_strains=[]"]
-#: (name, diameter nm, extra settings) of ``bulk``
-BULK_PLAN = [("bulk40_musen", 40.0, []), ("bulk40_musen_min1005", 40.0, ["bonds.min_length_factor=1.005"])]
-#: the paper's bulk silica (Dosta et al. section 3.1.2): E_macro and its fracture strength
-PAPER_BULK = {"youngs_modulus_GPa": 21.9, "strength_MPa": 601.0}
+        'bonds.breaking="musen"', "compression.snapshot_strains=[]", "packing.diameter_nm=40.0"]
+#: the paper's sample at d = 45 nm as ``scale`` runs it with the paper's rule (its README row: 8.844 MPa)
+FCC45 = [*SCALE_SETS, "packing.diameter_nm=45", "packing.tile_nm=380", "compression.resolver=amg",
+         "compression.event_tolerance=0.05", "compression.resolve_rtol=1e-5", 'bonds.breaking="musen"',
+         "compression.snapshot_strains=[]"]
+#: ... and at d = 30 nm (the scale row with the paper's rule: 20.59 MPa with the local step)
+FCC30 = [kv.replace("packing.diameter_nm=45", "packing.diameter_nm=30") for kv in FCC45]
+#: (name, workflow, settings, reference) of ``gap``: each sample as built, then one thing changed at a time
+GAP_PLAN = [("bulk40_musen", "quickstart", BULK, "bulk"),
+            ("bulk40_musen_min1005", "quickstart", [*BULK, "bonds.min_length_factor=1.005"], "bulk"),
+            ("bulk40_c_frictionless_0.01", "quickstart", [*BULK, 'contacts.quasistatic="frictionless"'], "bulk"),
+            ("bulk40_c_sticking_0.01", "quickstart", [*BULK, 'contacts.quasistatic="sticking"'], "bulk"),
+            ("bulk40_c_sticking_0.05", "quickstart", [*BULK, 'contacts.quasistatic="sticking"',
+                                                      "contacts.reference_strain=0.05"], "bulk"),
+            ("fcc45_musen", "opal_fcc", FCC45, "opal"),
+            ("fcc45_c_frictionless", "opal_fcc", [*FCC45, 'contacts.quasistatic="frictionless"'], "opal"),
+            ("fcc45_c_sticking", "opal_fcc", [*FCC45, 'contacts.quasistatic="sticking"'], "opal"),
+            ("fcc30_musen", "opal_fcc", FCC30, "opal"),
+            ("fcc30_c_frictionless", "opal_fcc", [*FCC30, 'contacts.quasistatic="frictionless"'], "opal"),
+            ("fcc30_c_sticking", "opal_fcc", [*FCC30, 'contacts.quasistatic="sticking"'], "opal")]
+#: the paper's numbers (Dosta et al.): the bulk silica (section 3.1.2: E_macro, strength ~ E/35) and the standard
+#: sample (41.1 MPa at ~1.7 GPa: strain >= 0.024)
+PAPER = {"bulk": {"youngs_modulus_GPa": 21.9, "strength_MPa": 601.0, "source": "section 3.1.2"},
+         "opal": {"youngs_modulus_GPa": 1.7, "strength_MPa": 41.1, "source": "section 3.1.2, Fig. 8"}}
 
 
-def bulk(out: Path) -> None:
-    """The pore-free block of :data:`BULK_PLAN` against the paper's bulk (module docstring)."""
+def gap(out: Path, names: list[str]) -> None:
+    """The rows of :data:`GAP_PLAN` (those named, or all): E, strength, strength / E and strain at peak against the
+    paper's, the network statistics and the bonds each check broke before the peak (module docstring)."""
     import opalflow
     from opalflow.bpm.bonds import network_statistics
+    from opalflow.opal.scene import build_opal
     from opalflow.registry import load_spec
     from opalflow.resources import WORKFLOWS
-    from opalflow.opal.scene import build_opal
 
-    rows = []
-    for name, d, extra in BULK_PLAN:
-        sets = [*BULK, f"packing.diameter_nm={d}", *extra]
+    path = RESULTS / "quasistatic_gap.json"
+    old = {r["name"]: r for r in json.loads(path.read_text())["rows"]} if path.exists() else {}
+    for name, workflow, sets, ref in GAP_PLAN:
+        if names and name not in names:
+            continue
         folder = out / name
         done = folder / "summary.json"
-        s = json.loads(done.read_text()) if done.exists() else opalflow.run("quickstart", folder, set=sets, quiet=True)
-        structure = build_opal(load_spec(WORKFLOWS / "quickstart.toml", sets))[0]
+        s = json.loads(done.read_text()) if done.exists() else opalflow.run(workflow, folder, set=sets, quiet=True)
+        structure = build_opal(load_spec(WORKFLOWS / f"{workflow}.toml", sets))[0]
         net = network_statistics(structure.positions, structure.diameters, structure.box_lengths, structure.periodic,
                                  structure.bonds, structure.meta["packing_solid_fraction"])
+        paper = PAPER[ref]
         ratio = s["strength_MPa"] / (1e3 * s["youngs_modulus_GPa"])
-        paper = PAPER_BULK["strength_MPa"] / (1e3 * PAPER_BULK["youngs_modulus_GPa"])
-        rows.append({"name": name, "diameter_nm": d, "set": sets, "n_particles": s["n_particles"],
+        q = s["quasistatic"]
+        old[name] = {"name": name, "workflow": workflow, "set": sets, "n_particles": s["n_particles"],
                      "n_bonds": s["n_bonds"], "box_nm": structure.box_lengths.tolist(), "network": net,
                      "youngs_modulus_GPa": s["youngs_modulus_GPa"], "strength_MPa": s["strength_MPa"],
                      "strain_at_peak": s["strain_at_peak"], "strength_over_E": ratio,
-                     "strength_over_E_vs_paper": ratio / paper - 1,
-                     "E_vs_paper": s["youngs_modulus_GPa"] / PAPER_BULK["youngs_modulus_GPa"] - 1,
-                     "strength_vs_paper": s["strength_MPa"] / PAPER_BULK["strength_MPa"] - 1,
-                     "events": s["quasistatic"]["events"], "broken_bonds_at_peak": s["broken_bonds_at_peak"],
-                     "broken_bonds_by_check_at_peak": s["broken_bonds_by_check_at_peak"], "wall_s": s["wall_s"]})
-        print(json.dumps({k: rows[-1][k] for k in ("name", "youngs_modulus_GPa", "strength_MPa", "strain_at_peak",
-                                                   "strength_over_E")}), flush=True)
-    (RESULTS / "quasistatic_bulk.json").write_text(json.dumps(
-        {"machine": machine(), "paper": {**PAPER_BULK, "strength_over_E": paper,
-                                         "source": "Dosta et al. section 3.1.2 (E_macro, bulk strength ~ E/35)"},
-         "rows": rows}, indent=1) + "\n")
+                     "paper": ref, "E_vs_paper": s["youngs_modulus_GPa"] / paper["youngs_modulus_GPa"] - 1,
+                     "strength_vs_paper": s["strength_MPa"] / paper["strength_MPa"] - 1,
+                     "strength_over_E_vs_paper": ratio / (paper["strength_MPa"] / 1e3 / paper["youngs_modulus_GPa"]) - 1,
+                     "events": q["events"], "broken_bonds_at_peak": s["broken_bonds_at_peak"],
+                     "broken_bonds_by_check_at_peak": s["broken_bonds_by_check_at_peak"],
+                     "contacts": q.get("contacts", "off"), "contact_pairs": q.get("contact_pairs", 0),
+                     "contacts_pressing_at_peak": q.get("contacts_pressing_at_peak", 0),
+                     "wall_s": s["wall_s"], "machine": machine()}
+        print(json.dumps({k: old[name][k] for k in ("name", "youngs_modulus_GPa", "strength_MPa", "strain_at_peak",
+                                                    "contacts_pressing_at_peak", "wall_s")}), flush=True)
+        rows = [old[n] for n, *_ in GAP_PLAN if n in old]
+        path.write_text(json.dumps({"paper": PAPER, "rows": rows}, indent=1) + "\n")
 
 
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("part", choices=["dynamic", "resolvers", "compare", "scale", "tolerance", "local", "verify", "bulk"])
+    p.add_argument("part", choices=["dynamic", "resolvers", "compare", "scale", "tolerance", "local", "verify", "gap"])
     p.add_argument("--out", default="", help="folder for the runs (default: a temporary one)")
     p.add_argument("--diameters", type=float, nargs="*", default=[60.0, 45.0], help="scale: particle diameters (nm)")
     p.add_argument("--resolver", default="amg", help="scale: compression.resolver")
@@ -440,6 +466,7 @@ def main(argv=None) -> None:
     p.add_argument("--record", nargs="*", default=[], help="scale: finished run folders to add, DIR[:TIME_OUTPUT]; "
                    "verify: the run to check")
     p.add_argument("--at", type=int, nargs="*", default=[], help="verify: event indices (0-based) to check")
+    p.add_argument("--only", nargs="*", default=[], help="gap: the rows to run (names of GAP_PLAN)")
     a = p.parse_args(argv)
     from threadpoolctl import threadpool_limits
 
@@ -450,9 +477,11 @@ def main(argv=None) -> None:
             scale(out, a.diameters, a.resolver, a.tolerance, a.rtol, a.local_rtol, a.breaking, a.record)
         elif a.part == "verify":
             verify(Path(a.record[0]), a.at, out)
+        elif a.part == "gap":
+            gap(out, a.only)
         else:
             {"dynamic": dynamic, "resolvers": resolvers, "compare": compare, "tolerance": tolerance,
-             "local": local, "bulk": bulk}[a.part](out)
+             "local": local}[a.part](out)
 
 
 if __name__ == "__main__":

@@ -152,6 +152,19 @@ def test_contacts_press_in_compression_and_open_in_tension(tmp_path):
     assert 'Contacts (`contacts.quasistatic = "sticking"`' in report
 
 
+def test_contacts_give_the_same_fracture_by_every_resolver(tmp_path):
+    """quickstart with sticking contacts, its first 30 events: the factor with Woodbury updates (contacts closing as
+    well as bonds breaking) and CG on the damaged network find the same peak; broken pressed bonds leave contacts
+    pressing."""
+    sets = [*QUICK, "bonds.smooth=false", 'bonds.breaking="musen"', 'contacts.quasistatic="sticking"',
+            "compression.events_max=30"]
+    got = {r: opalflow.run("quickstart", tmp_path / r, set=[*sets, f"compression.resolver={r}"], quiet=True)
+           for r in ("direct", "amg")}
+    assert got["amg"]["strength_MPa"] == pytest.approx(got["direct"]["strength_MPa"], rel=1e-3)
+    q = got["direct"]["quasistatic"]
+    assert q["contacts"] == "sticking" and q["contact_pairs"] > 0 and q["contacts_pressing_at_end"] > 0
+
+
 def test_eq_10_4_calibration_measured_in_tension(tmp_path):
     """Roy and Hossain eqs. 10.3-10.4 (opalflow.bpm.spec.first_estimate): a simple-cubic array calibrated to
     E = 3 GPa and sigma_t = 40 MPa has that E and that tensile strength."""

@@ -185,7 +185,8 @@ class StiffnessMatrix:
 
 
 class DirectResolver:
-    """Cholesky factor of K_ff with Woodbury updates for the bonds removed since (module docstring).
+    """Cholesky factor of K_ff with Woodbury updates for the bonds removed (and contacts put back) since
+    (module docstring).
 
     K_ff - U C U^T, U (n x R) the eigenvectors of the removed blocks (<= 6 per bond, 12 entries each, kept
     as index and value rows), C their eigenvalues: x = y + W S^-1 U^T y with y = A^-1 b, W = A^-1 U and
@@ -241,6 +242,15 @@ class DirectResolver:
 
     def remove(self, bonds: np.ndarray, free: np.ndarray) -> None:
         self.km.remove(bonds)
+        self._update(bonds, free, 1.0)
+
+    def add(self, bonds: np.ndarray) -> None:
+        """Put elements back (contacts that close): the same update with the blocks' sign turned."""
+        self.km.restore(bonds)
+        self._update(bonds, self.free, -1.0)
+
+    def _update(self, bonds: np.ndarray, free: np.ndarray, sign: float) -> None:
+        """K_ff - sign U C U^T for the blocks of ``bonds``: Woodbury columns, or a new factor (class docstring)."""
         t = time.perf_counter()
         if np.any(self.free & ~free) or self.update_s > self.factor_s or self.R + 6 * len(bonds) > len(self.S):
             self._factor(free)       # (at most 6 columns a bond)
@@ -259,14 +269,8 @@ class DirectResolver:
         cross = self._ut(W_new)                            # U^T W_new, (R + k, k)
         self.S[:R + k, R:R + k] = -cross
         self.S[R:R + k, :R] = -cross[:R].T
-        self.S[np.arange(R, R + k), np.arange(R, R + k)] += cinv
+        self.S[np.arange(R, R + k), np.arange(R, R + k)] += sign * cinv
         self.update_s += time.perf_counter() - t
-
-    def add(self, bonds: np.ndarray) -> None:
-        """Put elements back (contacts that close): the factor is renewed."""
-        if len(bonds):
-            self.km.restore(bonds)
-            self._factor(self.free)
 
     def _ut(self, v: np.ndarray) -> np.ndarray:
         """U^T v for v (n,) or (n, k)."""
