@@ -559,7 +559,10 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
 
     With ``contacts`` (:mod:`opalflow.bpm.contacts`; not with the local step) the touching pairs no intact bond joins press on each other:
     after every global solve the contacts in tension open and those pressed close, and the network is solved
-    again until none changes (at most :data:`CONTACT_ITERATIONS` rounds; each event's re-solves count them).
+    again until none changes (at most :data:`CONTACT_ITERATIONS` rounds; each event's re-solves count them).  A
+    contact that opens stays open for the rest of that solve: with a sticking tangential spring a contact can
+    pull its own pair apart (closed it is in tension, open it is pressed: Coulomb's law would give it no force
+    either way), and the rounds would flip it for ever.
 
     Stops when the next event would lie beyond ``strain_max``, when the stress after an event has fallen
     below ``stop_fraction`` of the peak, when no path carries load, or after ``events_max`` events.
@@ -613,15 +616,17 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
         """(x, the internal force K x, the stress per unit strain, CG iterations, |b|): the linear solve, and with
         contacts the active set: those in tension open, those pressed close, solved again until none changes."""
         x, force, stress, its, b_norm = linear_solve(x_prev)
+        opened = np.zeros(len(engaged), bool)
         for _ in range(CONTACT_ITERATIONS if contacts else 0):
             usable = contacts.usable(alive, loose)
             stretch = contacts.stretch(x.reshape(n, 6))
             tol = 1e-9 * float(np.abs(x).max())          # (a pair that neither presses nor separates stays)
             opening = np.flatnonzero(engaged & ((stretch > tol) | ~usable))
-            closing = np.flatnonzero(~engaged & usable & (stretch < -tol))
+            closing = np.flatnonzero(~engaged & usable & ~opened & (stretch < -tol))
             if not len(opening) and not len(closing):
                 break
             engaged[opening], engaged[closing] = False, True
+            opened[opening] = True
             solver.remove(m + opening, free)
             solver.add(m + closing)
             x, force, stress, more, b_norm = linear_solve(x)
