@@ -13,7 +13,10 @@ A key passes when ``|now - reference| <= atol + rtol |reference|``; a curve when
 at the stored abscissae (or, ``"by": "row"``, at the stored rows: a saw-tooth envelope) differ from the stored
 ones by at most ``tol`` times the largest stored value.
 A key that a run lacks fails, unless it ``needs`` an optional part (``"liggghts"``) that is absent here:
-then it is skipped and said so.
+then it is skipped and said so.  Where the run itself needs the part, the reference says what to run
+without it: ``"without": {"liggghts": {"engine": "lammps"}}`` (settings that leave the part out: the keys
+that need it are skipped, the others checked), or ``{"liggghts": null}`` (no run without it: every key is
+skipped, with the reason).
 """
 from __future__ import annotations
 
@@ -84,7 +87,8 @@ def lookup(summary: dict, path: str):
     return node
 
 
-def _available(part: str) -> bool:
+def available(part: str) -> bool:
+    """Whether the optional part ``part`` (``"liggghts"``) is here."""
     if part == "liggghts":
         from opalflow.lammps.engine import executable
 
@@ -108,7 +112,7 @@ def compare_key(name: str, key: str, spec: dict, now) -> Check:
     tol = " + ".join(t for t in ((f"{100 * rtol:g} %" if rtol else ""), (f"{atol:g}" if atol else "")) if t) or "exact"
     if now is None:
         needs = spec.get("needs")
-        verdict = f"skipped ({needs} not found here)" if needs and not _available(needs) else "MISSING"
+        verdict = f"skipped ({needs} not found here)" if needs and not available(needs) else "MISSING"
         return Check(name, key, ref, None, "-", tol, verdict)
     if ref is None:
         return Check(name, key, None, now, "-", tol, "NO REFERENCE")
@@ -165,8 +169,24 @@ def compare(name: str, ref: dict, res) -> list[Check]:
     return checks
 
 
+def settings(ref: dict) -> dict | None:
+    """The reference's ``set``, with the ``without`` settings of each optional part absent here; None where the run
+    cannot go without such a part (module docstring)."""
+    sets = dict(ref.get("set", {}))
+    for part, instead in ref.get("without", {}).items():
+        if not available(part):
+            if instead is None:
+                return None
+            sets.update(instead)
+    return sets
+
+
+def absent_parts(ref: dict) -> list[str]:
+    return [part for part in ref.get("without", {}) if not available(part)]
+
+
 def command(ref: dict) -> str:
-    sets = "".join(f" --set {k}={json.dumps(v)}" for k, v in ref.get("set", {}).items())
+    sets = "".join(f" --set {k}={json.dumps(v)}" for k, v in (settings(ref) or ref.get("set", {})).items())
     return f"python -m opalflow run {ref['workflow']} --out DIR{sets}"
 
 
@@ -208,7 +228,7 @@ def run_one(name: str, ref: dict, out: Path) -> tuple[object, float]:
     if out.exists():
         shutil.rmtree(out)
     t = time.perf_counter()
-    api.run(ref["workflow"], out, set=dict(ref.get("set", {})), quiet=True)
+    api.run(ref["workflow"], out, set=settings(ref), quiet=True)
     return load_results(out), time.perf_counter() - t
 
 
@@ -226,7 +246,14 @@ def regress(selected: list[str] | None = None, *, out: Path | None = None, fast:
     out = Path(out) if out is not None else Path(tempfile.mkdtemp(prefix="opalflow-regress-"))
     checks = []
     for name, ref in refs.items():
-        say(f"regress {name}: {command(ref)}")
+        if settings(ref) is None:
+            why = f"skipped ({', '.join(absent_parts(ref))} not found here)"
+            mine = [Check(name, key, spec.get("value"), None, "-", "-", why) for key, spec in ref.get("keys", {}).items()]
+            checks += mine
+            say(f"regress {name}: {why}: its run needs it")
+            continue
+        say(f"regress {name}: {command(ref)}" + (f" ({', '.join(absent_parts(ref))} not found here)"
+                                                 if absent_parts(ref) else ""))
         res, seconds = run_one(name, ref, out / name)
         mine = compare(name, ref, res)
         checks += mine

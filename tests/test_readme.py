@@ -6,6 +6,7 @@ Markers (``<!-- test: WHAT -- why -->``):
 - ``run``: each opalflow command of the block runs in a fresh folder, exit 0 (``&&`` chains: the venv and
   pip segments are not repeated, .ci/run installs the same way); ``skip "TEXT"`` leaves out the commands
   that hold TEXT and ``set K=V`` adds ``--set K=V`` to each run (small sizes), both said after ``--``;
+  ``needs "PART"`` skips the block, with that reason, where an optional part (``liggghts``) is absent;
 - ``not-run``: the reason follows ``--``;
 - ``output``: the block is what the command after ``--`` prints on stderr;
 - ``synopsis``: every verb and option shown exists in the CLI;
@@ -93,6 +94,11 @@ def _ids(kind):
 
 @pytest.mark.parametrize("text,marker", _ids("run"))
 def test_readme_commands_run(text, marker, tmp_path):
+    from opalflow.regress import available
+
+    for part in re.findall(r'needs "([^"]+)"', marker["args"]):
+        if not available(part):
+            pytest.skip(f"needs {part}, not found here (optional: the README block runs it)")
     skips = re.findall(r'skip "([^"]+)"', marker["args"])
     sets = re.findall(r"set (\S+=\S+)", marker["args"])
     ran = 0

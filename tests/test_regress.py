@@ -45,3 +45,23 @@ def test_an_unknown_reference_is_one_line(capsys):
     assert main(["regress", "nope"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error: regress = 'nope': no reference of that name")
+
+
+def test_without_liggghts_its_keys_are_skipped_and_the_rest_checked(tmp_path):
+    """A user without LIGGGHTS (PATH without it: a real absence): the plate runs on LAMMPS alone, its LAMMPS keys
+    are checked and its LIGGGHTS keys skipped; the impacts, which need both engines, are skipped whole; exit 0."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    env = {**os.environ, "PATH": str(Path(sys.executable).parent)}
+    proc = subprocess.run([sys.executable, "-m", "opalflow", "regress", "granular_plate", "granular_impacts"],
+                          env=env, cwd=tmp_path, capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    lines = proc.stdout.splitlines()
+    verdict = {line.split()[0]: line.rstrip() for line in lines if line.startswith("  ")}
+    assert verdict["plate_force_N.lammps"].endswith(" ok")
+    assert verdict["plate_force_N.liggghts"].endswith("skipped (liggghts not found here)")
+    assert "regress granular_impacts: skipped (liggghts not found here): its run needs it" in lines
+    assert "--set engine=\"lammps\"" in proc.stdout
