@@ -32,8 +32,9 @@ finished run (the paper's d = 15 nm with the local step, where every event re-so
 checked at a few events: from its broken bonds there, the next event by a global re-solve to 1e-7 |b|
 against its own (:func:`verify`).  ``gap``: the strength gap to the paper, one thing changed at a time
 (:data:`GAP_PLAN`): the pore-free silica block (:data:`BULK`, d = 40 nm) and the paper's sample at d = 45 nm
-(:data:`FCC45`), the paper's rule, bonds as built, without the pairs closer than 1.005 d, and with contacts
-(``contacts.quasistatic``, both friction bounds): E, strength, strength / E and strain at peak against the
+(:data:`FCC45`), the paper's rule, bonds as built, without the pairs closer than 1.005 d, with contacts
+(``contacts.quasistatic``, both friction bounds), packed by the paper's generator's rule and bonded as its code
+does by default (overlapping pairs unbonded, touching by contacts): E, strength, strength / E and strain at peak against the
 paper's (bulk 601 MPa / 21.9 GPa, the sample 41.1 MPa / 1.7 GPa), the network statistics, the bonds each check
 broke before the peak, the contacts pressing there (a finished run in ``--out`` is read, not re-run).
 Results: bench/results/quasistatic_dynamic.json, _resolvers.json, _compare.json, _scale.json, _tolerance.json,
@@ -400,6 +401,12 @@ GAP_PLAN = [("bulk40_musen", "quickstart", BULK, "bulk"),
             ("bulk40_c_sticking_0.01", "quickstart", [*BULK, 'contacts.quasistatic="sticking"'], "bulk"),
             ("bulk40_c_sticking_0.05", "quickstart", [*BULK, 'contacts.quasistatic="sticking"',
                                                       "contacts.reference_strain=0.05"], "bulk"),
+            ("bulk40_musenpack", "quickstart", [*BULK, 'packing.method="musen"'], "bulk"),
+            ("bulk40_musenpack_min1", "quickstart", [*BULK, 'packing.method="musen"', "bonds.min_length_factor=1.0"],
+             "bulk"),
+            ("bulk40_musenpack_min1_c_sticking", "quickstart", [*BULK, 'packing.method="musen"',
+                                                                "bonds.min_length_factor=1.0",
+                                                                'contacts.quasistatic="sticking"'], "bulk"),
             ("fcc45_musen", "opal_fcc", FCC45, "opal"),
             ("fcc45_c_frictionless", "opal_fcc", [*FCC45, 'contacts.quasistatic="frictionless"'], "opal"),
             ("fcc45_c_sticking", "opal_fcc", [*FCC45, 'contacts.quasistatic="sticking"'], "opal"),

@@ -54,3 +54,29 @@ def test_size_distribution():
     assert 2.5 < p.diameters.std() < 4.5
     assert abs(p.solid_fraction - 0.60) <= 0.005
     assert max_pair_overlap(p.positions, p.diameters, BOX, (True, True, False)) <= 0.01
+
+
+def test_the_papers_generator_stops_at_its_target_with_pairs_still_overlapping():
+    """packing.method = "musen" (MUSEN's package generator's rule): the solid fraction is kept, the same seed gives
+    the same bytes, and it stops as soon as the largest overlap is below the target (checked every 10 small
+    steps: just below it), with pairs still overlapping, more than FIRE leaves (checked every 200 steps, it
+    overshoots): the pairs MUSEN's default bonding leaves unbonded."""
+    box = np.array([320.0, 320.0, 320.0])
+    a = dense_random_packing(box, 40.0, 0.62, seed=4, tile_nm=0.0, method="musen")
+    b = dense_random_packing(box, 40.0, 0.62, seed=4, tile_nm=0.0, method="musen")
+    fire = dense_random_packing(box, 40.0, 0.62, seed=4, tile_nm=0.0)
+    assert a.positions.tobytes() == b.positions.tobytes() and abs(a.solid_fraction - 0.62) <= 0.005
+    assert 0.0045 < max_pair_overlap(a.positions, a.diameters, box, (True, True, True)) < 0.005
+
+    def overlapping(p):
+        return len(pairs_within(p.positions, 40.0, box, (True, True, True))) / len(p.positions)
+    assert overlapping(a) > 2.0 > 1.5 * overlapping(fire)
+
+
+def test_an_unknown_packing_method_is_one_line(tmp_path, capsys):
+    from opalflow.cli import main
+
+    assert main(["build", "quickstart", "--out", str(tmp_path / "no"), "--set", 'packing.method="jamming"']) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "packing.method" in err[0] and "fire, musen" in err[0]
+    assert not (tmp_path / "no").exists()

@@ -85,9 +85,9 @@ def build_opal(spec: OpalWorkflow, progress=None) -> tuple[Structure, dict]:
     k = spec.packing
     packing = dense_random_packing(
         box, d, k.solid_fraction, std=k.diameter_std_nm, size_bins=k.size_bins, seed=k.seed,
-        tile_nm=k.tile_nm, max_overlap=k.max_overlap,
+        tile_nm=k.tile_nm, max_overlap=k.max_overlap, method=k.method,
         coprime_with=(2 * spec.pores.cells_x, 6 * spec.pores.cells_y) if fcc else (1, 1),
-        progress=(lambda s, w: progress(f"packing: FIRE step {s}, largest overlap {100 * w:.2f} % d"))
+        progress=(lambda s, w: progress(f"packing ({k.method}): step {s}, largest overlap {100 * w:.2f} % d"))
         if progress else None)
     timings["packing"] = time.perf_counter() - t
 

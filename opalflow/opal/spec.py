@@ -6,6 +6,7 @@ import math
 from dataclasses import dataclass, field
 
 from opalflow.bpm.spec import BoundarySpec, BpmWorkflow, check_material
+from opalflow.packing import METHODS as PACKING_METHODS
 from opalflow.spec import SpecError, check
 
 ARRANGEMENTS = ("fcc", "random", "none")
@@ -28,6 +29,8 @@ class PackingSpec:
     seed: int = 1
     tile_nm: float = 380.0
     max_overlap: float = 0.005
+    #: the tile's relaxation: "fire" (LAMMPS's FIRE) or "musen" (the paper's generator's rule: opalflow.packing)
+    method: str = "fire"
 
 
 @dataclass
@@ -88,6 +91,7 @@ class OpalWorkflow(BpmWorkflow):
         check(k.seed >= 0, "packing.seed", k.seed, "must be >= 0")
         check(k.tile_nm == 0 or k.tile_nm >= 8 * k.diameter_nm, "packing.tile_nm", k.tile_nm,
               f"must be 0 (pack the whole box) or >= 8 particle diameters ({8 * k.diameter_nm:g} nm)")
+        check(k.method in PACKING_METHODS, "packing.method", k.method, f"must be one of {', '.join(PACKING_METHODS)}")
         check(0 < k.max_overlap <= 0.01, "packing.max_overlap", k.max_overlap,
               "must be in (0, 0.01] (fraction of the diameter)")
 
