@@ -429,7 +429,6 @@ def gap(out: Path, names: list[str]) -> None:
     from opalflow.resources import WORKFLOWS
 
     path = RESULTS / "quasistatic_gap.json"
-    old = {r["name"]: r for r in json.loads(path.read_text())["rows"]} if path.exists() else {}
     for name, workflow, sets, ref in GAP_PLAN:
         if names and name not in names:
             continue
@@ -442,21 +441,23 @@ def gap(out: Path, names: list[str]) -> None:
         paper = PAPER[ref]
         ratio = s["strength_MPa"] / (1e3 * s["youngs_modulus_GPa"])
         q = s["quasistatic"]
-        old[name] = {"name": name, "workflow": workflow, "set": sets, "n_particles": s["n_particles"],
-                     "n_bonds": s["n_bonds"], "box_nm": structure.box_lengths.tolist(), "network": net,
-                     "youngs_modulus_GPa": s["youngs_modulus_GPa"], "strength_MPa": s["strength_MPa"],
-                     "strain_at_peak": s["strain_at_peak"], "strength_over_E": ratio,
-                     "paper": ref, "E_vs_paper": s["youngs_modulus_GPa"] / paper["youngs_modulus_GPa"] - 1,
-                     "strength_vs_paper": s["strength_MPa"] / paper["strength_MPa"] - 1,
-                     "strength_over_E_vs_paper": ratio / (paper["strength_MPa"] / 1e3 / paper["youngs_modulus_GPa"]) - 1,
-                     "events": q["events"], "broken_bonds_at_peak": s["broken_bonds_at_peak"],
-                     "broken_bonds_by_check_at_peak": s["broken_bonds_by_check_at_peak"],
-                     "contacts": q.get("contacts", "off"), "contact_pairs": q.get("contact_pairs", 0),
-                     "contacts_pressing_at_peak": q.get("contacts_pressing_at_peak", 0),
-                     "wall_s": s["wall_s"], "machine": machine()}
-        print(json.dumps({k: old[name][k] for k in ("name", "youngs_modulus_GPa", "strength_MPa", "strain_at_peak",
-                                                    "contacts_pressing_at_peak", "wall_s")}), flush=True)
-        rows = [old[n] for n, *_ in GAP_PLAN if n in old]
+        row = {"name": name, "workflow": workflow, "set": sets, "n_particles": s["n_particles"],
+               "n_bonds": s["n_bonds"], "box_nm": structure.box_lengths.tolist(), "network": net,
+               "youngs_modulus_GPa": s["youngs_modulus_GPa"], "strength_MPa": s["strength_MPa"],
+               "strain_at_peak": s["strain_at_peak"], "strength_over_E": ratio,
+               "paper": ref, "E_vs_paper": s["youngs_modulus_GPa"] / paper["youngs_modulus_GPa"] - 1,
+               "strength_vs_paper": s["strength_MPa"] / paper["strength_MPa"] - 1,
+               "strength_over_E_vs_paper": ratio / (paper["strength_MPa"] / 1e3 / paper["youngs_modulus_GPa"]) - 1,
+               "events": q["events"], "broken_bonds_at_peak": s["broken_bonds_at_peak"],
+               "broken_bonds_by_check_at_peak": s["broken_bonds_by_check_at_peak"],
+               "contacts": q.get("contacts", "off"), "contact_pairs": q.get("contact_pairs", 0),
+               "contacts_pressing_at_peak": q.get("contacts_pressing_at_peak", 0),
+               "wall_s": s["wall_s"], "machine": machine()}
+        print(json.dumps({k: row[k] for k in ("name", "youngs_modulus_GPa", "strength_MPa", "strain_at_peak",
+                                              "contacts_pressing_at_peak", "wall_s")}), flush=True)
+        kept = {r["name"]: r for r in json.loads(path.read_text())["rows"]} if path.exists() else {}
+        kept[name] = row             # (read again before each write: several gap runs may share the file)
+        rows = [kept[n] for n, *_ in GAP_PLAN if n in kept]
         path.write_text(json.dumps({"paper": PAPER, "rows": rows}, indent=1) + "\n")
 
 

@@ -557,12 +557,12 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
     below ``local_rtol`` |b|; past it (and whenever particles come loose) the network is re-solved globally,
     to ``rtol`` |b|.
 
-    With ``contacts`` (:mod:`opalflow.bpm.contacts`; not with the local step) the touching pairs no intact bond joins press on each other:
-    after every global solve the contacts in tension open and those pressed close, and the network is solved
-    again until none changes (at most :data:`CONTACT_ITERATIONS` rounds; each event's re-solves count them).  A
-    contact that opens stays open for the rest of that solve: with a sticking tangential spring a contact can
-    pull its own pair apart (closed it is in tension, open it is pressed: Coulomb's law would give it no force
-    either way), and the rounds would flip it for ever.
+    With ``contacts`` (:mod:`opalflow.bpm.contacts`; not with the local step) the touching pairs no intact bond
+    joins press on each other: after every global solve the contacts in tension open and those pressed close,
+    and the network is solved again until none changes (at most :data:`CONTACT_ITERATIONS` rounds; each event's
+    re-solves count them).  A contact that opens stays open for the rest of that solve: with a sticking
+    tangential spring a contact can pull its own pair apart (closed it is in tension, open it is pressed:
+    Coulomb's law would give it no force either way), and the rounds would flip it for ever.
 
     Stops when the next event would lie beyond ``strain_max``, when the stress after an event has fallen
     below ``stop_fraction`` of the peak, when no path carries load, or after ``events_max`` events.
