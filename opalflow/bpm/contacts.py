@@ -28,9 +28,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from opalflow.bpm.bonds import find_bonds
 from opalflow.bpm.stiffness import BondNetwork
 from opalflow.materials import ContactProperties
-from opalflow.neighbors import pairs_within, separations
+from opalflow.neighbors import separations
 
 #: pairs whose centres lie within this factor of their contact distance touch (module docstring)
 CONTACT_REACH = 1.005
@@ -74,11 +75,9 @@ def contact_elements(positions: np.ndarray, diameters: np.ndarray, box: np.ndarr
                      reference_strain: float) -> Contacts:
     """The contacts of a structure: its touching pairs (``CONTACT_REACH``), their springs by the materials
     ``properties[kinds[p]]`` of their particles, the tangential one kept with ``friction = "sticking"``."""
-    pairs = pairs_within(positions, CONTACT_REACH * float(diameters.max()), box, periodic)
+    pairs = find_bonds(positions, diameters, box, periodic, CONTACT_REACH)      # the touching pairs
     sep = separations(positions, pairs, box, periodic)
     L = np.sqrt(np.einsum("ij,ij->i", sep, sep))
-    touching = L < CONTACT_REACH * 0.5 * (diameters[pairs[:, 0]] + diameters[pairs[:, 1]])
-    pairs, sep, L = pairs[touching], sep[touching], L[touching]
     k_n, k_t = np.zeros(len(pairs)), np.zeros(len(pairs))
     for a in np.unique(kinds):
         for b in np.unique(kinds):
@@ -88,8 +87,15 @@ def contact_elements(positions: np.ndarray, diameters: np.ndarray, box: np.ndarr
                                                            diameters[pairs[sel, 1]] / 2, reference_strain)
     if friction == "frictionless":
         k_t[:] = 0.0
-    index = {(int(min(i, j)), int(max(i, j))): k for k, (i, j) in enumerate(bonds)}
-    bond = np.array([index.get((int(i), int(j)), -1) for i, j in pairs], np.int64)
+    bond = np.full(len(pairs), -1, np.int64)          # each pair's bond: keys i n + j, sorted, searched
+    if len(bonds):
+        n = len(positions)
+        keys = np.minimum(bonds[:, 0], bonds[:, 1]).astype(np.int64) * n + np.maximum(bonds[:, 0], bonds[:, 1])
+        order = np.argsort(keys)
+        wanted = pairs[:, 0] * n + pairs[:, 1]
+        at = np.minimum(np.searchsorted(keys[order], wanted), len(order) - 1)
+        hit = keys[order][at] == wanted
+        bond[hit] = order[at[hit]]
     zero = np.zeros(len(pairs))
     net = BondNetwork(len(positions), pairs[:, 0].copy(), pairs[:, 1].copy(), -sep / L[:, None], L, k_n, k_t, zero,
                       zero.copy())
