@@ -12,7 +12,6 @@ x y z")`` (lengths then stay in nm).  OVITO opens ``data.lmp`` (with bonds) and 
 """
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -22,6 +21,7 @@ from opalflow.analysis import compression as mech
 from opalflow.lammps.datafile import read_data
 from opalflow.runs.record import RunRecord
 from opalflow.spec import SpecError
+from opalflow.store import read_json
 from opalflow.structure import Structure
 
 ANGSTROM_PER_NM = 10.0
@@ -90,7 +90,8 @@ def load_results(folder: str | Path) -> Results:
     path = folder / "summary.json"
     if not path.exists():
         raise SpecError("folder", str(folder), "has no summary.json: not a finished run folder")
-    res = Results(folder, json.loads(path.read_text()))
+    res = Results(folder, read_json(path, "the run's summary", "run `python -m opalflow analyze` on the folder "
+                                    "to write it again"))
     if (folder / "results.h5").exists():
         import h5py
 

@@ -35,7 +35,7 @@ import numpy as np
 
 from opalflow.resources import DATA
 from opalflow.spec import SpecError, check_name
-from opalflow.store import write_json_atomic
+from opalflow.store import read_json, write_json_atomic
 from opalflow.version import __version__
 
 REFERENCES = DATA / "regression"
@@ -70,7 +70,7 @@ def read_reference(name: str) -> dict:
     path = REFERENCES / f"{name}.json"
     if not path.exists():
         raise SpecError("regress", name, f"no reference of that name: one of {', '.join(names())}")
-    return json.loads(path.read_text())
+    return read_json(path, "a regression reference", f"restore it (`git checkout -- data/regression/{name}.json`)", keys=("workflow",))
 
 
 def lookup(summary: dict, path: str):

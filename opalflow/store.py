@@ -1,12 +1,15 @@
 """Results on disk: every file is written under a temporary name, then renamed.
 
 A finished result is therefore never replaced by a half-written one, and a run folder is
-held by one process at a time (:func:`folder_lock`).
+held by one process at a time (:func:`folder_lock`).  Every JSON file opalflow reads back (run.json,
+job.json, states, references, progress) is read by :func:`read_json`: damage is one line naming the file
+and what to do (:class:`DamagedFile`, exit 2: never a regression's 1, never a traceback).
 """
 from __future__ import annotations
 
 import json
 import os
+import socket
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -15,6 +18,34 @@ import numpy as np
 from opalflow.spec import InputError
 
 LOCK_FILE = ".opalflow.lock"
+
+
+class DamagedFile(InputError):
+    """A file opalflow wrote and reads back that is missing, cut short or without what it must hold (one line:
+    the file, what it is, what is wrong, what to do)."""
+
+    def __init__(self, path, what: str, wrong: str, remedy: str):
+        self.path = Path(path)
+        super().__init__(f"{path} ({what}): {wrong}; {remedy}")
+
+
+def read_json(path: str | os.PathLike, what: str, remedy: str, *, keys: tuple[str, ...] = ()) -> dict:
+    """The JSON object in ``path`` holding ``keys``; :class:`DamagedFile` when it is missing, unreadable, cut
+    short, not an object or without one of ``keys`` (``what``: what the file is, ``remedy``: what to do)."""
+    try:
+        data = json.loads(Path(path).read_bytes())
+    except FileNotFoundError:
+        raise DamagedFile(path, what, "missing", remedy) from None
+    except OSError as exc:
+        raise DamagedFile(path, what, f"cannot be read ({exc.strerror})", remedy) from None
+    except ValueError as exc:            # JSONDecodeError, UnicodeDecodeError
+        raise DamagedFile(path, what, f"damaged, not JSON ({exc})", remedy) from None
+    if not isinstance(data, dict):
+        raise DamagedFile(path, what, f"damaged: holds a JSON {type(data).__name__}, not an object", remedy)
+    missing = [k for k in keys if k not in data]
+    if missing:
+        raise DamagedFile(path, what, f"damaged: has no {', '.join(repr(k) for k in missing)}", remedy)
+    return data
 
 
 def _default(obj):
@@ -82,6 +113,20 @@ def write_json_atomic(path: str | os.PathLike, data: dict) -> None:
     write_text_atomic(path, json_text(data))
 
 
+def lock_owner(folder: str | os.PathLike) -> tuple[int, str] | None:
+    """(pid, host) of the process holding ``folder`` (its lock file), None where none holds it."""
+    try:
+        words = (Path(folder) / LOCK_FILE).read_text().split()
+        return int(words[0]), words[1] if len(words) > 1 else socket.gethostname()
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+def process_alive(pid: int, host: str) -> bool | None:
+    """Whether process ``pid`` of ``host`` lives: None where ``host`` is another machine (not checkable here)."""
+    return _alive(pid) if host == socket.gethostname() else None
+
+
 def _alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)
@@ -94,7 +139,7 @@ def _alive(pid: int) -> bool:
 
 @contextmanager
 def folder_lock(folder: str | os.PathLike):
-    """Hold ``folder`` for this process: ``.opalflow.lock`` holds the owner's pid.
+    """Hold ``folder`` for this process: ``.opalflow.lock`` holds the owner's pid and host.
 
     A second run into a folder that a live process holds is refused (InputError, one line); the
     lock of a process that died (killed, machine restarted) is taken over.  A folder this call
@@ -118,7 +163,7 @@ def folder_lock(folder: str | os.PathLike):
                                  f"{lock}); wait for it or choose another folder") from None
             lock.unlink(missing_ok=True)                    # stale: its owner is gone
     with os.fdopen(fd, "w") as f:
-        f.write(f"{os.getpid()}\n")
+        f.write(f"{os.getpid()} {socket.gethostname()}\n")
     try:
         yield folder
     finally:

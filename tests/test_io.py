@@ -163,3 +163,42 @@ def test_report_names_inputs_and_explains_large_errors(api_run):
     assert reason.startswith("resolution: d = 60 nm is 4.0 x the paper's 15 nm") and "2.074 GPa (d = 15 nm)" in reason
     assert "9.37 MPa (d = 45 nm)" in why("strength_MPa", -0.97, 60.0)
     assert why("youngs_modulus_GPa", 0.05, 60.0) == ""
+
+
+def test_every_dump_and_data_file_of_each_method_opens_in_ovito_and_ase(api_run, tmp_path):
+    """OVITO and ASE open every dump and data file of a dynamic, a static, a quasi-static and a resumed
+    quasi-static run, with every particle and the box the data file has (the quasi-static dumps' box lines
+    were ``np.float64(0.0) np.float64(762.0)`` under numpy 2: OVITO's "Invalid box size in line 7")."""
+    ovito_io = pytest.importorskip("ovito.io", reason="the ovito package (PyPI) is not installed")
+    import ase.io
+
+    from opalflow.lammps import engine
+    from opalflow.lammps.datafile import read_data
+
+    quick = {"compression.method": "quasistatic", "compression.snapshot_strains": [], "compression.strain_max": 0.03}
+    folders = {"dynamic": api_run[0]}
+    opalflow.run("lattice_sc", tmp_path / "static", set={"compression.method": "static"}, quiet=True)
+    folders["static"] = tmp_path / "static"
+    opalflow.run("quickstart", tmp_path / "quasistatic", set=quick, quiet=True)
+    folders["quasistatic"] = tmp_path / "quasistatic"
+    engine.request_stop("SIGUSR1")
+    with pytest.raises(engine.Preempted):
+        opalflow.run("quickstart", tmp_path / "resumed", set=quick, quiet=True)
+    opalflow.run(None, tmp_path / "resumed", resume=True, quiet=True)
+    folders["resumed quasistatic"] = tmp_path / "resumed"
+    opened = []
+    for method, folder in folders.items():
+        built = read_data(folder / "data.lmp")
+        data = ovito_io.import_file(str(folder / "data.lmp"), atom_style="bpm/sphere").compute()
+        assert data.particles.count == built.n_particles and data.particles.bonds.count == built.n_bonds, method
+        assert np.allclose(np.diag(np.asarray(data.cell)[:, :3]), built.box_lengths), method
+        dumps = sorted(folder.rglob("*.dump"))
+        assert dumps or method == "static", method
+        for dump in dumps:
+            frame = ovito_io.import_file(str(dump)).compute()
+            assert frame.particles.count == built.n_particles, dump
+            assert np.allclose(np.diag(np.asarray(frame.cell)[:, :3]), built.box_lengths), dump
+            atoms = ase.io.read(dump, format="lammps-dump-text")
+            assert len(atoms) == built.n_particles and np.allclose(atoms.cell.lengths(), built.box_lengths), dump
+            opened.append(f"{method}:{dump.name}")
+    assert {"quasistatic:fracture.peak.dump", "resumed quasistatic:fracture.end.dump"} <= set(opened)

@@ -266,6 +266,60 @@ def test_a_signal_stops_the_events_and_resume_gives_the_same_numbers(quick, tmp_
     assert not (out / "quasistatic_state.json").exists()
 
 
+def _dump_numbers(path):
+    lines = path.read_text().splitlines()
+    return lines[:5] + lines[8:9], np.loadtxt(lines[5:8]), np.loadtxt(lines[9:])
+
+
+def test_a_run_stopped_after_its_peak_resumes_to_the_same_fracture_dumps(quick, tmp_path, monkeypatch):
+    """Stopped one event before the end (after the peak), the resumed run's fracture dumps are the
+    uninterrupted run's: the peak's displacements come back from the state (quasistatic_peak.npy)."""
+    root, whole = quick
+    n = whole["quasistatic"]["events"]
+    assert n >= 3 and whole["broken_bonds_at_peak"] < whole["broken_bonds"]     # the peak comes before the end
+    calls = []
+    monkeypatch.setattr("opalflow.bpm.quasistatic_run.stop_requested", lambda: calls.append(1) or len(calls) == n - 1)
+    out = tmp_path / "stopped"
+    with pytest.raises(engine.Preempted):
+        opalflow.run("quickstart", out, set=QUICK, quiet=True)
+    state = json.loads((out / "quasistatic_state.json").read_text())
+    assert len(state["events"]) == n - 1 and state["peak_event"] >= 0 and (out / "quasistatic_peak.npy").exists()
+    monkeypatch.setattr("opalflow.bpm.quasistatic_run.stop_requested", lambda: False)
+    again = opalflow.run(None, out, resume=True, quiet=True)
+    assert again["strength_MPa"] == pytest.approx(whole["strength_MPa"], rel=1e-9)
+    for tag in ("peak", "end"):
+        head, box, rows = _dump_numbers(out / f"fracture.{tag}.dump")
+        head0, box0, rows0 = _dump_numbers(root / "direct" / f"fracture.{tag}.dump")
+        assert head == head0 and np.array_equal(box, box0)
+        assert np.allclose(rows, rows0, atol=2e-6), tag
+    from opalflow.lammps.datafile import read_data
+
+    peak = np.loadtxt((out / "fracture.peak.dump").read_text().splitlines()[9:])
+    built = read_data(out / "data.lmp")
+    assert np.abs(peak[np.argsort(peak[:, 0]), 2:5] - built.positions).max() > 1e-3    # deformed, not data.lmp's
+    assert not (out / "quasistatic_peak.npy").exists()
+
+
+@pytest.mark.parametrize("damage", ["truncated", "no events", "bad event"])
+def test_a_damaged_state_is_one_line_and_changes_nothing(quick, tmp_path, capsys, damage):
+    """A quasistatic_state.json cut short or without its events: `run --resume` says so in one line, exit 2
+    (not a regression's 1), and leaves run.json as it was."""
+    out = tmp_path / "stopped"
+    engine.request_stop("SIGUSR1")
+    with pytest.raises(engine.Preempted):
+        opalflow.run("quickstart", out, set=QUICK, quiet=True)
+    path = out / "quasistatic_state.json"
+    text = path.read_text()
+    path.write_text({"truncated": text[:len(text) // 2], "no events": '{"modulus_MPa": 1.0}',
+                     "bad event": '{"events": [{"strain": 1}], "modulus_MPa": 1.0}'}[damage])
+    record = (out / "run.json").read_text()
+    capsys.readouterr()
+    assert main(["run", "--out", str(out), "--resume"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and str(path) in err and "without --resume" in err, err
+    assert (out / "run.json").read_text() == record
+
+
 def test_event_tolerance_breaks_more_bonds_per_event(quick, tmp_path):
     _, exact = quick
     loose = opalflow.run("quickstart", tmp_path / "tol", set=[*QUICK, "compression.event_tolerance=0.05"], quiet=True)

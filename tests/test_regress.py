@@ -47,6 +47,19 @@ def test_an_unknown_reference_is_one_line(capsys):
     assert len(err) == 1 and err[0].startswith("error: regress = 'nope': no reference of that name")
 
 
+@pytest.mark.parametrize("text, wrong", [('{"workflow": "lattice_sc", "keys": {', "damaged, not JSON"),
+                                         ('{"keys": {}}', "damaged: has no 'workflow'"),
+                                         ('["lattice_sc"]', "holds a JSON list")])
+def test_a_damaged_reference_is_one_line_exit_2_not_a_regression(tmp_path, monkeypatch, capsys, text, wrong):
+    """A truncated reference, one without "workflow", one not an object: one line naming the file, exit 2
+    (a regression's exit is 1; before, a JSONDecodeError or KeyError traceback, exit 1)."""
+    monkeypatch.setattr(regress, "REFERENCES", tmp_path)
+    (tmp_path / "small.json").write_text(text)
+    assert main(["regress", "small"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(tmp_path / "small.json") in err[0] and wrong in err[0], err
+
+
 def test_without_liggghts_its_keys_are_skipped_and_the_rest_checked(tmp_path):
     """A user without LIGGGHTS (PATH without it: a real absence): the plate runs on LAMMPS alone, its LAMMPS keys
     are checked and its LIGGGHTS keys skipped; the impacts, which need both engines, are skipped whole; exit 0."""

@@ -3,8 +3,10 @@ contract for all: what a run folder holds), the defects it fixed, and the local 
 SLURM executor against a real one-node SLURM is in tests/test_slurm.py)."""
 import json
 import shutil
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -310,3 +312,48 @@ def test_a_relative_out_folder(tmp_path, monkeypatch, capsys):
     assert capsys.readouterr().out.startswith("E (top-layer strain) = ")
     assert json.loads((tmp_path / "runs/sc/progress.json").read_text())["step"] > 0
     assert RunRecord.read("runs/sc").state == "finished"
+
+
+def _started_then_signalled(out, sig):
+    """A real dynamic run of the lattice, signalled once LAMMPS reports progress (its first restart file)."""
+    args = ["run", "lattice_sc", "--out", str(out), "--set", "compression.strain_max=0.02",
+            "--set", "compression.restart_every_strain=0.001"]
+    child = ("import runpy, signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+             f"sys.argv = ['opalflow'] + {args!r}; runpy.run_module('opalflow', run_name='__main__')")
+    p = subprocess.Popen([sys.executable, "-c", child], stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 120
+    while time.time() < deadline and not list(out.glob("restart.*.bin")):
+        time.sleep(0.2)
+    p.send_signal(sig)
+    p.stderr.read()
+    return p.wait()
+
+
+@pytest.mark.parametrize("sig, state", [(signal.SIGKILL, "DIED"), (signal.SIGTERM, "interrupted")])
+def test_status_tells_a_killed_run_from_an_interrupted_one(tmp_path, capsys, sig, state):
+    """SIGKILL leaves run.json saying running and a lock whose process is gone: status says it died and how to
+    go on (it said "running ... s left"); SIGTERM (or Ctrl-C) ends the record interrupted: status says so (it
+    said "requeued", though no scheduler was involved)."""
+    out = tmp_path / "run"
+    assert _started_then_signalled(out, sig) == (-9 if sig == signal.SIGKILL else 143)
+    capsys.readouterr()
+    assert main(["status", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert f"1 {state.lower()}" in text and f"  {state}" in text, text
+    assert f"run --out {out} --resume" in text and "running" not in text and "requeued" not in text
+    assert main(["run", "--out", str(out), "--resume"]) == 0
+    assert main(["status", str(out)]) == 0 and "1 finished" in capsys.readouterr().out
+
+
+def test_status_of_a_damaged_record_says_damaged(tmp_path, capsys):
+    """A run.json cut short: status names it damaged with the reason (it said "pending"), as run --resume and
+    analyze refuse the folder."""
+    out = tmp_path / "built"
+    assert main(["build", "lattice_sc", "--out", str(out)]) == 0
+    text = (out / "run.json").read_text()
+    (out / "run.json").write_text(text[: len(text) // 3])
+    capsys.readouterr()
+    assert main(["status", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "1 damaged" in said and "DAMAGED" in said and "run.json is damaged" in said, said
+    assert main(["run", "--out", str(out), "--resume"]) == 2

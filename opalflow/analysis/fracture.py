@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from opalflow.store import new_figure, save_figure
+from opalflow.store import new_figure, read_json, save_figure
 
 
 def frames_at_peak_and_after(snapshots: list[dict], strain_at_peak: float) -> list[tuple[str, dict]]:
@@ -123,15 +123,13 @@ def plot_sides(path: Path, runs: dict[str, tuple[list[tuple[str, dict]], list, f
 def load_frames(folder: Path) -> tuple[list[tuple[str, dict]], list, float]:
     """The fracture frames of a finished compression run folder (from its results.h5 and run.json), with
     its box (nm) and mean particle diameter (nm)."""
-    import json
-
     import h5py
 
     from opalflow.runs.record import RunRecord
 
     folder = Path(folder)
     info = RunRecord.read(folder).facts()
-    summary = json.loads((folder / "summary.json").read_text())
+    summary = read_json(folder / "summary.json", "the run's summary", "run `python -m opalflow analyze` on the folder")
     snapshots = []
     with h5py.File(folder / "results.h5", "r") as h:
         for step in sorted(h.get("snapshots", {}), key=int):

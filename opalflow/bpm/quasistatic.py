@@ -566,11 +566,12 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
 
     Stops when the next event would lie beyond ``strain_max``, when the stress after an event has fallen
     below ``stop_fraction`` of the peak, when no path carries load, or after ``events_max`` events.
-    ``state`` (``{"events": [...], "modulus_MPa": E}``, given to ``checkpoint(state)`` every ``checkpoint_s``
-    seconds, before :class:`Stopped` is raised when ``should_stop()`` turns true, and on Ctrl-C): continue a
-    killed run from its events (the broken bonds are theirs); the result is the same (with an iterative
-    re-solve or the local step it restarts from a global re-solve: the same to the re-solve's tolerance, not to
-    the digit).
+    ``state`` (``{"events": [...], "modulus_MPa": E, "peak_event": k, "peak_x": (N, 6) or None}``, given to
+    ``checkpoint(state)`` every ``checkpoint_s`` seconds, before :class:`Stopped` is raised when
+    ``should_stop()`` turns true, and on Ctrl-C): continue a killed run from its events (the broken bonds are
+    theirs) and the displacements just before its peak event (for the fracture pictures); the result is the
+    same (with an iterative re-solve or the local step it restarts from a global re-solve: the same to the
+    re-solve's tolerance, not to the digit).
     """
     if resolver not in RESOLVERS:
         raise InputError(f"compression.resolver = {resolver!r}: must be one of {', '.join(RESOLVERS)}")
@@ -638,11 +639,16 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
     peak = int(np.argmax([e.stress_MPa for e in events])) if events else 0
     peak_stress = events[peak].stress_MPa if events else 0.0
     peak_alive = _intact(m, events[:peak]) if events else None
-    peak_x = None           # (not kept across a resume)
+    # the displacements just before the peak event, as the state kept them (``peak_event``: the event they
+    # precede; an event cut short by Ctrl-C may have set them without being kept)
+    peak_x = (np.asarray(state["peak_x"], float) if state and state.get("peak_x") is not None
+              and state.get("peak_event") == peak else None)
+    peak_event = peak if peak_x is not None else -1
 
     def save():
         if checkpoint:
-            checkpoint({"events": [e.__dict__ for e in events], "modulus_MPa": modulus})
+            checkpoint({"events": [e.__dict__ for e in events], "modulus_MPa": modulus, "peak_event": peak_event,
+                        "peak_x": peak_x})
 
     stopped = "events_max"
     touched = None
@@ -670,6 +676,7 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
             stress = strain * stress_unit
             if stress > peak_stress:
                 peak_stress, peak_alive, peak_x = stress, alive.copy(), strain * x.reshape(n, 6)
+                peak_event = len(events)
             broken = np.flatnonzero(B >= worst / (1.0 + tolerance))
             ends, pair = _subnetwork(net, broken)
             normal, shear = bond_checks(pair, x.reshape(n, 6)[ends], strengths.part(broken))

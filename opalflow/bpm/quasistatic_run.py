@@ -11,7 +11,6 @@ the same numbers.
 """
 from __future__ import annotations
 
-import json
 import resource
 import time
 from pathlib import Path
@@ -23,7 +22,7 @@ from opalflow.bpm.contacts import Contacts, contact_elements, describe as descri
 from opalflow.bpm.deck import particle_material
 from opalflow.bpm.loading import LOADINGS
 from opalflow.materials import contact_properties
-from opalflow.bpm.quasistatic import CHECKS, Stopped, Strengths, solve_fracture, summary_of
+from opalflow.bpm.quasistatic import CHECKS, Event, Stopped, Strengths, solve_fracture, summary_of
 from opalflow.bpm.scene import scene_of
 from opalflow.bpm.spec import BREAKING_RULES, BpmWorkflow
 from opalflow.bpm.report import reference_errors, sample_lines
@@ -32,9 +31,37 @@ from opalflow.bpm.stiffness import per_bond
 from opalflow.runs.record import finish
 from opalflow.lammps.engine import Interrupted, Preempted, stop_requested
 from opalflow.spec import SpecError
-from opalflow.store import h5_bytes, new_figure, put, save_figure, write_json_atomic
+from opalflow.store import DamagedFile, atomic_path, h5_bytes, new_figure, put, read_json, save_figure, write_json_atomic
 
 STATE = "quasistatic_state.json"
+PEAK = "quasistatic_peak.npy"     # the state's displacements just before the peak event (N, 6), beside STATE
+
+
+def save_state(out: Path, state: dict) -> None:
+    """The event loop's state: the events as JSON, the peak's displacements as .npy (written first: a
+    state file never names a peak the .npy does not hold)."""
+    state = dict(state)
+    peak_x = state.pop("peak_x", None)
+    if peak_x is not None:
+        with atomic_path(out / PEAK, PEAK + ".tmp.npy") as tmp:
+            np.save(tmp, peak_x)
+    write_json_atomic(out / STATE, state)
+
+
+def load_state(out: Path) -> dict:
+    """The state :func:`save_state` wrote (``peak_x`` None where no .npy is kept)."""
+    state = read_json(out / STATE, "the quasi-static run's saved state", "run it anew without --resume",
+                      keys=("events", "modulus_MPa"))
+    try:
+        for e in state["events"]:
+            Event(**e)
+            np.asarray(e["bonds"], np.int64)
+        float(state["modulus_MPa"])
+    except (TypeError, ValueError) as exc:
+        raise DamagedFile(out / STATE, "the quasi-static run's saved state", f"damaged ({exc})",
+                          "run it anew without --resume") from None
+    state["peak_x"] = np.load(out / PEAK) if state.get("peak_event", -1) >= 0 and (out / PEAK).exists() else None
+    return state
 
 
 def strengths_of(data, coefficients, rule: str = "lammps") -> Strengths:
@@ -62,7 +89,7 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
     if resume:
         if not (out / STATE).exists():
             raise SpecError("--resume", str(out), f"no {STATE} in the folder (the run saved none yet): run it anew")
-        state = json.loads((out / STATE).read_text())
+        state = load_state(out)
     s = scene_of(spec).structure(spec, say)
     loading = LOADINGS[c.loading]
     sample, net, info, record, written = network_run(spec, s, out, t0, launcher="in-process (quasi-static)",
@@ -79,7 +106,7 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
                              sense=loading.sense, strain_max=c.strain_max, stop_fraction=c.stop_fraction,
                              events_max=c.events_max, tolerance=c.event_tolerance, resolver=c.resolver,
                              rtol=c.resolve_rtol, local_rtol=c.local_rtol, state=state,
-                             checkpoint=lambda st: write_json_atomic(out / STATE, st), should_stop=stop_requested,
+                             checkpoint=lambda st: save_state(out, st), should_stop=stop_requested,
                              contacts=contacts, say=say)
     except Stopped as exc:                       # a scheduler's signal: the state is saved, a requeue resumes
         record.end(out, "interrupted", last_step=exc.events)
@@ -139,6 +166,7 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
     summary = finish(out, summary, lambda: _report(spec, info, summary, res, loading), files=files, record=record,
                      started=t0)
     (out / STATE).unlink(missing_ok=True)
+    (out / PEAK).unlink(missing_ok=True)
     return summary
 
 
@@ -214,7 +242,7 @@ def _write_dump(path: Path, data, snap: dict) -> None:
     lo, hi = data.box_lo, data.box_hi
     bounds = "pp" if data.periodic[0] else "ff"
     head = ["ITEM: TIMESTEP", "0", "ITEM: NUMBER OF ATOMS", str(data.n_particles),
-            f"ITEM: BOX BOUNDS {bounds} {bounds} ff"] + [f"{lo[k]!r} {hi[k]!r}" for k in range(3)]
+            f"ITEM: BOX BOUNDS {bounds} {bounds} ff"] + [f"{float(lo[k])!r} {float(hi[k])!r}" for k in range(3)]
     head.append("ITEM: ATOMS id type x y z radius broken_bonds")
     rows = np.column_stack([snap["id"], data.types, snap["position_nm"], data.diameters / 2, snap["broken_bonds"]])
     with open(path, "w") as f:

@@ -21,7 +21,7 @@ from pathlib import Path
 
 from opalflow.runs.record import finished_summary, run_kind, slurm_job
 from opalflow.spec import WorkflowSpec
-from opalflow.store import write_json_atomic
+from opalflow.store import DamagedFile, read_json, write_json_atomic
 
 JOB_FILE = "job.json"
 
@@ -45,13 +45,18 @@ class Job:
         return Path(root) / "jobs" / f"{self.label}-{self.key[:12]}"
 
 
-def read_job(folder: str | os.PathLike) -> dict:
-    """The job.json of a job folder ({} where there is none or it is cut short)."""
-    try:
-        data = json.loads((Path(folder) / JOB_FILE).read_text())
-    except (OSError, ValueError):
+def read_job(folder: str | os.PathLike, *, strict: bool = False) -> dict:
+    """The job.json of a job folder: {} where there is none, and where it is damaged unless ``strict``
+    (then :class:`opalflow.store.DamagedFile`; a study runs a job with a damaged job.json anew)."""
+    path = Path(folder) / JOB_FILE
+    if not path.exists():
         return {}
-    return data if isinstance(data, dict) else {}
+    try:
+        return read_json(path, "a study job's state", "run the study again: the job runs anew")
+    except DamagedFile:
+        if strict:
+            raise
+        return {}
 
 
 def update_job(folder: str | os.PathLike, **fields) -> dict:

@@ -11,19 +11,18 @@ from collections import Counter
 from pathlib import Path
 
 from opalflow.runs.jobs import read_job
+from opalflow.store import DamagedFile, lock_owner, process_alive, read_json
 from opalflow.runs.record import RunRecord, is_finished, read_summary
 from opalflow.spec import SpecError
 
-STATES = ("pending", "running", "requeued", "finished", "failed")
+STATES = ("pending", "running", "requeued", "interrupted", "died", "finished", "failed", "damaged")
 
 
 def _progress(folder: Path) -> tuple[str, float | None]:
     """What the running job says (step, rate, time left; or its last message) and its seconds left."""
-    import json
-
     try:
-        p = json.loads((folder / "progress.json").read_text())
-    except (OSError, ValueError):
+        p = read_json(folder / "progress.json", "the run's progress", "")
+    except DamagedFile:
         return "", None
     age = time.time() - p.get("time", 0)
     stale = f" (as of {age:.0f} s ago)" if age > 30 else ""
@@ -35,19 +34,44 @@ def _progress(folder: Path) -> tuple[str, float | None]:
 
 
 def run_state(folder: Path) -> tuple[str, dict]:
-    """(state, job.json or {}) of one run or job folder."""
-    meta = read_job(folder)
+    """(state, facts: job.json's, with ``error`` and ``where``) of one run or job folder, from its record
+    (job.json, else run.json) and the process that holds it (the folder's lock, else job.json's pid and host):
+
+    - ``running``: the record says so and the process lives (or runs on another host: ``where`` says so);
+    - ``died``: the record says running but its process is gone (killed by SIGKILL, the machine lost);
+    - ``interrupted`` (Ctrl-C, SIGTERM) and ``requeued`` (stopped by SLURM to go on in a requeued job);
+    - ``damaged``: job.json or run.json cannot be read (``error`` names the file and what to do).
+    """
+    try:
+        meta = read_job(folder, strict=True)
+    except DamagedFile as exc:
+        return "damaged", {"error": str(exc)}
     if is_finished(folder):
         return "finished", meta
-    if meta.get("state") in STATES:
-        return meta["state"], meta
-    if RunRecord.exists(folder):
-        try:
-            rec = RunRecord.read(folder)
-            return {"built": "pending", "interrupted": "requeued"}.get(rec.state, rec.state), meta
-        except SpecError:
-            pass
-    return "pending", meta
+    state = meta.get("state")
+    if state not in STATES:
+        state = "pending"
+        if RunRecord.exists(folder):
+            try:
+                rec = RunRecord.read(folder)
+            except SpecError as exc:
+                return "damaged", {**meta, "error": str(exc)}
+            state = {"built": "pending"}.get(rec.state, rec.state)
+            if state == "interrupted" and rec.sessions and rec.sessions[-1].slurm_job:
+                state = "requeued"
+            meta = {"error": rec.error, **meta}
+    if state == "running":
+        owner = lock_owner(folder) or ((meta["pid"], meta.get("host", "")) if "pid" in meta else None)
+        alive = process_alive(*owner) if owner else False
+        if alive is False:
+            state = "died"
+            meta = {**meta, "error": (f"its process (pid {owner[0]}) is gone" if owner else "no process holds it")
+                    + " without ending the run (killed?): "
+                    + ("run the study again: it continues this job" if "hash" in meta else
+                       f"continue it with `python -m opalflow run --out {folder} --resume`")}
+        elif alive is None:
+            meta = {**meta, "where": f"on {owner[1]}, not checked from here"}
+    return state, meta
 
 
 def status_lines(folder: str | Path, tail: int = 8) -> list[str]:
@@ -64,15 +88,18 @@ def status_lines(folder: str | Path, tail: int = 8) -> list[str]:
         state, meta = run_state(job)
         counts[state] += 1
         label = meta.get("label", job.name)
-        where = " ".join(x for x in (meta.get("host", ""), f"slurm {meta['slurm_job']}" if meta.get("slurm_job") else "")
-                         if x)
+        where = meta.get("where") or " ".join(
+            x for x in (meta.get("host", ""), f"slurm {meta['slurm_job']}" if meta.get("slurm_job") else "") if x)
         if state == "finished":
             s = read_summary(job) or {}
             wall = s.get("wall_s")
             rows.append(f"  finished  {label}: {s.get('headline', '')}" + (f" ({wall:.0f} s)" if wall else ""))
-        elif state == "failed":
-            rows.append(f"  FAILED    {label}: {meta.get('error', '')} [{job}]")
+        elif state in ("failed", "died", "damaged"):
+            rows.append(f"  {state.upper():<9} {label}: {meta.get('error') or 'no reason recorded'} [{job}]")
             rows += [f"            | {line}" for line in meta.get("log_tail", "").splitlines()[-tail:]]
+        elif state == "interrupted":
+            rows.append(f"  {state:<11} {label}: stopped (Ctrl-C or SIGTERM){_sessions(job)}; continue it with "
+                        f"`python -m opalflow run --out {job} --resume`")
         elif state in ("running", "requeued"):
             said, left = _progress(job)
             if state == "running":

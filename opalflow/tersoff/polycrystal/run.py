@@ -7,7 +7,6 @@ Each run folder gets ``results.h5`` (every dataset with ``units``, tables with `
 """
 from __future__ import annotations
 
-import json
 import math
 import time
 from pathlib import Path
@@ -15,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from opalflow.runs.record import RunRecord, finish
-from opalflow.store import h5_bytes, new_figure, save_figure, write_json_atomic
+from opalflow.store import h5_bytes, new_figure, read_json, save_figure, write_json_atomic
 from opalflow.tersoff.parameters import load_parameters
 from opalflow.tersoff.polycrystal.crystal import check_sample_hessian, longitudinal_speed_nm_ps, single_crystal
 from opalflow.tersoff.polycrystal.dynamics import M_PER_S, Polycrystal, polycrystal_bounds, speeds
@@ -24,6 +23,8 @@ from opalflow.tersoff.polycrystal.output import plot_mesh, write_vtu
 from opalflow.tersoff.polycrystal.samples import Samples, random_rotations, relax_md, relax_minimize
 from opalflow.tersoff.polycrystal.spec import PolycrystalWorkflow, TensionWorkflow, WavesWorkflow
 from opalflow.version import __version__
+
+REDO = "delete it and resume: the job runs again"
 
 #: seed 003, section 3: polycrystalline silicon (their ref. 30)
 REFERENCE = {"youngs_modulus_GPa": 160.0, "poisson_ratio": 0.22, "wave_speed_plate_m_s": 8850.0,
@@ -200,7 +201,7 @@ def run_tension(spec: TensionWorkflow, out: Path, say=print, resume: bool = Fals
             path = out / "jobs" / f"{name}.json"
             label = f"[{len(jobs) + 1}/{total}] {6 * n ** 3} elements, edge {n * h:g} nm, seed {seed}"
             if resume and path.exists():
-                jobs.append(json.loads(path.read_text()))
+                jobs.append(read_json(path, "a finished job of the run", REDO))
                 say(f"{label}: done before (resume)")
                 continue
             say(f"{label}: {t.method}")
@@ -448,7 +449,7 @@ def run_waves(spec: WavesWorkflow, out: Path, say=print, resume: bool = False) -
     check = _lammps_check(spec, params, samples, out)
     measured_path = out / "jobs" / "static_tension.json"
     if resume and measured_path.exists():
-        measured = json.loads(measured_path.read_text())
+        measured = read_json(measured_path, "a finished job of the run", REDO)
     else:
         say("E and nu of the same potential: static tension of 384 elements")
         tension = TensionWorkflow(name="moduli", kind="polycrystal_tension", tersoff=spec.tersoff, samples=spec.samples)
@@ -462,7 +463,7 @@ def run_waves(spec: WavesWorkflow, out: Path, say=print, resume: bool = False) -
     for name in w.experiments:
         path = out / "jobs" / f"wave_{name}.json"
         if resume and path.exists():
-            jobs.append(json.loads(path.read_text()))
+            jobs.append(read_json(path, "a finished job of the run", REDO))
             say(f"{name} wave: done before (resume)")
             continue
         job, states[name] = wave_job(spec, samples, crystal, bounds, name, say)
