@@ -73,7 +73,7 @@ def raw_workflow(workflow: str | Path | dict | WorkflowSpec, set: Settings = Non
 
 def load_workflow(workflow: str | Path | dict | WorkflowSpec, set: Settings = None) -> WorkflowSpec:
     """The validated spec of ``workflow`` with the ``set`` overrides applied."""
-    return registry.spec_from_dict(raw_workflow(workflow, set))
+    return registry.spec_from_dict(raw_workflow(workflow, set), raw_workflow(workflow) if set else None)
 
 
 def _folder(out: str | Path, field: str = "out") -> Path:
@@ -117,9 +117,11 @@ def run(workflow: str | Path | dict | WorkflowSpec | None, out: str | Path, *, s
         usable = lammps_info()["accelerators"]
         if suffix not in usable:
             raise SpecError("--suffix", suffix, f"this LAMMPS build offers {', '.join(usable) or 'none'}")
-    from opalflow.runs.record import run_kind
+    from opalflow.runs.record import refuse_finished, run_kind
 
     kind = registry.get(spec.kind)
+    if not resume and "executor" not in kind.options:      # (a study run again goes on: its finished jobs kept)
+        refuse_finished(out)
     ex = executor_of(None if resume and workflow is None else workflow, set, executor)
     if "executor" in kind.options:              # a kind of many jobs sends them there
         return run_kind(kind, spec, out, np_=np, resume=resume, say=_say(quiet), suffix=suffix,

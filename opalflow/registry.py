@@ -17,13 +17,15 @@ Adding a track is a new package plus one line here (or one entry point in its ow
 """
 from __future__ import annotations
 
+import copy
 import importlib
 from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from opalflow.spec import SpecError, WorkflowSpec, apply_overrides, convert, read_toml
+from opalflow.runs.spec import executor_from_raw
+from opalflow.spec import InputError, SpecError, WorkflowSpec, apply_overrides, convert, read_toml
 from opalflow.store import folder_lock
 
 #: CLI options a kind may take, besides --out and --set, and the runner's keyword for each
@@ -203,23 +205,41 @@ def get(name: str) -> Kind:
 
 
 # ----------------------------------------------------------------------------- specs
-def spec_from_dict(raw: dict) -> WorkflowSpec:
+def spec_from_dict(raw: dict, base: dict | None = None) -> WorkflowSpec:
     """The validated spec of a raw workflow table (kind picks the class).
 
-    Sections and top-level keys that only other kinds read are left out, so that ``--set kind=...``
-    can switch a workflow file to another kind; a key that no kind reads is refused.
+    Every section and top-level key is checked against the kind's spec before anything runs: a key that no
+    kind reads is refused by its section, and a section that only other kinds read is refused naming them;
+    ``[executor]`` (where the run goes, any kind's: :mod:`opalflow.runs.spec`) is checked and left out.
+    ``base`` (the workflow file's table before ``--set``): where ``--set kind=...`` switched the file to
+    another kind, the file's own sections that the new kind does not read are left out.
     """
     name = raw.get("kind", DEFAULT_KIND)
     if not isinstance(name, str):
         raise SpecError("kind", name, "must be a string")
     cls = get(name).spec_class()
     own = set(cls.__dataclass_fields__)
-    others = {f for k in kinds().values() for f in k.spec_class().__dataclass_fields__} - own
-    spec = convert(cls, {k: v for k, v in raw.items() if k not in others})
+    readers: dict[str, list[str]] = {}
+    for other, kind in kinds().items():
+        for f in kind.spec_class().__dataclass_fields__:
+            readers.setdefault(f, []).append(other)
+    switched = base is not None and base.get("kind", DEFAULT_KIND) != name
+    kept = {}
+    for key, value in raw.items():
+        if key == "executor" and key not in own:        # the run layer's, of any workflow: checked here
+            executor_from_raw({key: value})
+        elif key in own or key not in readers:          # (a key no kind reads: convert refuses it)
+            kept[key] = value
+        elif not (switched and key in base and base[key] == value):
+            what = f"[{key}]" if isinstance(value, dict) else f"'{key}'"
+            raise InputError(f"{what}: kind {name!r} does not read it (read by: {', '.join(readers[key])}); remove "
+                             f"it, or set kind to one of those")
+    spec = convert(cls, kept)
     spec.validate()
     return spec
 
 
 def load_spec(path: str | Path, overrides: list[str] | None = None) -> WorkflowSpec:
     """Read, override and validate a workflow file."""
-    return spec_from_dict(apply_overrides(read_toml(path), overrides or []))
+    base = read_toml(path)
+    return spec_from_dict(apply_overrides(copy.deepcopy(base), overrides or []), base)

@@ -22,6 +22,12 @@ from pathlib import Path
 from typing import Any, get_type_hints
 
 NAME_RE = re.compile(r"[A-Za-z0-9_]+")
+#: the longest name opalflow takes (workflow, material, partition ...): it goes into file headers and folder names
+NAME_MAX = 64
+#: the longest description (one line, shown in reports)
+DESCRIPTION_MAX = 500
+#: the longest value a refusal echoes
+SHOWN_MAX = 120
 
 
 class InputError(ValueError):
@@ -35,7 +41,10 @@ class SpecError(InputError):
         self.field = field_name
         self.value = value
         self.allowed = allowed
-        super().__init__(f"{field_name} = {value!r}: {allowed}")
+        shown = repr(value)
+        if len(shown) > SHOWN_MAX:          # (one line a terminal can show: a 1 MB name is not echoed)
+            shown = f"{shown[:SHOWN_MAX - 20]}... ({len(shown)} characters)"
+        super().__init__(f"{field_name} = {shown}: {allowed}")
 
 
 @dataclass
@@ -52,18 +61,23 @@ class WorkflowSpec:
     def validate(self) -> None:
         """Check every field; raise SpecError naming the first bad one (tracks extend this)."""
         check_name("name", self.name)
+        check(len(self.description) <= DESCRIPTION_MAX and "\n" not in self.description, "description",
+              self.description, f"one line of at most {DESCRIPTION_MAX} characters")
 
 
 # ----------------------------------------------------------------------------- loading
 def read_toml(path: str | Path) -> dict:
-    """The raw table of a workflow file."""
+    """The raw table of a workflow file (without a ``name``: the file's stem, where that is a name)."""
     path = Path(path)
     try:
-        return tomllib.loads(path.read_text())
+        raw = tomllib.loads(path.read_text())
     except FileNotFoundError:
         raise SpecError("workflow", str(path), "file not found") from None
     except tomllib.TOMLDecodeError as exc:
         raise SpecError("workflow", str(path), f"not valid TOML ({exc})") from None
+    if "name" not in raw and NAME_RE.fullmatch(path.stem) and len(path.stem) <= NAME_MAX:
+        raw["name"] = path.stem
+    return raw
 
 
 def parse_value(text: str) -> Any:
@@ -158,6 +172,7 @@ def check(cond: bool, where: str, value, allowed: str) -> None:
 def check_name(where: str, value: str) -> None:
     check(bool(NAME_RE.fullmatch(value)), where, value,
           "names may only contain letters, digits and '_' ([A-Za-z0-9_]+)")
+    check(len(value) <= NAME_MAX, where, value, f"names may be at most {NAME_MAX} characters long")
 
 
 def is_number(value) -> bool:

@@ -128,7 +128,7 @@ def test_ase_and_mdanalysis_readers_give_radii_and_bonds(api_run):
     assert np.allclose(u.bonds.values(pbc=True), 200.0, rtol=2e-3)
 
 
-def test_ctrl_c_prints_one_line_exits_130_and_resumes(tmp_path):
+def test_ctrl_c_prints_one_line_exits_130_and_resumes(tmp_path, capsys):
     out = tmp_path / "qs"
     args = ["run", "lattice_sc", "--out", str(out),
             "--set", "compression.strain_max=0.02", "--set", "compression.restart_every_strain=0.001"]
@@ -146,7 +146,12 @@ def test_ctrl_c_prints_one_line_exits_130_and_resumes(tmp_path):
     last = err.strip().splitlines()[-1]
     assert last.startswith("interrupted at step ") and f"--out {out} --resume" in last
     assert "Traceback" not in err
+    capsys.readouterr()
     assert main(["run", "--out", str(out), "--resume"]) == 0
+    said = capsys.readouterr()
+    step = int(last.split()[3].rstrip(";,"))
+    text = said.out + said.err                  # (a stop on a restart step itself runs nothing again)
+    assert "resuming from restart." in text and (f"the run had reached step {step}" in text or f"(step {step} of" in text)
     assert json.loads((out / "summary.json").read_text())["complete"]
 
 

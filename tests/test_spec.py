@@ -64,3 +64,56 @@ def test_set_changes_the_spec():
 def test_every_shipped_workflow_validates():
     for path in WORKFLOWS.glob("*.toml"):
         load_spec(path)
+
+
+@pytest.mark.parametrize("command, workflow, sets, section, readers", [
+    ("run", "tersoff_properties", ["compression.bogus=1"], "compression", "opal, lattice, datafile, aerogel"),
+    ("build", "quickstart", ["lattice.spacing_nm=nan", "lattice.bogus=1"], "lattice", "lattice"),
+    ("build", "quickstart", ['datafile.path="/nonexistent"'], "datafile", "datafile"),
+    ("run", "aerogel_dlca", ['compression.method="quasistatic"'], "compression", "opal, lattice, datafile, aerogel"),
+    ("plan", "polycrystal_tension", ['compression.method="quasistatic"'], "compression", "opal")])
+def test_a_section_the_kind_does_not_read_is_refused_naming_who_reads_it(tmp_path, capsys, command, workflow, sets,
+                                                                         section, readers):
+    """A setting in a section the kind does not read did nothing and said nothing (exit 0; the aerogel and
+    polycrystal ran for minutes): now one line naming the section and the kinds that read it, exit 2, nothing
+    written."""
+    from opalflow.cli import main
+
+    out = tmp_path / "x"
+    argv = [command, workflow] + (["--out", str(out)] if command != "plan" else [])
+    for s in sets:
+        argv += ["--set", s]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith(f"error: [{section}]: kind ") and readers in err, err
+    assert not out.exists()
+
+
+def test_a_switched_kind_leaves_out_the_files_own_sections_and_executor_is_checked(tmp_path, capsys):
+    """--set kind=... switches a workflow file to another kind (its own sections left out); [executor] is every
+    kind's and checked for a single run too (`plan quickstart --set 'executor.partition=a;rm -rf /tmp/x'` printed a
+    SLURM request with that string)."""
+    spec = load_spec(WORKFLOWS / "lattice_sc.toml", ["kind=opal"])
+    assert spec.kind == "opal"
+    for command in ("plan", "build"):
+        argv = [command, "quickstart"] + (["--out", str(tmp_path / "x")] if command == "build" else [])
+        assert_refused(capsys, argv, ['executor.partition="a;rm -rf /tmp/x"'], "executor.partition", tmp_path / "x")
+
+
+def test_a_megabyte_name_is_refused_in_a_short_line(tmp_path, capsys):
+    """A 1 MB name went into data.lmp, in.lmp and resume.lmp headers, 2 MB run.json and summary.json and 1 MB on the
+    terminal: names are at most 64 characters, a refusal echoes at most 120 of a value, nothing is written."""
+    import re
+
+    from opalflow.cli import main
+
+    text = (WORKFLOWS / "lattice_sc.toml").read_text()
+    long = tmp_path / "long.toml"
+    long.write_text(re.sub(r"^name = .*$", 'name = "' + "a" * 1_000_000 + '"', text, count=1, flags=re.M))
+    out = tmp_path / "x"
+    assert main(["build", str(long), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err) < 300 and "at most 64 characters" in err and "(1000002 characters)" in err, err[:300]
+    assert not out.exists()
+    assert main(["build", str(long), "--out", str(out), "--set", 'description="two\\nlines"', "--set", 'name="ok"']) == 2
+    assert "one line" in capsys.readouterr().err

@@ -146,10 +146,11 @@ def build(spec: BpmWorkflow, out: Path, say=print) -> dict:
     return summary
 
 
-def execute(out: Path, *, np_: int = 1, resume: bool = False, label: str = "", suffix: str | None = None) -> float:
+def execute(out: Path, *, np_: int = 1, resume: bool = False, label: str = "", suffix: str | None = None,
+            say=print) -> float:
     """Run the deck of a prepared folder with the launcher for ``np_`` ranks (:mod:`opalflow.runs.launch`);
     returns LAMMPS wall seconds.  The run record's current session says where it started (restart file,
-    step) and how it was launched."""
+    step) and how it was launched; a resume says so (and the steps it runs again)."""
     record = RunRecord.read(out)
     info = record.deck
     launcher = launch.choose(np_)
@@ -160,6 +161,10 @@ def execute(out: Path, *, np_: int = 1, resume: bool = False, label: str = "", s
             raise SpecError("--resume", str(out), "no readable restart file in the folder; run without --resume")
         mech.trim_curve(out / "curve.txt", step)     # LAMMPS reads the newest restart file
         first, restart = step, f"restart.{step}.bin"
+        reached = record.sessions[-1].last_step if record.sessions else None
+        say(f"{label}resuming from {restart} (step {step} of {info['steps']})"
+            + (f"; the run had reached step {reached}: steps {step}-{reached} run again" if reached and reached > step
+               else ""))
     record.begin(out, launcher=launcher.describe(), restart=restart, first_step=first)
     if not launcher.in_process:
         return run_subprocess(out, np=np_, total_steps=info["steps"], resume=resume, label=label, suffix=suffix,
@@ -414,7 +419,7 @@ def run_workflow(spec: BpmWorkflow, out: Path, *, np_: int = 1, resume: bool = F
         estimate = long_run_estimate(spec, deck, np_)
         if estimate:
             say(estimate)
-    lammps_s = execute(out, np_=np_, resume=resume, label=f"{spec.name}: ", suffix=suffix)
+    lammps_s = execute(out, np_=np_, resume=resume, label=f"{spec.name}: ", suffix=suffix, say=say)
     extra = {}
     if spec.compression.check_rate and not resume:
         half = dataclasses.replace(spec, compression=dataclasses.replace(

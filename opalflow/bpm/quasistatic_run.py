@@ -90,6 +90,8 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
         if not (out / STATE).exists():
             raise SpecError("--resume", str(out), f"no {STATE} in the folder (the run saved none yet): run it anew")
         state = load_state(out)
+        say(f"quasi-static: resuming from {STATE} ({len(state['events'])} events done"
+            + (", the peak's displacements kept" if state["peak_x"] is not None else "") + ")")
     s = scene_of(spec).structure(spec, say)
     loading = LOADINGS[c.loading]
     sample, net, info, record, written = network_run(spec, s, out, t0, launcher="in-process (quasi-static)",

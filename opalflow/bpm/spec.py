@@ -237,6 +237,9 @@ class BpmWorkflow(WorkflowSpec):
               "rule alone; the paper's rules need \"quasistatic\")")
         check(c.resolver in RESOLVERS, "compression.resolver", c.resolver,
               f"must be one of {', '.join(RESOLVERS)} (quasistatic method)")
+        check(c.solver == "auto" or c.method != "quasistatic", "compression.solver", c.solver,
+              "is the static method's: the quasi-static re-solves are set by compression.resolver (one of "
+              f"{', '.join(RESOLVERS)})")
         check(0 <= c.event_tolerance <= 0.5, "compression.event_tolerance", c.event_tolerance,
               "must be in [0, 0.5] (bonds within this fraction of the next limit break in one event)")
         check(0 <= c.stop_fraction < 1, "compression.stop_fraction", c.stop_fraction, "must be in [0, 1)")

@@ -201,7 +201,7 @@ def write_build_summary(folder: str | os.PathLike, summary: dict) -> None:
 def refuse_finished(folder: str | os.PathLike) -> None:
     """One line, before anything is written, where ``folder`` already holds a finished run."""
     if is_finished(folder):
-        raise SpecError("--out", str(folder), "holds a finished run (summary.json, results); build into another "
+        raise SpecError("--out", str(folder), "holds a finished run (summary.json, results): write into another "
                         "folder or remove it first")
 
 
