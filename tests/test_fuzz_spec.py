@@ -201,3 +201,60 @@ def test_fuzzed_set_through_the_cli(kind, tmp_path, capsys):
         else:
             assert code == 0 and kind in ("opal", "lattice") and (out / "in.lmp").exists(), (path, value, code)
     assert refused >= 10
+
+
+def _toml_value(v) -> str:
+    """A --set value as TOML writes it (a few odd forms a shell user types, too)."""
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float) and not math.isfinite(v):
+        return "nan" if math.isnan(v) else ("inf" if v > 0 else "-inf")
+    if v is None:
+        return ""
+    return json.dumps(v)
+
+
+def test_the_command_line_refuses_in_one_line_or_accepts_and_writes_nothing_on_refusal(tmp_path, monkeypatch,
+                                                                                        capsys):
+    """``run WORKFLOW --set ...`` with random sections, keys, values and kinds (every workflow file, every field
+    of every kind, unknown ones, malformed items): exit 0 (the spec is valid: the run itself is stubbed out, it
+    is not what this checks) or one line ``error: ...`` with exit 2 and no folder; never a traceback."""
+    import opalflow.runs.record as record
+
+    accepted = []
+    monkeypatch.setattr(record, "run_kind", lambda kind, spec, out, **kw: accepted.append(spec) or {"headline": "stub", "wall_s": 0.0})
+    rng = random.Random(20261203)
+    workflows = sorted(p.stem for p in WORKFLOWS.glob("*.toml"))
+    paths = sorted({".".join(p) for kind in registry.kinds().values() for p in fields(kind.spec_class())})
+    kinds = sorted(registry.kinds())
+    outcomes = Counter()
+    for case in range(400):
+        sets = []
+        for _ in range(rng.choice([1, 1, 2, 3])):
+            what = rng.random()
+            if what < 0.55:
+                sets.append(f"{rng.choice(paths)}={_toml_value(rng.choice(VALUES + METACHARACTERS))}")
+            elif what < 0.65:
+                sets.append(f"kind={json.dumps(rng.choice(kinds + ['nope', 'opal;shell ls']))}")
+            elif what < 0.8:
+                section = rng.choice([p.split('.')[0] for p in paths] + ["nonsense"])
+                sets.append(f"{section}.{rng.choice(['colour', 'x', 'seed'])}={_toml_value(rng.choice(VALUES))}")
+            else:
+                sets.append(rng.choice(["no_equals", "a..b=1", "=1", "packing.=1", ".x=1", "packing.seed",
+                                        "packing seed=1", "packing.seed==1", "packing.seed=[1,", "x=\"unclosed"]))
+        out = tmp_path / f"case{case}"
+        argv = ["run", rng.choice(workflows), "--out", str(out)] + [a for s in sets for a in ("--set", s)]
+        before = len(accepted)
+        code = main(argv)
+        err = capsys.readouterr().err.strip()
+        assert code in (0, 2), (argv, code, err[-500:])
+        if code == 2:
+            assert len(err.splitlines()) == 1 and err.startswith("error: ") and len(err) < 1000, (argv, err[:500])
+            assert not out.exists(), argv
+            outcomes["refused"] += 1
+        else:
+            assert len(accepted) == before + 1, argv
+            outcomes["accepted"] += 1
+    assert outcomes["refused"] > 200 and outcomes["accepted"] >= 5, outcomes       # (seeded: 387 and 13)
