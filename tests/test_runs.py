@@ -61,7 +61,8 @@ def tiny(kind: str, tmp_path: Path) -> tuple[str | Path, list[str]]:
     if kind == "datafile":
         src = tmp_path / "lattice_build"
         opalflow.build("lattice_sc", src, set=LATTICE, quiet=True)
-        return name, [*sets, "kind=datafile", f'datafile.path="{src / "data.lmp"}"',
+        return name, [*[kv for kv in sets if not kv.startswith("lattice.")],   # (a datafile reads no [lattice])
+                      "kind=datafile", f'datafile.path="{src / "data.lmp"}"',
                       'datafile.materials=["silica","substrate"]']
     return name, sets
 
@@ -215,7 +216,8 @@ def test_a_failed_job_keeps_its_failure_in_its_folder_and_status_shows_it(tmp_pa
     s.positions[-1, 2] = 3 * s.box_hi[2]            # an atom outside the box: LAMMPS refuses the data file
     write_data(tmp_path / "bad.lmp", s)
     bad = Job("bad", load_spec(WORKFLOWS / "lattice_sc.toml", [
-        *LATTICE, "kind=datafile", f'datafile.path="{tmp_path / "bad.lmp"}"',
+        *[kv for kv in LATTICE if not kv.startswith("lattice.")], "kind=datafile",
+        f'datafile.path="{tmp_path / "bad.lmp"}"',
         'datafile.materials=["silica","substrate"]']))
     res = run_jobs([bad, good], tmp_path / "study", say=lambda m: None)
     assert "LAMMPS failed" in res["bad"]["failed"] and "ERROR" in res["bad"]["log_tail"]

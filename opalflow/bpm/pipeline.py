@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import subprocess
 import time
 from pathlib import Path
 
@@ -25,9 +24,8 @@ from opalflow.bpm.deck import CompressionDeck, compression_deck, particle_materi
 from opalflow.bpm.scene import scene_of, solid_fraction
 from opalflow.bpm.spec import BpmWorkflow
 from opalflow.lammps.datafile import write_data
-from opalflow.lammps.engine import EngineError, lammps_info, run_in_process, run_script_sh, run_subprocess, session
+from opalflow.lammps.engine import EngineError, run_in_process, run_script_sh, run_subprocess, session
 from opalflow.materials import material
-from opalflow.resources import ROOT
 from opalflow.runs import launch
 from opalflow.runs.record import RunRecord, finish, refuse_finished, write_build_summary
 from opalflow.spec import SpecError
@@ -224,14 +222,6 @@ def curve_strain_stress(curve: dict, info: dict) -> tuple[np.ndarray, np.ndarray
     return -sense * curve["plate_dz_nm"] / info["height_nm"], 0.5 * (plate + substrate), plate, substrate
 
 
-def git_commit() -> str:
-    try:
-        return subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True,
-                              text=True, timeout=5).stdout.strip() or "unknown"
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
-
-
 def analyze(out: Path, started: float | None = None, lammps_s: float | None = None,
             extra: dict | None = None) -> dict:
     """Curves, modulus, strength, particle stresses -> results.h5, summary.json, report.md, plots.
@@ -356,13 +346,7 @@ def _fill_h5(h, info, curve, strain, stress, stress_plate, stress_substrate, bro
         g.attrs["strain"] = hist["strain"]
         put(g, "fraction", hist["fraction"], "1", description="fraction of intact bonds per bin")
         put(g, "edges", hist["edges"], "1", description="bin edges of the bond strain r / r0 - 1")
-    p = h.create_group("provenance")
-    p.attrs["spec"] = json.dumps(info["spec"])
-    p.attrs["lammps_version"] = lammps_info()["version"]
-    p.attrs["git_commit"] = git_commit()
-    p.attrs["seeds"] = json.dumps({name: section["seed"] for name, section in info["spec"].items()
-                                   if isinstance(section, dict) and "seed" in section})
-    p.attrs["run"] = json.dumps({k: v for k, v in info.items() if k != "spec"})
+    report.provenance_group(h, info)
     h.attrs["summary"] = json.dumps(summary, default=float)
 
 

@@ -25,7 +25,8 @@ from opalflow.materials import contact_properties
 from opalflow.bpm.quasistatic import CHECKS, Event, Stopped, Strengths, solve_fracture, summary_of
 from opalflow.bpm.scene import scene_of
 from opalflow.bpm.spec import BREAKING_RULES, BpmWorkflow
-from opalflow.bpm.report import reference_errors, sample_lines
+from opalflow.bpm.report import (network_inputs, provenance_group, reference_errors, sample_lines, structure_cost,
+                                 why)
 from opalflow.bpm.static_run import network_run, particle_stress
 from opalflow.bpm.stiffness import per_bond
 from opalflow.runs.record import finish
@@ -156,7 +157,7 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
     record.sessions[-1].last_step = got["events"]
 
     def files(stage):
-        stage("results.h5").write_bytes(h5_bytes(lambda h: _fill_h5(h, res, data, summary, sample)))
+        stage("results.h5").write_bytes(h5_bytes(lambda h: _fill_h5(h, res, data, summary, sample, info)))
         _plot_curve(stage("stress_strain.png"), res, summary)
         frames = _frames(net, data, res)
         if frames:
@@ -165,8 +166,8 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
             for tag, (_, snap) in zip(("peak", "end"), frames):
                 _write_dump(stage(f"fracture.{tag}.dump"), data, snap)
 
-    summary = finish(out, summary, lambda: _report(spec, info, summary, res, loading), files=files, record=record,
-                     started=t0)
+    summary = finish(out, summary, lambda: _report(spec, info, summary, res, loading, sample), files=files,
+                     record=record, started=t0)
     (out / STATE).unlink(missing_ok=True)
     (out / PEAK).unlink(missing_ok=True)
     return summary
@@ -252,7 +253,7 @@ def _write_dump(path: Path, data, snap: dict) -> None:
         np.savetxt(f, rows, fmt=["%d", "%d", "%.6f", "%.6f", "%.6f", "%.6f", "%d"])
 
 
-def _fill_h5(h, res, data, summary, sample) -> None:
+def _fill_h5(h, res, data, summary, sample, info) -> None:
     h.attrs["method"] = "quasistatic"
     h.attrs["youngs_modulus_GPa"] = summary["youngs_modulus_GPa"]
     g = h.create_group("quasistatic")
@@ -273,6 +274,7 @@ def _fill_h5(h, res, data, summary, sample) -> None:
         description="length bin (data.lmp bond type - 1) of each broken bond")
     put(g, "intact", res.alive.astype(np.int8), "1", description="1 for each bond intact at the end")
     put(g, "position_nm", data.positions, "nm", ["x", "y", "z"])
+    provenance_group(h, info)
 
 
 def _plot_curve(path: Path, res, summary) -> None:
@@ -308,7 +310,7 @@ def _check_table(summary) -> list[str]:
     return lines
 
 
-def _report(spec, info, summary, res, loading) -> str:
+def _report(spec, info, summary, res, loading, sample) -> str:
     q = summary["quasistatic"]
     lines = [f"# {spec.name}: quasi-static {loading.title}", "",
              f"{info['n_particles']} particles, {info['n_bonds']} bonds; the bond network linearised from LAMMPS's "
@@ -316,19 +318,23 @@ def _report(spec, info, summary, res, loading) -> str:
              "load (as `smooth no`; opalflow/bpm/quasistatic.py); substrate fixed, top layer "
              f"({info['top_layer_particles']} particles) {'pushed down' if loading.sense > 0 else 'pulled up'}"
              + (", glued to the wall" if loading.glued else ", its x, y and rotations free") + ".", "",
-             *sample_lines(info),
+             *sample_lines(info), *network_inputs(info, sample), "## Results", "",
              *([f"Contacts (`contacts.quasistatic = \"{q['contacts']}\"`, opalflow/bpm/contacts.py): "
                 f"{q['contact_pairs']} touching pairs, linear Hertz-Mindlin springs at "
                 f"{100 * spec.contacts.reference_strain:g} % overlap, in compression only; pressing just before the "
                 f"peak: {q['contacts_pressing_at_peak']}, at the end: {q['contacts_pressing_at_end']}.", ""]
                if q["contacts"] != "off" else []),
-             "| quantity | value | reference | error |", "|---|---|---|---|"]
+             "| quantity | value | reference | error | why the error |", "|---|---|---|---|---|"]
+    d = float(sample.structure.diameters.mean())
     for key, label in (("youngs_modulus_GPa", "Young's modulus, first branch (GPa)"),
                        ("strength_MPa", "strength (MPa)"), ("strain_at_peak", "strain at peak")):
         ref = summary["reference"].get(key) or (summary["reference"].get("youngs_modulus_specimen_GPa")
                                                 if key == "youngs_modulus_GPa" else None)
+        reason = (why("youngs_modulus_specimen_GPa" if key == "youngs_modulus_GPa" else key, ref["error"], d)
+                  if ref else "")
         lines.append(f"| {label} | {summary[key]:.4g} | "
-                     + (f"{ref['value']:g} ({ref['source']}) | {100 * ref['error']:+.2f} % |" if ref else "- | - |"))
+                     + (f"{ref['value']:g} ({ref['source']}) | {100 * ref['error']:+.2f} % | {reason or '-'} |"
+                        if ref else "- | - | - |"))
     lines += ["", f"{q['events']} events, {summary['broken_bonds']} bonds broken "
               f"({', '.join(f'{m}: {k}' for m, k in summary['broken_bonds_by_material'].items())}), "
               f"{summary['broken_bonds_at_peak']} before the peak; stopped: {q['stopped']}.", "",
@@ -338,7 +344,7 @@ def _report(spec, info, summary, res, loading) -> str:
                                                          else "")
               + (f"; {q['settled_locally']} events settled by the local step alone (local_rtol {q['local_rtol']:g})"
                  if q["local_rtol"] else "")
-              + f"; structure built in {summary['build_s']:.1f} s; wall {summary['wall_s']:.1f} s.", "",
+              + f"; {structure_cost(info)}; wall {summary['wall_s']:.1f} s.", "",
               "Plots: stress_strain.png, fracture.png. Data: results.h5 (group `quasistatic`), fracture.peak.dump and "
               "fracture.end.dump (OVITO), summary.json."]
     return "\n".join(lines) + "\n"

@@ -7,11 +7,13 @@ format of Dosta et al. Table 2, the files written and the run's cost.
 """
 from __future__ import annotations
 
+import json
+import subprocess
 import tomllib
 from functools import lru_cache
 
 from opalflow.analysis import compression as mech
-from opalflow.resources import DATA
+from opalflow.resources import DATA, ROOT
 
 
 def reference_errors(summary: dict, references: dict) -> dict:
@@ -206,3 +208,75 @@ def compression_report(info: dict, summary: dict, fit, fracture: bool) -> str:
         lines += [_session_row(k, x) for k, x in enumerate(sessions, 1)]
         lines.append("")
     return "\n".join(lines)
+
+
+def git_commit() -> str:
+    try:
+        return subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True,
+                              text=True, timeout=5).stdout.strip() or "unknown"
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+def provenance_group(h, info: dict) -> None:
+    """results.h5's ``provenance`` group, every method's: the spec, LAMMPS's version, opalflow's commit, the
+    seeds and the run's facts (``info``: the spec under ``"spec"``, the rest JSON)."""
+    from opalflow.lammps.engine import lammps_info
+
+    p = h.create_group("provenance")
+    p.attrs["spec"] = json.dumps(info["spec"])
+    p.attrs["lammps_version"] = lammps_info()["version"]
+    p.attrs["git_commit"] = git_commit()
+    p.attrs["seeds"] = json.dumps({name: section["seed"] for name, section in info["spec"].items()
+                                   if isinstance(section, dict) and "seed" in section})
+    p.attrs["run"] = json.dumps({k: v for k, v in info.items() if k != "spec"}, default=float)
+
+
+def structure_cost(info: dict) -> str:
+    """How the structure came: built, or read from the cache (and what its first build cost)."""
+    if info.get("structure_cache"):
+        return (f"structure read from the cache in {info['build_s']:.1f} s (first built in "
+                f"{info['structure_first_build_s']:.1f} s)")
+    return f"structure built in {info['build_s']:.1f} s"
+
+
+def network_inputs(info: dict, sample) -> list[str]:
+    """The Inputs table of the static and quasi-static reports: scene, sample, particles, bonds, materials,
+    contacts, loading, breaking rule and re-solves (from the spec in ``info`` and the loaded sample)."""
+    from opalflow.bpm.spec import BREAKING_RULES
+    from opalflow.materials import material
+
+    spec = info["spec"]
+    c, b = spec["compression"], spec["bonds"]
+    data = sample.structure
+    box = data.box_lengths
+    d = float(data.diameters.mean())
+    structure = info.get("structure", {})
+    rows = [("scene", f"{spec['kind']}: {spec.get('description') or spec['name']}"),
+            ("sample", f"{box[0]:.0f} x {box[1]:.0f} nm (x, y; sides {'periodic' if info['periodic'][0] else 'open'}), "
+                       f"{info['height_nm']:.0f} nm high above the fixed substrate; stress on {stress_area(info)}"),
+            ("particles", f"{info['n_particles']}, mean diameter d = {d:.3g} nm; top layer "
+                          f"{info['top_layer_particles']}"),
+            ("bonds", f"{info['n_bonds']} ({info['n_bonds'] / max(1, info['n_particles']):.1f} per particle), "
+                      + ("from the data file, " if info.get("source") else f"cutoff {b['cutoff_factor']:g} d, ")
+                      + f"model {b['model']}, {len(sample.bins.lengths)} length bins"),
+            ("solid fraction", f"{info['solid_fraction']:.4f} of the sample volume")]
+    if info.get("source"):
+        rows.insert(1, ("data file", info["source"]))
+    if "porosity" in structure:
+        rows.append(("porosity", f"{structure['porosity']:.4f} (macro-pores)"))
+    for name in sorted(set(sample.bins.materials)):
+        m = material(name, spec["materials"])
+        rows.append((f"material {name}", f"bond E_b {m['bond_youngs_modulus_GPa']:g} GPa, nu "
+                     f"{m['bond_poisson_ratio']:g}, strength {m['bond_strength_MPa']:g} MPa "
+                     f"({m.get('source', 'workflow')})"))
+    rows.append(("loading", f"{c['loading']}, to strain {c['strain_max']:g} ({c['method']})"))
+    if c["method"] == "quasistatic":
+        rows.append(("breaking rule", f"`{b['breaking']}`: {BREAKING_RULES[b['breaking']]}"))
+        rows.append(("contacts", f"`contacts.quasistatic = \"{spec['contacts']['quasistatic']}\"`"))
+        rows.append(("re-solves", f"`compression.resolver = \"{c['resolver']}\"`, event tolerance "
+                     f"{c['event_tolerance']:g}, local_rtol {c['local_rtol']:g}"))
+    else:
+        rows.append(("solver", f"`compression.solver = \"{c['solver']}\"`"))
+    cell = [(k, v.replace("|", "\\|")) for k, v in rows]           # (|F_s| in a table cell)
+    return ["## Inputs", "", "| input | value |", "|---|---|", *[f"| {k} | {v} |" for k, v in cell], ""]

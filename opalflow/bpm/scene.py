@@ -56,6 +56,7 @@ class Scene:
             with open(path, "rb") as f:
                 s = pickle.load(f)
             os.utime(path)                       # recently used
+            s.meta["cache"] = str(path)          # (this process's: where the structure came from)
             if progress:
                 progress(f"structure: {s.n_particles} particles, {s.n_bonds} bonds from the cache ({path}; "
                          f"built in {s.meta.get('build_s', 0.0):.1f} s); OPALFLOW_CACHE=off rebuilds")

@@ -24,7 +24,7 @@ from opalflow.analysis import compression as mech
 from opalflow.analysis.elasticity import isotropic_average
 from opalflow.bpm.deck import bond_model, loaded_sample
 from opalflow.bpm.loading import LOADINGS
-from opalflow.bpm.report import reference_errors, sample_lines
+from opalflow.bpm.report import network_inputs, provenance_group, reference_errors, sample_lines, structure_cost
 from opalflow.bpm.scene import scene_of, solid_fraction
 from opalflow.bpm.spec import BpmWorkflow
 from opalflow.bpm.static import (VOIGT, LooseParticlesError, StaticResult, loose_message, loose_particles,
@@ -85,7 +85,8 @@ def network_run(spec: BpmWorkflow, s, out: Path, t0: float, *, launcher: str, re
             "solid_fraction": solid_fraction(s), "build_s": build_s, "references": spec.references(),
             "height_nm": sample.height_nm, "area_nm2": sample.area_nm2, "top_layer_particles": int(sample.top_layer.sum()),
             "loading": sample.loading, "loading_sense": sample.loading_sense, "periodic": data.periodic.tolist(),
-            "source": data.meta.get("source", "")}
+            "source": data.meta.get("source", ""), "structure_cache": s.meta.get("cache", ""),
+            "structure_first_build_s": s.meta.get("build_s", build_s)}
     scene = scene_of(spec)
     if scene.run_keys:
         stats = scene.statistics(sample.source)
@@ -166,12 +167,12 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
 
     def files(stage):
         t = time.perf_counter()
-        _write_h5(stage("results.h5"), data, res, sigma_unit, strain_unit, snapshots, summary)
+        _write_h5(stage("results.h5"), data, res, sigma_unit, strain_unit, snapshots, summary, info)
         _plots(stage, data, res, snapshots, strain_unit, c.snapshot_strains)
         summary["timings_s"]["files"] = time.perf_counter() - t
 
     sides = "periodic" if s.periodic[0] else "open"       # the structure's, whatever section set it
-    return finish(out, summary, lambda: _report(spec, info, summary, res, sides), files=files, started=t0)
+    return finish(out, summary, lambda: _report(spec, info, summary, res, sides, sample), files=files, started=t0)
 
 
 def _record(spec: BpmWorkflow, info: dict) -> RunRecord:
@@ -180,7 +181,7 @@ def _record(spec: BpmWorkflow, info: dict) -> RunRecord:
                                      if k not in ("workflow", "spec", "references", "opalflow_version")})
 
 
-def _write_h5(path: Path, data, res: StaticResult, sigma_unit, strain_unit, snapshots, summary) -> None:
+def _write_h5(path: Path, data, res: StaticResult, sigma_unit, strain_unit, snapshots, summary, info) -> None:
     def fill(h):
         h.attrs["method"] = "static"
         h.attrs["youngs_modulus_GPa"] = summary["youngs_modulus_GPa"]
@@ -198,6 +199,7 @@ def _write_h5(path: Path, data, res: StaticResult, sigma_unit, strain_unit, snap
             sg = h.create_group(f"snapshots/{e:.4f}")
             sg.attrs["strain"] = e
             put(sg, "sigma_MPa", snap["sigma_MPa"], "MPa", mech.STRESS_COLUMNS)
+        provenance_group(h, info)
     path.write_bytes(h5_bytes(fill))
 
 
@@ -217,7 +219,7 @@ def _plots(stage, data, res: StaticResult, snapshots, strain_unit, strains) -> N
             f"strain {100 * e:.2f} %": mech.histogram_fraction(strain_unit * e, edges) for e in strains})
 
 
-def _report(spec: BpmWorkflow, info: dict, summary: dict, res: StaticResult, sides: str) -> str:
+def _report(spec: BpmWorkflow, info: dict, summary: dict, res: StaticResult, sides: str, sample) -> str:
     loading = LOADINGS[spec.compression.loading]
     lines = [f"# {spec.name}: static {loading.title}", "",
              f"{info['n_particles']} particles, {info['n_bonds']} bonds; the bond network linearised from LAMMPS's "
@@ -227,7 +229,7 @@ def _report(spec: BpmWorkflow, info: dict, summary: dict, res: StaticResult, sid
              + ("glued to the wall (x, y and rotations held)" if loading.glued
                 else "its x, y and rotations free") + "; sides "
              f"{sides}. Contacts carry no load at the reference state and bonds do not break: "
-             "no strength.", "", *sample_lines(info),
+             "no strength.", "", *sample_lines(info), *network_inputs(info, sample), "## Results", "",
              "| quantity | value | reference | error |", "|---|---|---|---|"]
     ref = summary["reference"].get("youngs_modulus_specimen_GPa") or summary["reference"].get("youngs_modulus_GPa")
     lines.append(f"| Young's modulus (GPa) | {summary['youngs_modulus_GPa']:.4g} | "
@@ -238,7 +240,7 @@ def _report(spec: BpmWorkflow, info: dict, summary: dict, res: StaticResult, sid
     lines += ["", f"Solver `{res.solver}`: {res.iterations} iterations to relative residual {res.residual:.1e}; "
               f"set-up {res.setup_seconds:.1f} s, iterations {res.seconds - res.setup_seconds:.1f} s, peak memory "
               f"{res.peak_memory_MiB:.0f} MiB; "
-              f"structure built in {summary['build_s']:.1f} s; wall {summary['wall_s']:.1f} s.", ""]
+              f"{structure_cost(info)}; wall {summary['wall_s']:.1f} s.", ""]
     lines += mech.stress_table(summary["stress_by_material"], digits=2)
     lines += ["", "Plots: displacement.png, stress_hist.png, bond_strain.png. Data: results.h5 (group `static`), "
               "summary.json."]
