@@ -117,3 +117,28 @@ def test_a_megabyte_name_is_refused_in_a_short_line(tmp_path, capsys):
     assert not out.exists()
     assert main(["build", str(long), "--out", str(out), "--set", 'description="two\\nlines"', "--set", 'name="ok"']) == 2
     assert "one line" in capsys.readouterr().err
+
+
+def test_a_finished_run_is_not_replaced_and_a_nameless_file_takes_its_stem(tmp_path, capsys):
+    """`run` into a finished run's folder replaced it silently while `build` refused; a workflow without `name`
+    printed "building opal (datafile)"."""
+    import json
+
+    from opalflow.cli import main
+
+    text = "\n".join(line for line in (WORKFLOWS / "lattice_sc.toml").read_text().splitlines()
+                     if not line.startswith("name ="))
+    (tmp_path / "my_lattice.toml").write_text(text)
+    assert main(["build", str(tmp_path / "my_lattice.toml"), "--out", str(tmp_path / "built")]) == 0
+    said = capsys.readouterr()
+    assert "building my_lattice (lattice)" in said.out + said.err
+    out = tmp_path / "run"
+    small = ["--set", "compression.method=static"]
+    assert main(["run", str(tmp_path / "my_lattice.toml"), "--out", str(out), *small]) == 0
+    capsys.readouterr()
+    before = (out / "summary.json").read_text()
+    assert json.loads(before)["workflow"] == "my_lattice"
+    assert main(["run", "lattice_sc", "--out", str(out), *small]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: --out = ") and "holds a finished run" in err
+    assert (out / "summary.json").read_text() == before
