@@ -47,6 +47,27 @@ def brute_force_pairs(x, r, box, periodic):
     return np.column_stack([i, j])
 
 
+def signalled_run(out, sig) -> tuple[int, str]:
+    """A real dynamic run of the lattice into ``out`` in a child process, sent ``sig`` once LAMMPS has written its
+    first restart file: (exit code, stderr).  Python keeps SIGINT ignored where its parent ignored it
+    (background shells): the child restores Ctrl-C itself (a preexec_fn would fork this JAX-threaded process)."""
+    import subprocess
+    import sys
+    import time
+
+    args = ["run", "lattice_sc", "--out", str(out), "--set", "compression.strain_max=0.02",
+            "--set", "compression.restart_every_strain=0.001"]
+    child = ("import runpy, signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+             f"sys.argv = ['opalflow'] + {args!r}; runpy.run_module('opalflow', run_name='__main__')")
+    p = subprocess.Popen([sys.executable, "-c", child], stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 120
+    while time.time() < deadline and not list(out.glob("restart.*.bin")):
+        time.sleep(0.2)
+    p.send_signal(sig)
+    err = p.stderr.read()
+    return p.wait(), err
+
+
 def assert_refused(capsys, argv: list[str], sets: list[str], field: str, out) -> None:
     """The CLI refuses the --set values with one line naming ``field``, exit 2, ``out`` not created."""
     from opalflow.cli import main

@@ -2,9 +2,6 @@
 readers, Ctrl-C."""
 import json
 import signal
-import subprocess
-import sys
-import time
 
 import numpy as np
 import pytest
@@ -129,20 +126,11 @@ def test_ase_and_mdanalysis_readers_give_radii_and_bonds(api_run):
 
 
 def test_ctrl_c_prints_one_line_exits_130_and_resumes(tmp_path, capsys):
+    from conftest import signalled_run
+
     out = tmp_path / "qs"
-    args = ["run", "lattice_sc", "--out", str(out),
-            "--set", "compression.strain_max=0.02", "--set", "compression.restart_every_strain=0.001"]
-    # Python keeps SIGINT ignored where its parent ignored it (background shells): the child restores
-    # Ctrl-C itself (a preexec_fn would fork this JAX-threaded process)
-    child = ("import runpy, signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
-             f"sys.argv = ['opalflow'] + {args!r}; runpy.run_module('opalflow', run_name='__main__')")
-    p = subprocess.Popen([sys.executable, "-c", child], stderr=subprocess.PIPE, text=True)
-    deadline = time.time() + 120
-    while time.time() < deadline and not list(out.glob("restart.*.bin")):
-        time.sleep(0.2)
-    p.send_signal(signal.SIGINT)
-    err = p.stderr.read()
-    assert p.wait() == 130
+    code, err = signalled_run(out, signal.SIGINT)
+    assert code == 130
     last = err.strip().splitlines()[-1]
     assert last.startswith("interrupted at step ") and f"--out {out} --resume" in last
     assert "Traceback" not in err

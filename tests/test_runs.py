@@ -6,7 +6,6 @@ import shutil
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -316,28 +315,15 @@ def test_a_relative_out_folder(tmp_path, monkeypatch, capsys):
     assert RunRecord.read("runs/sc").state == "finished"
 
 
-def _started_then_signalled(out, sig):
-    """A real dynamic run of the lattice, signalled once LAMMPS reports progress (its first restart file)."""
-    args = ["run", "lattice_sc", "--out", str(out), "--set", "compression.strain_max=0.02",
-            "--set", "compression.restart_every_strain=0.001"]
-    child = ("import runpy, signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
-             f"sys.argv = ['opalflow'] + {args!r}; runpy.run_module('opalflow', run_name='__main__')")
-    p = subprocess.Popen([sys.executable, "-c", child], stderr=subprocess.PIPE, text=True)
-    deadline = time.time() + 120
-    while time.time() < deadline and not list(out.glob("restart.*.bin")):
-        time.sleep(0.2)
-    p.send_signal(sig)
-    p.stderr.read()
-    return p.wait()
-
-
 @pytest.mark.parametrize("sig, state", [(signal.SIGKILL, "DIED"), (signal.SIGTERM, "interrupted")])
 def test_status_tells_a_killed_run_from_an_interrupted_one(tmp_path, capsys, sig, state):
     """SIGKILL leaves run.json saying running and a lock whose process is gone: status says it died and how to
     go on (it said "running ... s left"); SIGTERM (or Ctrl-C) ends the record interrupted: status says so (it
     said "requeued", though no scheduler was involved)."""
     out = tmp_path / "run"
-    assert _started_then_signalled(out, sig) == (-9 if sig == signal.SIGKILL else 143)
+    from conftest import signalled_run
+
+    assert signalled_run(out, sig)[0] == (-9 if sig == signal.SIGKILL else 143)
     capsys.readouterr()
     assert main(["status", str(out)]) == 0
     text = capsys.readouterr().out
