@@ -24,6 +24,7 @@ from typing import Any, Callable
 
 from opalflow import registry
 from opalflow.resources import WORKFLOWS
+from opalflow.runs.spec import executor_from_raw
 from opalflow.spec import SpecError, WorkflowSpec, apply_overrides, read_toml, set_value
 
 Settings = dict[str, Any] | list[str] | None
@@ -73,7 +74,9 @@ def raw_workflow(workflow: str | Path | dict | WorkflowSpec, set: Settings = Non
 
 def load_workflow(workflow: str | Path | dict | WorkflowSpec, set: Settings = None) -> WorkflowSpec:
     """The validated spec of ``workflow`` with the ``set`` overrides applied."""
-    return registry.spec_from_dict(raw_workflow(workflow, set), raw_workflow(workflow) if set else None)
+    raw = raw_workflow(workflow, set)
+    executor_from_raw(dict(raw))                # (every kind's [executor], checked for a single run too)
+    return registry.spec_from_dict(raw, raw_workflow(workflow) if set else None)
 
 
 def _folder(out: str | Path, field: str = "out") -> Path:
@@ -136,8 +139,6 @@ def run(workflow: str | Path | dict | WorkflowSpec | None, out: str | Path, *, s
 def executor_of(workflow, set: Settings = None, override: str | None = None):
     """The ``[executor]`` of a workflow (with the ``set`` overrides; ``override``: its type, as
     ``--executor``); a resumed run without a workflow has only the override."""
-    from opalflow.runs.spec import executor_from_raw
-
     return executor_from_raw({} if workflow is None else raw_workflow(workflow, set), override)
 
 

@@ -24,7 +24,6 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from opalflow.runs.spec import executor_from_raw
 from opalflow.spec import InputError, SpecError, WorkflowSpec, apply_overrides, convert, read_toml
 from opalflow.store import folder_lock
 
@@ -210,7 +209,8 @@ def spec_from_dict(raw: dict, base: dict | None = None) -> WorkflowSpec:
 
     Every section and top-level key is checked against the kind's spec before anything runs: a key that no
     kind reads is refused by its section, and a section that only other kinds read is refused naming them;
-    ``[executor]`` (where the run goes, any kind's: :mod:`opalflow.runs.spec`) is checked and left out.
+    ``[executor]`` (where the run goes, any kind's: :mod:`opalflow.runs.spec`, checked by
+    :func:`opalflow.api.load_workflow`) is left out.
     ``base`` (the workflow file's table before ``--set``): where ``--set kind=...`` switched the file to
     another kind, the file's own sections that the new kind does not read are left out.
     """
@@ -226,9 +226,9 @@ def spec_from_dict(raw: dict, base: dict | None = None) -> WorkflowSpec:
     switched = base is not None and base.get("kind", DEFAULT_KIND) != name
     kept = {}
     for key, value in raw.items():
-        if key == "executor" and key not in own:        # the run layer's, of any workflow: checked here
-            executor_from_raw({key: value})
-        elif key in own or key not in readers:          # (a key no kind reads: convert refuses it)
+        if key == "executor" and key not in own:        # the run layer's, of any workflow (checked by the API)
+            continue
+        if key in own or key not in readers:            # (a key no kind reads: convert refuses it)
             kept[key] = value
         elif not (switched and key in base and base[key] == value):
             what = f"[{key}]" if isinstance(value, dict) else f"'{key}'"
