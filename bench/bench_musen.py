@@ -1,0 +1,336 @@
+"""MUSEN, the paper's own code (Dosta et al.; github.com/msolids/musen), as the peer of opalflow's bonded-particle
+model: the same particles, bonds, substrate, loading and periodic box run by both codes, side by side.
+
+Not in CI and not run by the tests: it needs a ``CMUSEN`` binary built from a MUSEN checkout (``--cmusen PATH`` or
+the ``MUSEN_CMUSEN`` environment variable).  opalflow holds no MUSEN code and no recipe that builds it.
+
+How opalflow's scene becomes a MUSEN scene (MUSEN's text format: its ``Documentation/Text file format.pdf`` and
+``Modules/SimResultsStorage/ImportFromText.cpp``; script keys: ``Modules/ScriptInterface/ScriptAnalyzer.cpp``):
+
+- every particle a sphere of the same radius (contact radius = radius), SI units (m, kg, s);
+- every bond a solid bond between the same two particles, diameter ``2 bonds.radius_factor r`` and initial length
+  the built centre distance, of a bond compound with the material's bond E, nu and strength (data/materials.toml;
+  MUSEN's tangential strength = normal, as opalflow and the paper take it): ``ModelSBElastic`` with
+  ``CONSIDER_BREAKAGE 1``, the paper's rule as MUSEN computes it (``bonds.breaking = "musen"`` in opalflow);
+- the substrate: its particles of a compound ``held`` with the density x :data:`HEAVY` (at rest, they do not move
+  within the run); the top particle layer (opalflow's: centres within 3/4 d of the top) of a compound ``driven``,
+  as heavy, moving at the plate's velocity from the first step: opalflow's ``compression.loading = "glued"`` (the
+  top layer moves with the wall in all six degrees of freedom); the plate stress is the z force on the driven
+  layer over the cross-section, the strain the driven layer's displacement over the sample's height;
+- periodic sides where opalflow's are (PBC over the same box);
+- unbonded touching particles: Hertz-Mindlin contacts (``ModelPPHertzMindlin``, the material's contact E, nu,
+  restitution, friction), MUSEN's contact model for pairs without a bond;
+- every free particle starts at the velocity of its height in the uniform strain rate (opalflow's affine start);
+- no damping: MUSEN's elastic bond has none (opalflow's dynamic decks damp bonds at ``bonds.damping_ratio``).
+
+opalflow runs the same spec: quasi-static (the paper's rule, contacts off / frictionless / sticking) and dynamic
+(LAMMPS, glued loading, ``bonds.smooth = false``).  Results: bench/results/musen_peer.json.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+RESULTS = HERE / "results"
+#: the substrate's and the driven layer's density factor: a driven particle's velocity changes by
+#: F t / (HEAVY m) ~ 1e-7 of the plate's over a run
+HEAVY = 1.0e12
+NM = 1.0e-9
+#: the pore-free silica block of bench_quasistatic's gap study (BULK there), at the size named
+BULK = ['pores.arrangement="none"', 'boundary.sides="periodic"', "pores.diameter_nm=400.0", "pores.spacing_nm=400.0",
+        "pores.layers=1", "bonds.smooth=false", 'bonds.breaking="musen"', "compression.snapshot_strains=[]",
+        'compression.loading="glued"', 'compression.method="quasistatic"']
+#: the paper's sample at d = 45 nm as bench_quasistatic's gap study runs it (FCC45 there: AMG re-solves, bonds within
+#: 5 % of the next limit break in one event), glued
+OPAL45 = ["compression.method=quasistatic", "compression.drop_loose=true", "bonds.smooth=false",
+          "packing.diameter_nm=45", "packing.tile_nm=380", "compression.resolver=amg", "compression.event_tolerance=0.05",
+          "compression.resolve_rtol=1e-5", 'bonds.breaking="musen"', "compression.snapshot_strains=[]",
+          'compression.loading="glued"']
+#: case -> (workflow, settings, strain_max, opalflow's runs of it: the labels of :data:`OPALFLOW`)
+CASES = {"bulk60": ("quickstart", [*BULK, "packing.diameter_nm=60.0"], 0.05,
+                    ["quasistatic", "quasistatic_frictionless", "quasistatic_sticking", "dynamic_lammps_rule"]),
+         "bulk40": ("quickstart", [*BULK, "packing.diameter_nm=40.0"], 0.05,
+                    ["quasistatic", "quasistatic_frictionless", "quasistatic_sticking"]),
+         "opal45": ("opal_fcc", OPAL45, 0.025, ["quasistatic", "quasistatic_frictionless", "quasistatic_sticking"])}
+
+
+def num(v) -> str:
+    """A number as MUSEN reads it (numpy 2's repr of np.float64 is not one)."""
+    return repr(float(v))
+
+
+def loaded(workflow: str, sets: list[str]):
+    """opalflow's spec and loaded sample (the structure the static, quasi-static and dynamic runs share)."""
+    from opalflow.bpm.deck import loaded_sample
+    from opalflow.bpm.scene import scene_of
+    from opalflow.registry import load_spec
+    from opalflow.resources import WORKFLOWS
+
+    spec = load_spec(WORKFLOWS / f"{workflow}.toml", sets)
+    s = scene_of(spec).structure(spec, lambda m: None)
+    return spec, loaded_sample(spec, s)
+
+
+def scene_text(spec, sample, speed_m_s: float) -> str:
+    """The MUSEN text scene of ``sample`` (module docstring)."""
+    from opalflow.bpm.deck import particle_material
+    from opalflow.materials import contact_properties, material
+
+    data = sample.structure
+    names = {particle_material(n, spec.material) for n in data.type_names}
+    if len(names) != 1:
+        raise SystemExit(f"one particle material only (the bulk and the uncoated opal), not {sorted(names)}")
+    mat = names.pop()
+    m = material(mat, spec.materials)
+    c = contact_properties(mat)
+    rho = m["density_kg_m3"]
+    E_c, nu_c = c.youngs_modulus_MPa * 1e6, c.poisson_ratio
+    sigma = m["bond_strength_MPa"] * 1e6
+    lines = []
+    for key, density in (("particle", rho), ("held", HEAVY * rho), ("driven", HEAVY * rho)):
+        lines.append(f"32 {key} {key} 0 {num(density)} 7 {num(E_c)} 10 {num(nu_c)}")
+    lines.append(f"32 bond bond 0 {num(rho)} 7 {num(m['bond_youngs_modulus_GPa'] * 1e9)} 10 {num(m['bond_poisson_ratio'])} "
+                 f"8 {num(sigma)} 9 {num(sigma)}")
+    keys = ("particle", "held", "driven")
+    for a in keys:
+        for b in keys:
+            lines.append(f"33 {a} {b} 200 {num(c.restitution)} 201 {num(c.friction)} 202 0")
+    lo, hi = data.box_lo * NM, data.box_hi * NM
+    lines.append("22 " + " ".join(num(v) for v in (*lo, *hi)))
+    p = [bool(v) for v in data.periodic]
+    if any(p):
+        lines.append(f"28 1 {int(p[0])} {int(p[1])} {int(p[2])} " + " ".join(num(v) for v in (*lo, *hi)))
+    held, driven = data.groups["substrate"], sample.top_layer
+    x, r = (data.positions * NM).tolist(), (data.diameters / 2 * NM).tolist()      # Python floats: repr is a number
+    # the affine start (opalflow's dynamic decks' too): every free particle at the velocity of its height in the
+    # uniform strain rate, so the run starts without the shock of a layer set moving against a sample at rest
+    # (undamped, that shock rings through the whole run: the opal at d = 45 nm swung between -5.7 and +2.6 MPa)
+    rise = np.clip((data.positions[:, 2] - sample.base_nm) / sample.height_nm, 0.0, 1.0)
+    for i in range(data.n_particles):
+        key = "held" if held[i] else "driven" if driven[i] else "particle"
+        vz = -speed_m_s if driven[i] else 0.0 if held[i] else -speed_m_s * float(rise[i])
+        lines.append(f"0 {i} 1 1 5 {num(r[i])} {num(r[i])} 23 {key} 24 0 1e300 2 0 12 {num(x[i][0])} {num(x[i][1])} {num(x[i][2])} "
+                     f"15 0 0 {num(vz)}")
+    d_b = [2 * spec.bonds.radius_factor * v for v in r]
+    for k, ((i, j), L0) in enumerate(zip(data.bonds.tolist(), (sample.bond_lengths * NM).tolist())):
+        lines.append(f"0 {data.n_particles + k} 1 9 5 {i} {j} {num(min(d_b[i], d_b[j]))} {num(L0)} 23 bond 24 0 1e300 2 0")
+    return "\n".join(lines) + "\n"
+
+
+def script_text(folder: Path, dt: float, end_time: float, saving: float) -> str:
+    """CMUSEN's script: import the scene, simulate on the CPU (saving the particles' forces alone: all of the
+    state of the opal at d = 45 nm, 200 times, is 7.3 GB), export every bond's activity interval (once: at every
+    saved time the bonds' lines were 2 GB) and the particles' forces."""
+    return f"""JOB
+COMPONENT IMPORT_FROM_TEXT
+SOURCE_FILE {folder / 'scene.txt'}
+RESULT_FILE {folder / 'scene.mdem'}
+JOB
+COMPONENT SIMULATOR
+SOURCE_FILE {folder / 'scene.mdem'}
+RESULT_FILE {folder / 'run.mdem'}
+SIMULATOR_TYPE CPU
+EXT_ACCEL 0 0 0
+SELECTIVE_SAVING_P 0 0 1 0 0 0 0
+SELECTIVE_SAVING_SB 0 0 0
+MODEL_PP ModelPPHertzMindlin
+MODEL_SB ModelSBElastic
+MODEL_SB_PARAMS CONSIDER_BREAKAGE 1
+SIMULATION_STEP {num(dt)}
+SAVING_STEP {num(saving)}
+END_TIME {num(end_time)}
+JOB
+COMPONENT EXPORT_TO_TEXT
+SOURCE_FILE {folder / 'run.mdem'}
+RESULT_FILE {folder / 'bonds.txt'}
+TEXT_EXPORT_OBJECTS 0 1 0
+TEXT_EXPORT_CONST 1 1 0 0 1
+TEXT_EXPORT_TD_PART 0 0 0 0 0 0 0 0 0
+TEXT_EXPORT_TD_BOND 0 0 0 0 0 0 0
+TEXT_EXPORT_SCENE 0 0 0 0
+TEXT_EXPORT_GEOMETRIES 0 0 0 0
+TEXT_EXPORT_MATERIALS 0 0 0
+TEXT_EXPORT_GENERATORS 0 0
+TIME_INTERVAL 0 0
+JOB
+COMPONENT EXPORT_TO_TEXT
+SOURCE_FILE {folder / 'run.mdem'}
+RESULT_FILE {folder / 'export.txt'}
+TEXT_EXPORT_OBJECTS 1 0 0
+TEXT_EXPORT_CONST 1 1 0 0 0
+TEXT_EXPORT_TD_PART 0 0 1 0 0 0 0 0 0
+TEXT_EXPORT_TD_BOND 0 0 0 0 0 0 0
+TEXT_EXPORT_SCENE 0 0 0 0
+TEXT_EXPORT_GEOMETRIES 0 0 0 0
+TEXT_EXPORT_MATERIALS 0 0 0
+TEXT_EXPORT_GENERATORS 0 0
+TEXT_EXPORT_PRECISION 12
+"""
+
+
+#: values after each time-dependent identifier of MUSEN's text export (ETXTCommands)
+TD_WIDTH = {12: 3, 15: 3, 16: 3, 18: 1, 20: 3, 31: 4, 36: 9, 37: 1, 42: 3, 43: 1, 45: 3}
+
+
+def read_export(path: Path) -> tuple[dict, dict]:
+    """(per particle id {time: force (3,)}, per bond id its activity end time) from MUSEN's text export (read a
+    line at a time: a big scene's export is gigabytes)."""
+    forces, ends = {}, {}
+    for line in open(path):
+        t = line.split()
+        if not t or t[0] != "0":
+            continue
+        oid, kind = int(t[1]), int(t[3])
+        k, here, now = 4, {}, None
+        while k < len(t):
+            ident = int(t[k])
+            if ident == 24:
+                if kind == 9:
+                    ends[oid] = float(t[k + 2])
+                k += 3
+            elif ident == 2:
+                now = float(t[k + 1])
+                k += 2
+            elif ident == 20 and now is not None:
+                here[now] = np.array([float(v) for v in t[k + 1:k + 4]])
+                k += 4
+            elif ident in TD_WIDTH:
+                k += 1 + TD_WIDTH[ident]
+            else:
+                k += 1
+        if kind == 1:
+            forces[oid] = here
+    return forces, ends
+
+
+def run_musen(cmusen: str, spec, sample, folder: Path, strain_max: float, speed_m_s: float, dt: float,
+              points: int, threads: int) -> dict:
+    """Write the scene and script, run CMUSEN, read back the stress-strain curve and the broken bonds."""
+    folder.mkdir(parents=True, exist_ok=True)
+    height = sample.height_nm * NM
+    end = strain_max * height / speed_m_s
+    (folder / "scene.txt").write_text(scene_text(spec, sample, speed_m_s))
+    (folder / "script.txt").write_text(script_text(folder, dt, end, end / points))
+    t0 = time.perf_counter()
+    with open(folder / "cmusen.log", "w") as log:
+        subprocess.run([cmusen, f"-s={folder / 'script.txt'}", f"-t={threads}"], stdout=log, stderr=subprocess.STDOUT,
+                       check=True, cwd=folder)
+    wall = time.perf_counter() - t0
+    forces, _ = read_export(folder / "export.txt")
+    _, ends = read_export(folder / "bonds.txt")
+    top = np.flatnonzero(sample.top_layer)
+    times = sorted(forces[int(top[0])])
+    fz = np.array([sum(forces[int(i)][tt][2] for i in top) for tt in times])
+    strain = np.array(times) * speed_m_s / height
+    stress = fz / (sample.area_nm2 * NM * NM) / 1e6          # the layer is pushed up by the sample: F_z > 0
+    n = sample.structure.n_particles
+    broke = np.array([ends[k] for k in sorted(ends)]) if ends else np.zeros(0)
+    broken = int(np.sum((broke > 0) & (broke < 1e299)))
+    return {"strain": strain.tolist(), "stress_MPa": stress.tolist(), "wall_s": round(wall, 1),
+            "broken_bonds": broken, "n_bonds": len(ends), "n_particles": n, "time_step_s": dt,
+            "speed_m_s": speed_m_s, "end_time_s": end, "height_m": height,
+            "bond_end_s": sorted(float(t) for t in broke if 0 < t < 1e299)}
+
+
+def figures(curve: dict, fit_max: float) -> dict:
+    """E (a line through the origin fitted to the curve below ``fit_max`` strain), strength, strain at peak and the
+    bonds broken before it."""
+    e, s = np.array(curve["strain"]), np.array(curve["stress_MPa"])
+    sel = (e > 0) & (e <= fit_max)
+    E = float(np.sum(e[sel] * s[sel]) / np.sum(e[sel] ** 2)) / 1e3 if sel.any() else float("nan")
+    p = int(np.argmax(s))
+    ends = np.array(curve.get("bond_end_s", []))
+    return {"youngs_modulus_GPa": E, "strength_MPa": float(s[p]), "strain_at_peak": float(e[p]),
+            "broken_bonds_at_peak": int(np.sum(ends * curve["speed_m_s"] / curve["height_m"] < e[p]))}
+
+
+#: opalflow's runs of the same spec: label -> settings added
+OPALFLOW = {"quasistatic": [],
+            "quasistatic_frictionless": ['contacts.quasistatic="frictionless"'],
+            "quasistatic_sticking": ['contacts.quasistatic="sticking"'],
+            "dynamic_lammps_rule": ['compression.method="dynamic"', 'bonds.breaking="lammps"']}
+
+
+def run_opalflow(workflow: str, sets: list[str], folder: Path, strain_max: float, speed_m_s: float) -> dict:
+    """opalflow's run of the same spec (a finished one in ``folder`` is read, not re-run)."""
+    import opalflow
+
+    if (folder / "summary.json").exists():
+        s = json.loads((folder / "summary.json").read_text())
+    else:
+        extra = [f"compression.strain_max={strain_max!r}", f"compression.plate_speed_m_s={speed_m_s!r}"]
+        s = opalflow.run(workflow, folder, set=[*sets, *extra], quiet=True)
+    keys = ("youngs_modulus_GPa", "strength_MPa", "strain_at_peak", "broken_bonds", "broken_bonds_at_peak",
+            "broken_bonds_by_check_at_peak", "wall_s")
+    return {k: s[k] for k in keys if k in s}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--cmusen", default=os.environ.get("MUSEN_CMUSEN"), help="the CMUSEN binary")
+    ap.add_argument("--case", default="bulk60", choices=sorted(CASES))
+    ap.add_argument("--out", type=Path, default=Path("/tmp/musen_peer"))
+    ap.add_argument("--speed", type=float, default=1.0, help="plate speed, m/s")
+    ap.add_argument("--dt-fraction", type=float, default=0.1, help="time step over sqrt(m / k_n) of one bond")
+    ap.add_argument("--points", type=int, default=200)
+    ap.add_argument("--threads", type=int, default=os.cpu_count())
+    ap.add_argument("--strain-max", type=float, default=None)
+    ap.add_argument("--again", action="store_true", help="run MUSEN again where a row is stored in --out")
+    ap.add_argument("--musen-only", action="store_true", help="MUSEN alone, not opalflow's runs")
+    args = ap.parse_args()
+    if not args.cmusen:
+        raise SystemExit("give --cmusen PATH (or MUSEN_CMUSEN): a CMUSEN binary built from a MUSEN checkout")
+    from opalflow.bpm.deck import particle_material
+    from opalflow.materials import material
+
+    workflow, sets, strain_max, runs = CASES[args.case]
+    strain_max = args.strain_max or strain_max
+    spec, sample = loaded(workflow, sets)
+    data = sample.structure
+    k_n = sample.coefficients[0].kr / float(np.mean(sample.bond_lengths))       # pN/nm = 1e-3 N/m
+    rho = material(particle_material(data.type_names[0], spec.material), spec.materials)["density_kg_m3"]
+    mass = float(np.mean(rho * np.pi / 6 * (data.diameters * NM) ** 3))
+    dt = args.dt_fraction * float(np.sqrt(mass / (k_n * 1e-3)))
+    folder = args.out / f"{args.case}_v{args.speed:g}"
+    row_path = folder / "row.json"
+    if row_path.exists() and not args.again:
+        musen = json.loads(row_path.read_text())["musen"]
+    else:
+        musen = run_musen(args.cmusen, spec, sample, folder, strain_max, args.speed, dt, args.points, args.threads)
+        musen = {**figures(musen, 0.002), **musen}
+    row = {"case": args.case, "workflow": workflow, "set": sets, "strain_max": strain_max, "speed_m_s": args.speed,
+           "n_particles": data.n_particles, "n_bonds": data.n_bonds,
+           "height_nm": sample.height_nm, "area_nm2": sample.area_nm2, "musen": musen}
+    row_path.write_text(json.dumps(row, indent=1))
+    print(f"MUSEN: E {musen['youngs_modulus_GPa']:.4g} GPa, {musen['strength_MPa']:.4g} MPa at strain "
+          f"{musen['strain_at_peak']:.4f}, {musen['broken_bonds_at_peak']} bonds broken before the peak, "
+          f"{musen['broken_bonds']} in all ({musen['wall_s']} s)")
+    for label in ([] if args.musen_only else runs):
+        extra = OPALFLOW[label]
+        got = run_opalflow(workflow, [*sets, *extra], folder / f"opalflow_{label}", strain_max, args.speed)
+        row[f"opalflow_{label}"] = got
+        print(f"opalflow {label}: E {got['youngs_modulus_GPa']:.4g} GPa ({got['youngs_modulus_GPa'] / musen['youngs_modulus_GPa'] - 1:+.1%}), "
+              f"{got['strength_MPa']:.4g} MPa ({got['strength_MPa'] / musen['strength_MPa'] - 1:+.1%}) at strain "
+              f"{got['strain_at_peak']:.4f}")
+    row["machine"] = f"{platform.node()}, {os.cpu_count()} cores; CMUSEN on {args.threads} threads"
+    RESULTS.mkdir(exist_ok=True)
+    path = RESULTS / "musen_peer.json"
+    rows = json.loads(path.read_text()) if path.exists() else {}
+    rows[f"{args.case}_v{args.speed:g}"] = {k: v for k, v in row.items()}
+    rows[f"{args.case}_v{args.speed:g}"]["musen"] = {k: v for k, v in musen.items()
+                                                      if k not in ("strain", "stress_MPa", "bond_end_s")}
+    rows[f"{args.case}_v{args.speed:g}"]["musen"]["curve"] = {
+        "strain": [round(v, 6) for v in musen["strain"]], "stress_MPa": [round(v, 4) for v in musen["stress_MPa"]]}
+    path.write_text(json.dumps(rows, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()
