@@ -128,13 +128,17 @@ def process_alive(pid: int, host: str) -> bool | None:
 
 
 def _alive(pid: int) -> bool:
+    """Whether process ``pid`` of this machine lives (a zombie, killed and not yet reaped, does not)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
     except PermissionError:
         return True
-    return True
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return True
 
 
 @contextmanager
