@@ -51,7 +51,8 @@ BULK = ['pores.arrangement="none"', 'boundary.sides="periodic"', "pores.diameter
 #: the paper's sample at d = 45 nm as bench_quasistatic's gap study runs it (FCC45 there: AMG re-solves, bonds within
 #: 5 % of the next limit break in one event), glued
 OPAL45 = ["compression.method=quasistatic", "compression.drop_loose=true", "bonds.smooth=false",
-          "packing.diameter_nm=45", "packing.tile_nm=380", "compression.resolver=amg", "compression.event_tolerance=0.05",
+          "packing.diameter_nm=45", "packing.tile_nm=380", "compression.resolver=amg",
+          "compression.event_tolerance=0.05",
           "compression.resolve_rtol=1e-5", 'bonds.breaking="musen"', "compression.snapshot_strains=[]",
           'compression.loading="glued"']
 #: case -> (workflow, settings, strain_max, opalflow's runs of it: the labels of :data:`OPALFLOW`)
@@ -97,7 +98,8 @@ def scene_text(spec, sample, speed_m_s: float) -> str:
     lines = []
     for key, density in (("particle", rho), ("held", HEAVY * rho), ("driven", HEAVY * rho)):
         lines.append(f"32 {key} {key} 0 {num(density)} 7 {num(E_c)} 10 {num(nu_c)}")
-    lines.append(f"32 bond bond 0 {num(rho)} 7 {num(m['bond_youngs_modulus_GPa'] * 1e9)} 10 {num(m['bond_poisson_ratio'])} "
+    lines.append(f"32 bond bond 0 {num(rho)} 7 {num(m['bond_youngs_modulus_GPa'] * 1e9)} "
+                 f"10 {num(m['bond_poisson_ratio'])} "
                  f"8 {num(sigma)} 9 {num(sigma)}")
     keys = ("particle", "held", "driven")
     for a in keys:
@@ -117,11 +119,13 @@ def scene_text(spec, sample, speed_m_s: float) -> str:
     for i in range(data.n_particles):
         key = "held" if held[i] else "driven" if driven[i] else "particle"
         vz = -speed_m_s if driven[i] else 0.0 if held[i] else -speed_m_s * float(rise[i])
-        lines.append(f"0 {i} 1 1 5 {num(r[i])} {num(r[i])} 23 {key} 24 0 1e300 2 0 12 {num(x[i][0])} {num(x[i][1])} {num(x[i][2])} "
+        lines.append(f"0 {i} 1 1 5 {num(r[i])} {num(r[i])} 23 {key} 24 0 1e300 "
+                     f"2 0 12 {num(x[i][0])} {num(x[i][1])} {num(x[i][2])} "
                      f"15 0 0 {num(vz)}")
     d_b = [2 * spec.bonds.radius_factor * v for v in r]
     for k, ((i, j), L0) in enumerate(zip(data.bonds.tolist(), (sample.bond_lengths * NM).tolist())):
-        lines.append(f"0 {data.n_particles + k} 1 9 5 {i} {j} {num(min(d_b[i], d_b[j]))} {num(L0)} 23 bond 24 0 1e300 2 0")
+        lines.append(f"0 {data.n_particles + k} 1 9 5 {i} {j} {num(min(d_b[i], d_b[j]))} {num(L0)} "
+                     "23 bond 24 0 1e300 2 0")
     return "\n".join(lines) + "\n"
 
 
@@ -282,7 +286,7 @@ def main() -> None:
     ap.add_argument("--dt-fraction", type=float, default=0.1, help="time step over sqrt(m / k_n) of one bond")
     ap.add_argument("--points", type=int, default=200)
     ap.add_argument("--threads", type=int, default=os.cpu_count())
-    ap.add_argument("--strain-max", type=float, default=None)
+    ap.add_argument("--strain-max", type=float, default=None, help="a shorter run (not recorded in bench/results)")
     ap.add_argument("--again", action="store_true", help="run MUSEN again where a row is stored in --out")
     ap.add_argument("--musen-only", action="store_true", help="MUSEN alone, not opalflow's runs")
     args = ap.parse_args()
@@ -317,10 +321,13 @@ def main() -> None:
         extra = OPALFLOW[label]
         got = run_opalflow(workflow, [*sets, *extra], folder / f"opalflow_{label}", strain_max, args.speed)
         row[f"opalflow_{label}"] = got
-        print(f"opalflow {label}: E {got['youngs_modulus_GPa']:.4g} GPa ({got['youngs_modulus_GPa'] / musen['youngs_modulus_GPa'] - 1:+.1%}), "
+        dE = got["youngs_modulus_GPa"] / musen["youngs_modulus_GPa"] - 1
+        print(f"opalflow {label}: E {got['youngs_modulus_GPa']:.4g} GPa ({dE:+.1%}), "
               f"{got['strength_MPa']:.4g} MPa ({got['strength_MPa'] / musen['strength_MPa'] - 1:+.1%}) at strain "
               f"{got['strain_at_peak']:.4f}")
     row["machine"] = f"{platform.node()}, {os.cpu_count()} cores; CMUSEN on {args.threads} threads"
+    if args.strain_max is not None:          # (a shortened run is a try, not a result)
+        return
     RESULTS.mkdir(exist_ok=True)
     path = RESULTS / "musen_peer.json"
     rows = json.loads(path.read_text()) if path.exists() else {}

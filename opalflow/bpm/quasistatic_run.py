@@ -6,8 +6,8 @@ The run folder gets what a dynamic run writes where it applies: ``data.lmp``, ``
 ``summary.json`` (E of the first branch, strength, strain at peak, bonds broken in all and per material),
 ``report.md``, ``stress_strain.png`` (the saw-tooth and its envelope), ``fracture.png`` and, for OVITO,
 ``fracture.peak.dump`` and ``fracture.end.dump`` (LAMMPS text dumps: particles with the bonds each has lost).
-A killed run continues with ``--resume`` from ``quasistatic_state.json`` (written every few seconds) to
-the same numbers.
+A killed run continues with ``--resume`` from ``quasistatic_state.json`` and ``quasistatic_peak.npy``
+(written every few seconds) to the same numbers and the same fracture dumps.
 """
 from __future__ import annotations
 
@@ -32,7 +32,8 @@ from opalflow.bpm.stiffness import per_bond
 from opalflow.runs.record import finish
 from opalflow.lammps.engine import Interrupted, Preempted, stop_requested
 from opalflow.spec import SpecError
-from opalflow.store import DamagedFile, atomic_path, h5_bytes, new_figure, put, read_json, save_figure, write_json_atomic
+from opalflow.store import (DamagedFile, atomic_path, h5_bytes, new_figure, put, read_json, save_figure,
+                            write_json_atomic)
 
 STATE = "quasistatic_state.json"
 PEAK = "quasistatic_peak.npy"     # the state's displacements just before the peak event (N, 6), beside STATE

@@ -11,9 +11,9 @@ from collections import Counter
 from pathlib import Path
 
 from opalflow.runs.jobs import read_job
-from opalflow.store import DamagedFile, lock_owner, process_alive, read_json
 from opalflow.runs.record import RunRecord, is_finished, read_summary
 from opalflow.spec import SpecError
+from opalflow.store import DamagedFile, lock_owner, process_alive, read_json
 
 STATES = ("pending", "running", "requeued", "interrupted", "died", "finished", "failed", "damaged")
 
