@@ -150,7 +150,8 @@ def test_killed_run_resumes(tmp_path, lattice_run):
 
 
 def test_failed_run_keeps_earlier_results(tmp_path, capsys):
-    """Acceptance 7: a LAMMPS failure exits with the error and log tail, results.h5 stays."""
+    """Acceptance 7: a LAMMPS failure exits with the error and log tail and keeps its folder; a finished run's
+    results are never replaced (a second run into its folder is refused before anything is written)."""
     out = tmp_path / "run"
     assert main(["run", "lattice_sc", "--out", str(out)]) == 0
     before = (out / "results.h5").read_bytes()
@@ -163,14 +164,17 @@ def test_failed_run_keeps_earlier_results(tmp_path, capsys):
     s.positions[-1, 2] = 3 * s.box_hi[2]
     write_data(tmp_path / "bad.lmp", s)
     capsys.readouterr()
-    code = main(["run", "lattice_sc", "--out", str(out), "--set", "kind=datafile",
-                 "--set", f'datafile.path="{tmp_path / "bad.lmp"}"',
-                 "--set", 'datafile.materials=["silica","substrate"]', "--set", "contacts.enabled=true"])
+    bad = ["--set", "kind=datafile", "--set", f'datafile.path="{tmp_path / "bad.lmp"}"',
+           "--set", 'datafile.materials=["silica","substrate"]', "--set", "contacts.enabled=true"]
+    assert main(["run", "lattice_sc", "--out", str(out), *bad]) == 2
+    assert "holds a finished run" in capsys.readouterr().err
+    assert (out / "results.h5").read_bytes() == before
+    failed = tmp_path / "failed"
+    code = main(["run", "lattice_sc", "--out", str(failed), *bad])
     err = capsys.readouterr().err
     assert code == 1
     assert "LAMMPS failed" in err and "ERROR" in err and "log tail" in err
-    assert f"run folder kept: {out}" in err
-    assert (out / "results.h5").read_bytes() == before
+    assert f"run folder kept: {failed}" in err and (failed / "log.lammps").exists()
 
 
 def test_rate_check_switch_reports_the_half_speed_run(tmp_path):

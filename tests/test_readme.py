@@ -170,7 +170,7 @@ def test_readme_toml_is_a_valid_section(tmp_path, monkeypatch):
             raw.update(tomllib.loads(text))
             if "datafile" in raw:
                 rod_frame(raw["datafile"]["path"], cells=3)
-            spec_from_dict(raw)
+            spec_from_dict(raw, raw_workflow("quickstart"))      # (a block that switches the kind: as --set does)
 
 
 def test_readme_layout_names_existing_paths():
