@@ -133,7 +133,7 @@ def script_text(folder: Path, dt: float, end_time: float, saving: float) -> str:
     """CMUSEN's script: import the scene, simulate on the CPU (saving the particles' forces alone: all of the
     state of the opal at d = 45 nm, 200 times, is 7.3 GB), export every bond's activity interval (once: at every
     saved time the bonds' lines were 2 GB) and the particles' forces."""
-    return f"""JOB
+    sim = f"""JOB
 COMPONENT IMPORT_FROM_TEXT
 SOURCE_FILE {folder / 'scene.txt'}
 RESULT_FILE {folder / 'scene.mdem'}
@@ -151,32 +151,28 @@ MODEL_SB_PARAMS CONSIDER_BREAKAGE 1
 SIMULATION_STEP {num(dt)}
 SAVING_STEP {num(saving)}
 END_TIME {num(end_time)}
-JOB
+"""
+    return sim + _export(folder, "bonds.txt", objects="0 1 0", const="1 1 0 0 1", part="0 0 0 0 0 0 0 0 0",
+                         extra="TIME_INTERVAL 0 0") \
+        + _export(folder, "export.txt", objects="1 0 0", const="1 1 0 0 0", part="0 0 1 0 0 0 0 0 0",
+                  extra="TEXT_EXPORT_PRECISION 12")
+
+
+def _export(folder: Path, name: str, *, objects: str, const: str, part: str, extra: str) -> str:
+    """One EXPORT_TO_TEXT job of run.mdem: the objects, constant and particle properties chosen, nothing else."""
+    return f"""JOB
 COMPONENT EXPORT_TO_TEXT
 SOURCE_FILE {folder / 'run.mdem'}
-RESULT_FILE {folder / 'bonds.txt'}
-TEXT_EXPORT_OBJECTS 0 1 0
-TEXT_EXPORT_CONST 1 1 0 0 1
-TEXT_EXPORT_TD_PART 0 0 0 0 0 0 0 0 0
+RESULT_FILE {folder / name}
+TEXT_EXPORT_OBJECTS {objects}
+TEXT_EXPORT_CONST {const}
+TEXT_EXPORT_TD_PART {part}
 TEXT_EXPORT_TD_BOND 0 0 0 0 0 0 0
 TEXT_EXPORT_SCENE 0 0 0 0
 TEXT_EXPORT_GEOMETRIES 0 0 0 0
 TEXT_EXPORT_MATERIALS 0 0 0
 TEXT_EXPORT_GENERATORS 0 0
-TIME_INTERVAL 0 0
-JOB
-COMPONENT EXPORT_TO_TEXT
-SOURCE_FILE {folder / 'run.mdem'}
-RESULT_FILE {folder / 'export.txt'}
-TEXT_EXPORT_OBJECTS 1 0 0
-TEXT_EXPORT_CONST 1 1 0 0 0
-TEXT_EXPORT_TD_PART 0 0 1 0 0 0 0 0 0
-TEXT_EXPORT_TD_BOND 0 0 0 0 0 0 0
-TEXT_EXPORT_SCENE 0 0 0 0
-TEXT_EXPORT_GEOMETRIES 0 0 0 0
-TEXT_EXPORT_MATERIALS 0 0 0
-TEXT_EXPORT_GENERATORS 0 0
-TEXT_EXPORT_PRECISION 12
+{extra}
 """
 
 
