@@ -35,6 +35,7 @@ HERE = Path(__file__).resolve().parent
 
 def build(workflow: str, diameter: float, path: Path) -> None:
     from opalflow.bpm.deck import loaded_sample
+    from opalflow.bpm.loading import LOADINGS
     from opalflow.bpm.scene import scene_of
     from opalflow.registry import load_spec
     from opalflow.resources import WORKFLOWS
@@ -45,8 +46,9 @@ def build(workflow: str, diameter: float, path: Path) -> None:
     deck = loaded_sample(spec, s)
     data = deck.structure
     with open(path, "wb") as f:
-        pickle.dump({"structure": data, "coefficients": deck.coefficients, "top": deck.top_layer,
-                     "height": deck.height_nm, "area": deck.area_nm2, "build_s": time.perf_counter() - t}, f)
+        pickle.dump({"structure": data, "coefficients": deck.coefficients,
+                     "supports": LOADINGS[spec.compression.loading].supports(deck),
+                     "build_s": time.perf_counter() - t}, f)
 
 
 def solve(path: Path, solver: str) -> dict:
@@ -57,8 +59,8 @@ def solve(path: Path, solver: str) -> dict:
         d = pickle.load(f)
     s = d["structure"]
     net = stiffness_network(s, d["coefficients"])
-    r = solve_compression(net, s.positions, s.groups["substrate"], d["top"], d["height"], d["area"],
-                          solver=solver, drop_loose=True, say=lambda m: print(m, file=sys.stderr, flush=True))
+    r = solve_compression(net, s.positions, d["supports"], solver=solver, drop_loose=True,
+                          say=lambda m: print(m, file=sys.stderr, flush=True))
     solve_s = r.seconds - r.setup_seconds
     return {"n_particles": s.n_particles, "n_bonds": s.n_bonds, "dofs": 6 * s.n_particles,
             "youngs_modulus_GPa": r.modulus_MPa / 1e3, "iterations": r.iterations, "relative_residual": r.residual,

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from opalflow.bpm.deck import compression_deck
+from opalflow.bpm.loading import LOADINGS
 from opalflow.bpm.relaxation import relaxation_deck
 from opalflow.bpm.scene import build_key, scene_of
 from opalflow.bpm.static import Factor, block_matrix, solve_compression, solver_threads, thread_budget
@@ -32,8 +33,8 @@ def test_damped_relaxation_in_lammps_reaches_the_static_modulus(tmp_path, workfl
     spec = load_spec(WORKFLOWS / f"{workflow}.toml", sets)
     deck = compression_deck(spec, scene_of(spec).structure(spec))
     s = deck.structure
-    static = solve_compression(stiffness_network(s, deck.coefficients), s.positions, s.groups["substrate"],
-                               deck.top_layer, deck.height_nm, deck.area_nm2, say=lambda m: None)
+    static = solve_compression(stiffness_network(s, deck.coefficients), s.positions,
+                               LOADINGS[deck.loading].supports(deck), say=lambda m: None)
     script = relaxation_deck(deck, steps=200_000, damping=1.0, every=50, target_MPa=static.modulus_MPa,
                              tolerance=1e-3)
     assert "break no" in script and "smooth no" in script and "pair_style" not in script

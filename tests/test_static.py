@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from opalflow.bpm.deck import loaded_sample
+from opalflow.bpm.loading import LOADINGS
 from opalflow.bpm.scene import scene_of
 from opalflow.bpm.static import LooseParticlesError, assemble, solve_compression
 from opalflow.bpm.stiffness import stiffness_network
@@ -57,7 +58,7 @@ def test_assembled_matrix_is_the_operator(workflow, sets):
 def test_every_solver_gives_the_same_modulus():
     _, sample, net = scene("opal_quick", SMALL_OPAL)
     s = sample.structure
-    args = (net, s.positions, s.groups["substrate"], sample.top_layer, sample.height_nm, sample.area_nm2)
+    args = (net, s.positions, LOADINGS["plate"].supports(sample))
     direct = solve_compression(*args, solver="direct", say=lambda m: None)      # the factor: exact to round-off
     assert direct.residual < 1e-12
     amg = solve_compression(*args, solver="amg", energy_tol=0, say=lambda m: None)
@@ -77,7 +78,7 @@ def test_the_energy_stop_bounds_the_modulus_error(solver):
     factor's) and its error is near the tolerance asked for, with fewer iterations than the residual rule."""
     _, sample, net = scene("opal_quick", SMALL_OPAL)
     s = sample.structure
-    args = (net, s.positions, s.groups["substrate"], sample.top_layer, sample.height_nm, sample.area_nm2)
+    args = (net, s.positions, LOADINGS["plate"].supports(sample))
     exact = solve_compression(*args, solver="direct", say=lambda m: None).modulus_MPa
     by_residual = solve_compression(*args, solver=solver, energy_tol=0, say=lambda m: None)
     for tol in (1e-5, 1e-7):
@@ -99,7 +100,7 @@ def test_a_floating_cluster_is_refused_in_one_line(tmp_path, capsys):
     net.i, net.j = net.i[keep], net.j[keep]
     for name in ("n", "L", "a_r", "a_s", "bend", "twist"):
         setattr(net, name, getattr(net, name)[keep])
-    args = (net, s.positions, s.groups["substrate"], sample.top_layer, sample.height_nm, sample.area_nm2)
+    args = (net, s.positions, LOADINGS["plate"].supports(sample))
     with pytest.raises(LooseParticlesError, match="1 particles have no bond path to the substrate"):
         solve_compression(*args)
     said = []
@@ -128,8 +129,7 @@ def test_static_solution_is_an_equilibrium_of_lammps(tmp_path, workflow, sets):
 
     _, sample, net = scene(workflow, sets)
     s = sample.structure
-    res = solve_compression(net, s.positions, s.groups["substrate"], sample.top_layer, sample.height_nm,
-                            sample.area_nm2, say=lambda m: None)
+    res = solve_compression(net, s.positions, LOADINGS[sample.loading].supports(sample), say=lambda m: None)
     f, tau = lammps_response(tmp_path, s, sample.coefficients, res.u, res.theta)
     scale_f = np.abs(net.bond_forces(res.u, res.theta)).max()
     free = ~s.groups["substrate"] & ~sample.top_layer

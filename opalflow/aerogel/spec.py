@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from opalflow.bpm.methods import METHODS
 from opalflow.bpm.spec import BondsSpec, BoundarySpec, BpmWorkflow, CompressionSpec, check_material
 from opalflow.spec import WorkflowSpec, check
 
@@ -126,7 +127,7 @@ class AerogelWorkflow(BpmWorkflow):
         check(self.boundary.sides == "periodic", "boundary.sides", self.boundary.sides,
               "must be \"periodic\" (the aggregate is periodic sideways; open sides would cut it free)")
         if self.sample.periodic_z:
-            check(self.compression.method == "static", "sample.periodic_z", self.sample.periodic_z,
+            check(METHODS[self.compression.method].tensor, "sample.periodic_z", self.sample.periodic_z,
                   "needs compression.method = \"static\" (the periodic cube has no walls to compress it between)")
         check(1.0 <= self.bonds.cutoff_factor <= 1.1, "bonds.cutoff_factor", self.bonds.cutoff_factor,
               "must be in [1.0, 1.1] (bonds at contacts: centre distance within this factor of the contact distance)")

@@ -17,6 +17,7 @@ import numpy as np
 
 from opalflow.bpm.bonds import BOND_MODELS
 from opalflow.bpm.loading import CONTACT_LAWS, LOADINGS
+from opalflow.bpm.methods import METHODS
 from opalflow.bpm.spec import BpmWorkflow
 from opalflow.bpm.timestep import TimestepEstimate, estimate_timestep
 from opalflow.lammps.syntax import name, num, render
@@ -104,12 +105,13 @@ class LoadedSample:
     bins: BondBins
     coefficients: list[BondCoefficients]
     bond_lengths: np.ndarray                # r0 of each bond (nm)
-    height_nm: float                        # from the substrate's top to the sample's
-    area_nm2: float                         # the box across periodic sides, the footprint across open ones
+    height_nm: float                        # strain = the driven particles' displacement / height_nm
+    area_nm2: float                         # stress = their force / area_nm2 (uniaxial: the cross-section)
     base_nm: float                          # the substrate's top
     plate_z0_nm: float                      # the sample's top
-    top_z0_nm: float                        # the top layer's mean centre height
-    top_layer: np.ndarray                   # the top particle layer (LAMMPS group "top")
+    top_z0_nm: float                        # the driven particles' mean centre height
+    top_layer: np.ndarray                   # the driven particles (LAMMPS group "top")
+    marks: dict                             # what else the loading placed (bending: span, supports, nose)
     loading: str                            # compression.loading (opalflow.bpm.loading.LOADINGS)
     loading_sense: int                      # +1: compression, -1: tension (strain and stress positive in it)
 
@@ -177,26 +179,13 @@ def bond_model(spec: BpmWorkflow, s: Structure, r0: np.ndarray | None = None
 
 
 def loaded_sample(spec: BpmWorkflow, s: Structure) -> LoadedSample:
-    """``s`` as the compression or tension of ``spec`` loads it (:class:`LoadedSample`): the static and
-    quasi-static solves need this and no deck."""
-    substrate = s.groups.get("substrate", np.zeros(s.n_particles, bool))
-    if not substrate.any():
-        # (a data file's scene names datafile.substrate itself when its choice selects no particle)
-        raise SpecError("substrate.layers", 0, "the compression needs a fixed substrate (layers >= 1)")
+    """``s`` as the loading of ``spec`` holds it (:class:`LoadedSample`, its geometry from
+    :meth:`opalflow.bpm.loading.Loading.place`): the static and quasi-static solves need this and no deck."""
+    loading = LOADINGS[spec.compression.loading]
+    place = loading.place(s, float(np.mean(s.diameters)))      # refuses a sample the loading cannot hold
     r0 = s.bond_lengths()
     data, bins, coeffs = bond_model(spec, s, r0)
-    d_mean = float(np.mean(s.diameters))
-    top = float(np.max(s.positions[:, 2] + s.diameters / 2))
-    base = float(np.max(s.positions[substrate, 2] + s.diameters[substrate] / 2))
-    # the top particle layer: centres within 3/4 of a diameter of the top surface
-    top_group = (s.positions[:, 2] >= top - 0.75 * d_mean) & ~substrate
-    r = s.diameters / 2
-    extent = [float(s.box_lengths[k]) if s.periodic[k] else float(np.max(s.positions[:, k] + r) -
-                                                                    np.min(s.positions[:, k] - r)) for k in (0, 1)]
-    loading = LOADINGS[spec.compression.loading]
-    return LoadedSample(structure=data, source=s, bins=bins, coefficients=coeffs, bond_lengths=r0,
-                        height_nm=top - base, area_nm2=extent[0] * extent[1], base_nm=base, plate_z0_nm=top,
-                        top_z0_nm=float(np.mean(s.positions[top_group, 2])), top_layer=top_group,
+    return LoadedSample(structure=data, source=s, bins=bins, coefficients=coeffs, bond_lengths=r0, **place,
                         loading=loading.name, loading_sense=loading.sense)
 
 
@@ -219,7 +208,7 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
                 for k, n in enumerate(s.type_names)}
     plate_E = {t: plate_contact_E(cp, plate) for t, cp in contacts.items()}
     estimate = estimate_timestep(data, coeffs, contacts if spec.contacts.enabled else {},
-                                 plate_E, contacts, r0, spectral=spec.compression.method == "dynamic")
+                                 plate_E, contacts, r0, spectral=not METHODS[spec.compression.method].linear)
     limit_ns = estimate.limit_ns
     if c.timestep_s:
         dt = c.timestep_s * 1e9
@@ -259,7 +248,7 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
     bond_lines = "\n".join(f"bond_coeff      {t + 1} " + " ".join(num(x) for x in style.coefficients(cf))
                            for t, cf in enumerate(coeffs))
     common = dict(ghost_cutoff=num(1.25 * float(np.max(r0, initial=d_mean)) + 0.2 * d_mean),
-                  data_file="data.lmp", boundary="p p f" if s.periodic[0] else "m m f")
+                  data_file="data.lmp", boundary=("p p " if s.periodic[0] else "m m ") + loading.z_boundary)
     blocks = {
         "system": render("system", **common),
         "bonds": render(style.block, breakable="yes" if spec.bonds.breakable else "no",
@@ -267,9 +256,10 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
         "contacts": render("contacts", pair_coeffs="\n".join(
             f"pair_coeff      {t} {t} {law.args(cp)}" for t, cp in contacts.items())),
         "integrate": render("integrate", skin=num(0.2 * d_mean), timestep=num(dt)),
-        "damping": render("damping", zeta=num(c.global_damping), gamma=num(gamma), plate_speed=num(loading.sense * v),
+        "damping": render("damping", zeta=num(c.global_damping), gamma=num(gamma),
+                          plate_speed=num(loading.sense * v if loading.affine else 0.0),
                           base=num(base), height=num(height)),
-        **loading.blocks(v, substrate_type, top - 0.75 * d_mean, top, base,
+        **loading.blocks(sample, v, substrate_type, top - 0.75 * d_mean,
                          law.args(contacts[1], plate_E[1], 2 * contacts[1].stiffness)),
         "snapshots": render("snapshots", next_snapshot=_next_snapshot(snaps), count_bonds=COUNT_BONDS),
         "run": render("run", restart_every=num(restart_every), steps=num(steps)),
@@ -285,7 +275,7 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
         for b in wanted:
             if b == "output":
                 parts.append(render("output", height=num(height), every=num(every), strain_sign=loading.strain_expression(),
-                                    curve_file="file" if fresh else "append"))
+                                    substrate_fz=loading.support_force, curve_file="file" if fresh else "append"))
             elif fresh:
                 parts.append(blocks[b])
             elif b == "system":

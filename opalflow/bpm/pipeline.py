@@ -21,6 +21,7 @@ from opalflow.analysis import compression as mech
 from opalflow.analysis import fracture
 from opalflow.bpm import report
 from opalflow.bpm.deck import CompressionDeck, compression_deck, particle_material
+from opalflow.bpm.methods import METHODS
 from opalflow.bpm.scene import scene_of, solid_fraction
 from opalflow.bpm.spec import BpmWorkflow
 from opalflow.lammps.datafile import write_data
@@ -77,22 +78,15 @@ def dynamic_steps(spec: BpmWorkflow, deck: CompressionDeck) -> int:
 
 
 def cost_facts(spec: BpmWorkflow) -> dict:
-    """What :mod:`opalflow.runs.plan` prices a run by: its method and solver, particles, bonds, (dynamic)
-    steps, and the seconds the structure and deck took to build here.  Writes nothing."""
-    from opalflow.bpm.static import auto_solver
-
+    """What :mod:`opalflow.runs.plan` prices a run by: its method and what the method adds (a dynamic run's
+    steps, a solve's solver: :meth:`opalflow.bpm.methods.Method.price`), particles, bonds, and the seconds the
+    structure took to build here.  Writes nothing."""
+    method = METHODS[spec.compression.method]
     t = time.perf_counter()
     s = scene_of(spec).structure(spec)
-    deck = compression_deck(spec, s)
-    facts = {"method": spec.compression.method, "n_particles": s.n_particles, "n_bonds": s.n_bonds,
-             "bond_model": spec.bonds.model, "build_s": time.perf_counter() - t}
-    if spec.compression.method == "quasistatic":      # priced as its first solve (the events are not known)
-        facts["solver"] = "amg"
-    elif spec.compression.method == "static":
-        solver = spec.compression.solver
-        facts["solver"] = auto_solver(s.n_particles, s.n_bonds) if solver == "auto" else solver
-    else:
-        facts["steps"] = dynamic_steps(spec, deck)
+    facts = {"method": method.name, "n_particles": s.n_particles, "n_bonds": s.n_bonds,
+             "bond_model": spec.bonds.model, **method.price(spec, s)}
+    facts["build_s"] = time.perf_counter() - t
     return facts
 
 
@@ -179,11 +173,18 @@ def restart_files(out: Path) -> list[tuple[int, Path]]:
                    if p.name.split(".")[1].isdigit()), reverse=True)
 
 
-def resumable(out: Path) -> bool:
-    """Whether ``--resume`` can go on in ``out``: a restart file (dynamic) or the quasi-static state."""
-    from opalflow.bpm.quasistatic_run import STATE
+def has_restart(out: Path) -> bool:
+    """Whether a dynamic run in ``out`` has a restart file to go on from."""
+    return bool(restart_files(out))
 
-    return bool(restart_files(out)) or (Path(out) / STATE).exists()
+
+def resumable(out: Path) -> bool:
+    """Whether ``--resume`` can go on in ``out``: what the method of its run resumes from (a restart file, the
+    quasi-static state; :attr:`opalflow.bpm.methods.Method.resumable`)."""
+    from opalflow.registry import resolve
+
+    method = METHODS[RunRecord.read(out).spec["compression"].get("method", "dynamic")]
+    return bool(method.resumable) and resolve(method.resumable)(out)
 
 
 def newest_readable_restart(out: Path) -> int | None:
@@ -380,21 +381,13 @@ def analyze_folder(out: Path) -> dict:
 
 def run_workflow(spec: BpmWorkflow, out: Path, *, np_: int = 1, resume: bool = False, say=print,
                  suffix: str | None = None) -> dict:
-    """prepare (unless resuming) -> execute -> analyze; the rate check runs a half-speed twin.
-    ``compression.method = "static"``: one linear solve instead (opalflow.bpm.static_run); "quasistatic": the
-    event-driven fracture of the linear network (opalflow.bpm.quasistatic_run)."""
-    if spec.compression.method == "static":
-        if resume or np_ > 1 or suffix:
-            raise SpecError("compression.method", "static", "a static solve has no --resume, --np or --suffix")
-        from opalflow.bpm.static_run import run_static
+    """The run of a bonded-particle workflow, by its ``compression.method`` (:mod:`opalflow.bpm.methods`)."""
+    return METHODS[spec.compression.method].run(spec, out, np_=np_, resume=resume, suffix=suffix, say=say)
 
-        return run_static(spec, out, say=say)
-    if spec.compression.method == "quasistatic":
-        if np_ > 1 or suffix:
-            raise SpecError("compression.method", "quasistatic", "the quasi-static method has no --np or --suffix")
-        from opalflow.bpm.quasistatic_run import run_quasistatic
 
-        return run_quasistatic(spec, out, resume=resume, say=say)
+def run_dynamic(spec: BpmWorkflow, out: Path, *, np_: int = 1, resume: bool = False, say=print,
+                suffix: str | None = None) -> dict:
+    """prepare (unless resuming) -> execute -> analyze; the rate check runs a half-speed twin."""
     t = time.perf_counter()
     if not resume:
         deck = prepare(spec, out, progress=say)

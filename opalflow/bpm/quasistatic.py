@@ -74,6 +74,7 @@ import numpy as np
 from numba import njit
 
 from opalflow.bpm.contacts import Contacts, joined
+from opalflow.bpm.loading import Supports
 from opalflow.bpm.spec import RESOLVERS
 from opalflow.bpm.static import (DIRECT_MAX_DOFS, Factor, Stop, block_amg_preconditioner, block_matrix, bond_blocks,
                                   loose_particles, particle_amg, pcg)
@@ -543,15 +544,13 @@ class FractureResult:
         return int(np.argmax([e.stress_MPa for e in self.events])) if self.events else -1
 
 
-def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray, fixed: np.ndarray,
-                   top: np.ndarray, height: float, area: float, *, clamp_top: bool = False, sense: int = 1,
+def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray, supports: Supports, *,
                    strain_max: float = 0.04, stop_fraction: float = 0.5, events_max: int = 100_000,
                    tolerance: float = 0.0, resolver: str = "auto", rtol: float = 1e-6, local_rtol: float = 0.0,
                    state: dict | None = None, checkpoint=None, checkpoint_s: float = 5.0, should_stop=lambda: False,
                    contacts: Contacts | None = None, say=print) -> FractureResult:
-    """The event loop of the module docstring under the loading of
-    :func:`opalflow.bpm.static.solve_compression` (``fixed``: substrate; ``top``: the top layer, pushed in
-    z in the loading's ``sense``, held in its other dofs with ``clamp_top``).
+    """The event loop of the module docstring under the loading's ``supports``
+    (:meth:`opalflow.bpm.loading.Loading.supports`, as in :func:`opalflow.bpm.static.solve_compression`).
 
     With ``local_rtol`` > 0 an event settles by :class:`LocalSettle` alone while the residual it leaves stays
     below ``local_rtol`` |b|; past it (and whenever particles come loose) the network is re-solved globally,
@@ -579,22 +578,16 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
     n, m = net.n_particles, len(net.L)
     events = [Event(**e) for e in state["events"]] if state else []
     alive = _intact(m, events)
-    anchored = fixed | (top if clamp_top else np.zeros(n, bool))
 
     def loose_of(alive):
-        return loose_particles(net.part(alive), anchored)
+        return loose_particles(net.part(alive), supports.anchored)
 
     def constraints(loose):
-        pres = np.zeros((n, 6), bool)
-        pres[fixed | loose] = True
-        loaded = top & ~fixed & ~loose
-        pres[loaded, slice(None) if clamp_top else 2] = True
-        x_p = np.zeros((n, 6))
-        x_p[loaded, 2] = -sense * height                 # unit strain
-        return ~pres.ravel(), x_p.ravel(), loaded
+        held = supports.without(loose)
+        return ~held.held.ravel(), held.drive.ravel(), held                 # x_p: unit strain
 
     loose = loose_of(alive)
-    free, x_p, loaded = constraints(loose)
+    free, x_p, held = constraints(loose)
     if resolver == "auto":
         resolver = "direct" if free.sum() <= DIRECT_MAX_DOFS else "amg" if m <= RESOLVE_AMG_MAX_BONDS else "block-amg"
     whole = joined(net, contacts.net) if contacts else net
@@ -605,7 +598,7 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
     setup = time.perf_counter() - t0
 
     def stress_of(force):
-        return -sense * float(np.sum(force.reshape(n, 6)[loaded, 2])) / area      # per unit strain, > 0
+        return held.stress(force)      # per unit strain, > 0
 
     def linear_solve(x_prev):
         b = np.where(free, -solver.matvec(x_p), x_p)
@@ -656,7 +649,7 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
     last_saved = time.perf_counter()
     try:
         while len(events) < events_max:
-            if stress_unit <= 0 or not loaded.any():
+            if stress_unit <= 0 or not held.loaded.any():
                 stopped = "no load path"
                 break
             if touched is None:         # (after a global re-solve: every bond; after a local step: its bonds)
@@ -690,7 +683,7 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
                 came_loose = bool(np.any(new_loose & ~loose))
                 if came_loose:
                     loose = new_loose
-                    free, x_p, loaded = constraints(loose)
+                    free, x_p, held = constraints(loose)
             solver.remove(broken, free)
             B[broken] = -np.inf
             touched = settle(x, force, broken, alive, free) if settle and not came_loose else None

@@ -50,6 +50,11 @@ def save_state(out: Path, state: dict) -> None:
     write_json_atomic(out / STATE, state)
 
 
+def has_state(out: Path) -> bool:
+    """Whether a quasi-static run in ``out`` saved a state to go on from."""
+    return (Path(out) / STATE).exists()
+
+
 def load_state(out: Path) -> dict:
     """The state :func:`save_state` wrote (``peak_x`` None where no .npy is kept)."""
     state = read_json(out / STATE, "the quasi-static run's saved state", "run it anew without --resume",
@@ -105,9 +110,7 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
            if contacts else ""))
     try:
         res = solve_fracture(net, strengths_of(data, sample.coefficients, spec.bonds.breaking), data.positions,
-                             data.groups["substrate"],
-                             sample.top_layer, sample.height_nm, sample.area_nm2, clamp_top=loading.glued,
-                             sense=loading.sense, strain_max=c.strain_max, stop_fraction=c.stop_fraction,
+                             loading.supports(sample), strain_max=c.strain_max, stop_fraction=c.stop_fraction,
                              events_max=c.events_max, tolerance=c.event_tolerance, resolver=c.resolver,
                              rtol=c.resolve_rtol, local_rtol=c.local_rtol, state=state,
                              checkpoint=lambda st: save_state(out, st), should_stop=stop_requested,
@@ -316,9 +319,8 @@ def _report(spec, info, summary, res, loading, sample) -> str:
     lines = [f"# {spec.name}: quasi-static {loading.title}", "",
              f"{info['n_particles']} particles, {info['n_bonds']} bonds; the bond network linearised from LAMMPS's "
              f"bpm/rotational, bonds broken one event at a time by {BREAKING_RULES[spec.bonds.breaking]} at full "
-             "load (as `smooth no`; opalflow/bpm/quasistatic.py); substrate fixed, top layer "
-             f"({info['top_layer_particles']} particles) {'pushed down' if loading.sense > 0 else 'pulled up'}"
-             + (", glued to the wall" if loading.glued else ", its x, y and rotations free") + ".", "",
+             f"load (as `smooth no`; opalflow/bpm/quasistatic.py); {loading.held_text(info['top_layer_particles'])}.",
+             "",
              *sample_lines(info), *network_inputs(info, sample), "## Results", "",
              *([f"Contacts (`contacts.quasistatic = \"{q['contacts']}\"`, opalflow/bpm/contacts.py): "
                 f"{q['contact_pairs']} touching pairs, linear Hertz-Mindlin springs at "

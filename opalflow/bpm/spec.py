@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from opalflow.bpm.bonds import BOND_MODELS
 from opalflow.bpm.contacts import CONTACT_FRICTION
 from opalflow.bpm.loading import CONTACT_LAWS, LOADINGS
+from opalflow.bpm.methods import METHODS
 from opalflow.materials import OVERRIDABLE, material_names
 from opalflow.spec import WorkflowSpec, check, check_name, is_number
 
@@ -73,9 +74,6 @@ class ContactsSpec:
     reference_strain: float = 0.01
 
 
-#: how a compression is computed: a LAMMPS run, the linear solve of opalflow.bpm.static (E, no strength), or
-#: the event-driven fracture of the linear network, opalflow.bpm.quasistatic (E and strength at zero rate)
-METHODS = ("dynamic", "static", "quasistatic")
 #: solvers of the static method (opalflow.bpm.static.SOLVERS)
 STATIC_SOLVERS = ("auto", "direct", "amg", "block-amg", "cg", "cg-jax")
 #: re-solves of the quasistatic method (opalflow.bpm.quasistatic.RESOLVERS)
@@ -200,9 +198,6 @@ class BpmWorkflow(WorkflowSpec):
         check(0 < k.reference_strain <= 0.2, "contacts.reference_strain", k.reference_strain,
               "must be in (0, 0.2] (overlap / contact distance where the Hertz-Mindlin springs are taken)")
         if k.quasistatic != "off":
-            check(self.compression.method == "quasistatic" and k.enabled, "contacts.quasistatic", k.quasistatic,
-                  "needs compression.method = \"quasistatic\" and contacts.enabled = true (the dynamic method's "
-                  "contacts are LAMMPS's pair style; the static one has none)")
             check(self.compression.local_rtol == 0, "compression.local_rtol", self.compression.local_rtol,
                   "must be 0 with contacts.quasistatic (the local step takes no contacts)")
         c = self.compression
@@ -222,24 +217,12 @@ class BpmWorkflow(WorkflowSpec):
         check(c.method in METHODS, "compression.method", c.method, f"must be one of {', '.join(METHODS)}")
         check(c.solver in STATIC_SOLVERS, "compression.solver", c.solver,
               f"must be one of {', '.join(STATIC_SOLVERS)} (static method)")
-        linear = c.method in ("static", "quasistatic")
-        check(not (linear and c.check_rate), "compression.check_rate", c.check_rate,
-              f"must be false with method = \"{c.method}\" (a linear solve has no loading rate)")
-        check(not (linear and not BOND_MODELS[b.model].moments), "bonds.model", b.model,
-              f"must be \"parallel\" with compression.method = \"{c.method}\" (contact bonds carry no moment: "
-              "a tree-like network of them is a mechanism with no static stiffness)")
-        check(not (c.method == "quasistatic" and not b.breakable), "bonds.breakable", b.breakable,
-              "must be true with compression.method = \"quasistatic\" (it breaks bonds; \"static\" gives E alone)")
         check(b.breaking in BREAKING_RULES, "bonds.breaking", b.breaking,
               f"must be one of {', '.join(BREAKING_RULES)}")
-        check(b.breaking == "lammps" or c.method == "quasistatic", "bonds.breaking", b.breaking,
-              f"must be \"lammps\" with compression.method = \"{c.method}\" (LAMMPS's bpm/rotational has its own "
-              "rule alone; the paper's rules need \"quasistatic\")")
+        METHODS[c.method].check(self)
+        LOADINGS[c.loading].check(self)
         check(c.resolver in RESOLVERS, "compression.resolver", c.resolver,
               f"must be one of {', '.join(RESOLVERS)} (quasistatic method)")
-        check(c.solver == "auto" or c.method != "quasistatic", "compression.solver", c.solver,
-              "is the static method's: the quasi-static re-solves are set by compression.resolver (one of "
-              f"{', '.join(RESOLVERS)})")
         check(0 <= c.event_tolerance <= 0.5, "compression.event_tolerance", c.event_tolerance,
               "must be in [0, 0.5] (bonds within this fraction of the next limit break in one event)")
         check(0 <= c.stop_fraction < 1, "compression.stop_fraction", c.stop_fraction, "must be in [0, 1)")

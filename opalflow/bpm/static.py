@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
+from opalflow.bpm.loading import Supports
 from opalflow.bpm.spec import STATIC_SOLVERS as SOLVERS
 from opalflow.bpm.stiffness import BondNetwork
 from opalflow.spec import InputError
@@ -128,41 +129,34 @@ def rigid_body_modes(positions: np.ndarray) -> np.ndarray:
     return modes.reshape(-1, 6)
 
 
-def solve_compression(net: BondNetwork, positions: np.ndarray, fixed: np.ndarray, top: np.ndarray,
-                      height: float, area: float, *, strain: float = 1e-4, solver: str = "auto",
-                      rtol: float = 1e-6, energy_tol: float = ENERGY_TOL, maxiter: int = 20000,
-                      drop_loose: bool = False, clamp_top: bool = False, sense: int = 1, say=print) -> StaticResult:
-    """Uniaxial compression by a prescribed top-layer displacement (see the module docstring).
-
-    ``fixed``: the substrate; ``top``: the top layer (both boolean over particles); the top layer moves
-    only in z and is free sideways and in rotation (a frictionless plate), or with ``clamp_top`` is held
-    in its other five degrees of freedom (glued to the wall: ``compression.loading = "glued"``); ``sense`` -1
-    pulls it up instead (``"tension"``; strain and stress are positive in the loading's sense).  The strain is
-    small and the answer linear in it; the stress is reported for ``strain``.  E is taken from the elastic
-    energy W of the solution, E = 2 W / (A H e^2) (Clapeyron: W = 1/2 F delta at equilibrium), which
-    converges quadratically in the solution's error where the top layer's reaction force converges
-    linearly; CG stops (:class:`Stop`) at relative residual ``rtol`` or when the estimated energy error is
-    below ``energy_tol`` of W (0: the residual alone).  Particles with no bond path
-    to the substrate make K singular: refused, or with ``drop_loose`` held still (they carry nothing).
+def solve_compression(net: BondNetwork, positions: np.ndarray, supports: Supports, *, strain: float = 1e-4,
+                      solver: str = "auto", rtol: float = 1e-6, energy_tol: float = ENERGY_TOL, maxiter: int = 20000,
+                      drop_loose: bool = False, say=print) -> StaticResult:
+    """The sample under its loading's ``supports`` (:meth:`opalflow.bpm.loading.Loading.supports`: for the
+    uniaxial tests the substrate held, the top layer moved in z and free sideways and in rotation, or glued:
+    held in its other five degrees of freedom; strain and stress positive in the loading's sense).  The
+    strain is small and the answer linear in it; the stress is reported for ``strain``.  E is taken from the
+    elastic energy W of the solution, E = 2 W / (A H e^2) (Clapeyron: W = 1/2 F delta at equilibrium, A and H
+    the loading's area and gauge length), which converges quadratically in the solution's error where the
+    driven particles' reaction force converges linearly; CG stops (:class:`Stop`) at relative residual
+    ``rtol`` or when the estimated energy error is below ``energy_tol`` of W (0: the residual alone).
+    Particles with no bond path to the anchored ones make K singular: refused, or with ``drop_loose`` held
+    still (they carry nothing).
     """
     if solver not in SOLVERS:
         raise InputError(f"compression.solver = {solver!r}: must be one of {', '.join(SOLVERS)}")
     if solver == "auto":
         solver = auto_solver(net.n_particles, len(net.L))
-    loose = loose_particles(net, fixed)
+    loose = loose_particles(net, supports.anchored)
     if loose.any() and not drop_loose:
         raise LooseParticlesError(loose_message(int(loose.sum())))
     if loose.any():
         say(f"static solve: {int(loose.sum())} loose particles (no bond path to the substrate) left out")
     t0 = time.perf_counter()
     n = net.n_particles
-    prescribed = np.zeros((n, 6), bool)
-    prescribed[fixed | loose] = True
-    prescribed[top & ~fixed & ~loose, slice(None) if clamp_top else 2] = True
-    x_p = np.zeros((n, 6))
-    delta = strain * height
-    x_p[top & ~fixed & ~loose, 2] = -sense * delta
-    free = ~prescribed.ravel()
+    held = supports.without(loose)
+    x_p = strain * held.drive
+    free = ~held.held.ravel()
     K_xp = net.matvec(x_p.ravel())
     rhs = np.where(free, -K_xp, 0.0)
     stop = Stop(rtol, maxiter, energy_tol, 0.5 * float(x_p.ravel() @ K_xp))
@@ -199,7 +193,7 @@ def solve_compression(net: BondNetwork, positions: np.ndarray, fixed: np.ndarray
     x_f, iterations = prepared.solve(rhs, stop, progress)
     x = x_p.ravel() + np.where(free, x_f, 0.0)
     reaction = net.matvec(x)                      # K x: the force the supports apply, zero elsewhere
-    modulus = float(x @ reaction) / (area * height * strain ** 2)      # 2 W / (A H e^2), W = 1/2 x^T K x
+    modulus = float(x @ reaction) / (supports.area_nm2 * supports.gauge_nm * strain ** 2)      # 2 W / (A H e^2), W = 1/2 x^T K x
     x = x.reshape(n, 6)
     seconds = time.perf_counter() - t0
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0

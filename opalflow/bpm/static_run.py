@@ -72,7 +72,7 @@ def network_run(spec: BpmWorkflow, s, out: Path, t0: float, *, launcher: str, re
     data = sample.structure
     t = time.perf_counter()
     net = stiffness_network(data, sample.coefficients)
-    loose = loose_particles(net, data.groups["substrate"])
+    loose = loose_particles(net, LOADINGS[c.loading].supports(sample).anchored)
     timings["network"] = time.perf_counter() - t
     if loose.any() and not c.drop_loose:     # refused before anything is written
         raise LooseParticlesError(loose_message(int(loose.sum())))
@@ -123,9 +123,8 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
     data = sample.structure
     substrate = data.groups["substrate"]
     say(f"static solve ({c.solver}): {s.n_particles} particles, {s.n_bonds} bonds, {6 * s.n_particles} dofs")
-    res = solve_compression(net, data.positions, substrate, sample.top_layer, sample.height_nm, sample.area_nm2,
-                            strain=STRAIN, solver=c.solver, drop_loose=c.drop_loose,
-                            clamp_top=LOADINGS[c.loading].glued, sense=LOADINGS[c.loading].sense, say=say)
+    res = solve_compression(net, data.positions, LOADINGS[c.loading].supports(sample), strain=STRAIN,
+                            solver=c.solver, drop_loose=c.drop_loose, say=say)
     written.result()                 # data.lmp (written while the solver ran)
     E_GPa = res.modulus_MPa / 1e3
     t = time.perf_counter()
@@ -223,13 +222,9 @@ def _report(spec: BpmWorkflow, info: dict, summary: dict, res: StaticResult, sid
     loading = LOADINGS[spec.compression.loading]
     lines = [f"# {spec.name}: static {loading.title}", "",
              f"{info['n_particles']} particles, {info['n_bonds']} bonds; the bond network linearised from LAMMPS's "
-             "bpm/rotational (opalflow/bpm/stiffness.py); substrate fixed, top layer "
-             f"({info['top_layer_particles']} particles) {'pushed down' if loading.sense > 0 else 'pulled up'} by "
-             f"strain {res.strain:g} x H (H = {info['height_nm']:.1f} nm), "
-             + ("glued to the wall (x, y and rotations held)" if loading.glued
-                else "its x, y and rotations free") + "; sides "
-             f"{sides}. Contacts carry no load at the reference state and bonds do not break: "
-             "no strength.", "", *sample_lines(info), *network_inputs(info, sample), "## Results", "",
+             f"bpm/rotational (opalflow/bpm/stiffness.py); {loading.held_text(info['top_layer_particles'])}, by "
+             f"strain {res.strain:g} x H (H = {info['height_nm']:.1f} nm); sides {sides}. Contacts carry no load at "
+             "the reference state and bonds do not break: no strength.", "", *sample_lines(info), *network_inputs(info, sample), "## Results", "",
              "| quantity | value | reference | error |", "|---|---|---|---|"]
     ref = summary["reference"].get("youngs_modulus_specimen_GPa") or summary["reference"].get("youngs_modulus_GPa")
     lines.append(f"| Young's modulus (GPa) | {summary['youngs_modulus_GPa']:.4g} | "

@@ -8,7 +8,8 @@ uniaxial compression along z with periodic x and y strains only the z bonds, so
 
 which is pi/4 E_b for r_b = a/2.  FCC with cubic cell a: diameter a / sqrt(2),
 12 neighbours.  The bottom layer is the fixed substrate, or, with ``lattice.periodic_z``, the lattice is
-periodic in all three directions (no substrate) for the static stiffness tensor.
+periodic in all three directions (no substrate) for the static stiffness tensor; a beam in three-point
+bending (``compression.loading = "bending"``) has none either.
 """
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ import math
 import numpy as np
 
 from opalflow.bpm.bonds import bond_types_by_material, find_bonds
+from opalflow.bpm.loading import LOADINGS
 from opalflow.bpm.scene import Scene
 from opalflow.lattice.spec import LatticeWorkflow
 from opalflow.materials import material
@@ -41,7 +43,8 @@ def build_lattice(spec: LatticeWorkflow, progress=None) -> Structure:
     periodic = np.array([spec.boundary.sides == "periodic"] * 2 + [lat.periodic_z])
     x = quantize(x, box, periodic)
     diameters = np.full(len(x), d)
-    substrate = np.zeros(len(x), bool) if lat.periodic_z else x[:, 2] < x[:, 2].min() + 0.5 * d
+    held = not lat.periodic_z and LOADINGS[spec.compression.loading].substrate     # (a beam in bending has none)
+    substrate = x[:, 2] < x[:, 2].min() + 0.5 * d if held else np.zeros(len(x), bool)
     types = np.where(substrate, 2, 1).astype(np.int32)
     bonds = find_bonds(x, diameters, box, periodic, spec.bonds.cutoff_factor, spec.bonds.min_length_factor)
     rho = density_to_nano(material(spec.material, spec.materials)["density_kg_m3"])

@@ -4,6 +4,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from opalflow.bpm.methods import METHODS
 from opalflow.bpm.spec import BoundarySpec, BpmWorkflow
 from opalflow.materials import material
 from opalflow.spec import check
@@ -39,6 +40,9 @@ class LatticeWorkflow(BpmWorkflow):
             return {}
         props = material(self.material, self.materials)
         r = self.bonds.radius_factor / 2
+        if self.compression.loading == "bending":
+            return {"youngs_modulus_GPa": (self.flexural_modulus(props, r), "beam theory: Timoshenko's simply "
+                                           "supported beam with the lattice's EI and GA (LatticeWorkflow.flexural_modulus)")}
         if self.lattice.periodic_z:      # C11 = C22 = C33, C12 = 0: E along each axis is C11
             return {"youngs_modulus_GPa": (math.pi * r**2 * props["bond_youngs_modulus_GPa"],
                                            "analytic: C11 = E_b pi r_b^2 / a^2, C12 = 0 (periodic simple-cubic lattice)")}
@@ -49,6 +53,27 @@ class LatticeWorkflow(BpmWorkflow):
                                     "analytic: sigma_b pi r_b^2 / a^2 (simple-cubic lattice in tension)")
         return refs
 
+    def flexural_modulus(self, props: dict, r: float) -> float:
+        """The flexural modulus E_f = F L^3 / (4 b h^3 delta) (ASTM D790) that beam theory gives a simple-cubic
+        beam of n_x x n_y x n_z cells (spacing a, bond radius r_b = r a) in three-point bending over the span
+        L = (n_x - 1) a between its bottom end particles: Timoshenko's mid-span deflection (Timoshenko and Gere,
+        Mechanics of Materials, sec. 10.4), delta / F = L^3 / (48 EI) + L / (4 kappa G A), kappa = 5/6,
+        with the lattice's own stiffnesses: EI = n_y E_b (A_b sum_k z_k^2 + n_z I_b) (the bonds along x at
+        heights z_k from the mid-plane, stretched, and bent themselves; A_b = pi r_b^2, I_b = pi r_b^4 / 4; that
+        is E b h^3 / 12 (1 - 1/n_z^2) plus the bonds' own), G = G_b A_b / (2 a^2) (each bond's shear spring
+        G_b A_b / a, the particles turning by half the shear: C44 of the periodic lattice's static tensor, to
+        round-off), A = b h.  E_b, G_b = E_b / (2 (1 + nu_b)) from the material."""
+        lat = self.lattice
+        a, n = lat.spacing_nm, lat.cells_z
+        span, depth, width = (lat.cells_x - 1) * a, n * a, lat.cells_y * a
+        E_b = props["bond_youngs_modulus_GPa"]
+        area_b, i_b = math.pi * (r * a) ** 2, math.pi * (r * a) ** 4 / 4
+        heights = [(k - (n - 1) / 2) * a for k in range(n)]
+        EI = lat.cells_y * E_b * (area_b * sum(h * h for h in heights) + n * i_b)
+        GA = E_b / (2 * (1 + props["bond_poisson_ratio"])) * area_b / (2 * a**2) * width * depth
+        compliance = span**3 / (48 * EI) + span / (4 * 5 / 6 * GA)
+        return span**3 / (4 * width * depth**3 * compliance)
+
     def validate(self) -> None:
         super().validate()
         lat = self.lattice
@@ -56,7 +81,7 @@ class LatticeWorkflow(BpmWorkflow):
               f"must be one of {', '.join(LATTICES)}")
         check(1e-3 <= lat.spacing_nm <= 1e5, "lattice.spacing_nm", lat.spacing_nm, "must be in [1e-3, 1e5] nm")
         if lat.periodic_z:
-            check(self.compression.method == "static", "lattice.periodic_z", lat.periodic_z,
+            check(METHODS[self.compression.method].tensor, "lattice.periodic_z", lat.periodic_z,
                   "needs compression.method = \"static\" (a sample periodic in z has no substrate to compress on)")
             check(self.boundary.sides == "periodic", "lattice.periodic_z", lat.periodic_z,
                   "needs boundary.sides = \"periodic\" (periodic in all three directions)")

@@ -1,0 +1,120 @@
+"""The methods of a bonded-particle loading: ``compression.method`` -> :class:`Method`.
+
+A method is how the response of the loaded sample is computed: a LAMMPS run (``dynamic``), one linear solve
+of the bond network (``static``: E, no strength, :mod:`opalflow.bpm.static_run`) or the event-driven fracture
+of the linear network (``quasistatic``: E and strength at zero rate, :mod:`opalflow.bpm.quasistatic_run`).
+Each says what it needs of the spec (:meth:`Method.check`, called by the spec's validation), which command-line
+options it takes, how :mod:`opalflow.runs.plan` prices it, how it runs and what it resumes from.  The runners
+are named as ``"module:function"`` and imported when used (as :class:`opalflow.registry.Kind` names its own),
+so the spec stays light.  A new method is one class here and one line in :data:`METHODS`.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from opalflow.bpm.bonds import BOND_MODELS
+from opalflow.spec import SpecError, check
+
+
+class Method:
+    """A way to compute the loading of a bonded-particle sample."""
+
+    name = ""
+    #: ``"module:function"`` called as ``run(spec, out, say=..., **options)`` -> summary dict
+    runner = ""
+    #: the command-line options it takes (keywords of the runner): of np_, resume, suffix
+    options: tuple[str, ...] = ()
+    refusal = ""
+    #: the linear bond network (no loading rate, no time step; bonds must carry moments)
+    linear = True
+    #: ``"module:function"`` called as ``resumable(folder)`` -> bool: something to resume from; "" none
+    resumable = ""
+    #: a sample periodic in x, y and z gets its stiffness tensor (no substrate to load)
+    tensor = False
+
+    #: the paper's breaking rules (``bonds.breaking`` other than "lammps") and contact springs in the solve
+    paper_rules = False
+
+    def check(self, spec) -> None:
+        """Refuse what this method cannot compute (one line: field, value, what is allowed)."""
+        c, b = spec.compression, spec.bonds
+        check(not (self.linear and c.check_rate), "compression.check_rate", c.check_rate,
+              f"must be false with method = \"{self.name}\" (a linear solve has no loading rate)")
+        check(not (self.linear and not BOND_MODELS[b.model].moments), "bonds.model", b.model,
+              f"must be \"parallel\" with compression.method = \"{self.name}\" (contact bonds carry no moment: "
+              "a tree-like network of them is a mechanism with no static stiffness)")
+        check(b.breaking == "lammps" or self.paper_rules, "bonds.breaking", b.breaking,
+              f"must be \"lammps\" with compression.method = \"{self.name}\" (LAMMPS's bpm/rotational has its own "
+              "rule alone; the paper's rules need \"quasistatic\")")
+        check(spec.contacts.quasistatic == "off" or (self.paper_rules and spec.contacts.enabled),
+              "contacts.quasistatic", spec.contacts.quasistatic,
+              "needs compression.method = \"quasistatic\" and contacts.enabled = true (the dynamic method's "
+              "contacts are LAMMPS's pair style; the static one has none)")
+
+    def price(self, spec, s) -> dict:
+        """What :mod:`opalflow.runs.plan` prices a run of structure ``s`` by, besides its size."""
+        return {}
+
+    def run(self, spec, out: Path, *, np_: int = 1, resume: bool = False, suffix: str | None = None,
+            say=print) -> dict:
+        """Run ``spec`` into ``out`` (options this method does not take must be at their defaults)."""
+        from opalflow.registry import resolve
+
+        given = {"np_": np_ != 1, "resume": resume, "suffix": suffix is not None}
+        if any(on and o not in self.options for o, on in given.items()):
+            raise SpecError("compression.method", self.name, self.refusal)
+        values = {"np_": np_, "resume": resume, "suffix": suffix}
+        return resolve(self.runner)(spec, out, say=say, **{o: values[o] for o in self.options})
+
+
+class Dynamic(Method):
+    """LAMMPS integrates the motion (:func:`opalflow.bpm.pipeline.run_dynamic`)."""
+
+    name, runner, linear = "dynamic", "opalflow.bpm.pipeline:run_dynamic", False
+    options = ("np_", "resume", "suffix")
+    resumable = "opalflow.bpm.pipeline:has_restart"
+
+    def price(self, spec, s):
+        from opalflow.registry import resolve
+
+        deck = resolve("opalflow.bpm.deck:compression_deck")(spec, s)
+        return {"steps": resolve("opalflow.bpm.pipeline:dynamic_steps")(spec, deck)}
+
+
+class Static(Method):
+    """One linear solve of the bond network (:func:`opalflow.bpm.static_run.run_static`)."""
+
+    name, runner, tensor = "static", "opalflow.bpm.static_run:run_static", True
+    refusal = "a static solve has no --resume, --np or --suffix"
+
+    def price(self, spec, s):
+        from opalflow.registry import resolve
+
+        solver = spec.compression.solver
+        return {"solver": resolve("opalflow.bpm.static:auto_solver")(s.n_particles, s.n_bonds)
+                if solver == "auto" else solver}
+
+
+class Quasistatic(Method):
+    """Event-driven breaking of the linear network (:func:`opalflow.bpm.quasistatic_run.run_quasistatic`)."""
+
+    name, runner = "quasistatic", "opalflow.bpm.quasistatic_run:run_quasistatic"
+    options = ("resume",)
+    refusal = "the quasi-static method has no --np or --suffix"
+    resumable = "opalflow.bpm.quasistatic_run:has_state"
+
+    paper_rules = True
+
+    def check(self, spec):
+        super().check(spec)
+        check(spec.bonds.breakable, "bonds.breakable", spec.bonds.breakable,
+              "must be true with compression.method = \"quasistatic\" (it breaks bonds; \"static\" gives E alone)")
+        check(spec.compression.solver == "auto", "compression.solver", spec.compression.solver,
+              "is the static method's: the quasi-static re-solves are set by compression.resolver")
+
+    def price(self, spec, s):
+        return {"solver": "amg"}            # priced as its first solve (the events are not known)
+
+
+#: ``compression.method`` -> method
+METHODS: dict[str, Method] = {m.name: m for m in (Dynamic(), Static(), Quasistatic())}
