@@ -12,7 +12,8 @@ from opalflow.bpm.deck import compression_deck
 from opalflow.bpm.loading import LOADINGS
 from opalflow.bpm.relaxation import relaxation_deck
 from opalflow.bpm.scene import build_key, scene_of
-from opalflow.bpm.static import Factor, block_matrix, solve_compression, solver_threads, thread_budget
+from opalflow.bpm.static import block_matrix, solve_compression
+from opalflow.linalg.direct import Factor, solver_threads, thread_budget
 from opalflow.bpm.stiffness import stiffness_network
 from opalflow.cli import main
 from opalflow.lammps.datafile import write_data

@@ -5,6 +5,8 @@ run stopped by a scheduler's signal resumed to the same numbers, and the refusal
 import dataclasses
 import json
 import math
+import types
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,6 +15,7 @@ import opalflow
 from opalflow.bpm.loading import LOADINGS, Loading
 from opalflow.cli import main
 from opalflow.lammps import engine
+from opalflow.spec import SpecError
 
 TENSION = ["compression.loading=tension", "bonds.breakable=true", "compression.strain_max=0.02",
            "compression.snapshot_strains=[]"]
@@ -329,10 +332,29 @@ def test_event_tolerance_breaks_more_bonds_per_event(quick, tmp_path):
 
 def test_a_new_loading_is_one_class_and_one_registry_line():
     """The loadings the deck and the solvers know come from the registry; each one's blocks render."""
-    assert set(LOADINGS) == {"plate", "glued", "tension"}
+    assert set(LOADINGS) == {"plate", "glued", "tension", "bending"}
     assert all(isinstance(v, Loading) and v.name == k for k, v in LOADINGS.items())
-    blocks = LOADINGS["tension"].blocks(1.0, 2, 90.0, 100.0, 5.0, "")
+    sample = types.SimpleNamespace(plate_z0_nm=100.0, base_nm=5.0)
+    blocks = LOADINGS["tension"].blocks(sample, 1.0, 2, 90.0, "")
     assert "move linear 0.0 0.0 1.0" in blocks["plate"] and "ramp vz 0.0 1.0" in blocks["affine_start"]
+
+
+def test_methods_are_objects_that_check_their_spec_and_name_their_runner():
+    """compression.method -> opalflow.bpm.methods.METHODS: each names a runner that exists, its options are the
+    runner's keywords, and the refusals of what it cannot compute come from it."""
+    import inspect
+
+    from opalflow.bpm.methods import METHODS
+    from opalflow.registry import resolve
+
+    assert set(METHODS) == {"dynamic", "static", "quasistatic"}
+    for name, method in METHODS.items():
+        params = inspect.signature(resolve(method.runner)).parameters
+        assert method.name == name and set(method.options) <= set(params), name
+        assert not method.resumable or callable(resolve(method.resumable))
+    assert [m.linear for m in METHODS.values()] == [False, True, True]
+    with pytest.raises(SpecError, match="compression.method = 'static': a static solve has no --resume"):
+        METHODS["static"].run(None, Path("/nonexistent"), resume=True)
 
 
 @pytest.mark.parametrize("sets, field", [

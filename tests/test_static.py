@@ -238,7 +238,7 @@ def test_own_gauss_seidel_sweeps_are_pyamgs(bs, dtype):
     import scipy.sparse as sp
     from pyamg.relaxation.relaxation import block_gauss_seidel
 
-    from opalflow.bpm.static import smoothers
+    from opalflow.linalg.multigrid import smoothers
 
     rng = np.random.default_rng(3)
     n = 40

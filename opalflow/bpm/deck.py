@@ -189,41 +189,45 @@ def loaded_sample(spec: BpmWorkflow, s: Structure) -> LoadedSample:
                         loading=loading.name, loading_sense=loading.sense)
 
 
-def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
-    """Decks (fresh and resume) for the uniaxial compression (or tension) of ``s``: the loaded sample
-    (:func:`loaded_sample`) and what a dynamic run adds to it (time step, damping, output, restarts)."""
-    c = spec.compression
-    sample = loaded_sample(spec, s)
+def particle_contacts(spec: BpmWorkflow, s: Structure):
+    """(law, contact properties per atom type, the plate's contact E per type): the contact law of
+    ``contacts.model`` prepared for each type's material and mean radius, friction and restitution as given."""
     d_mean = float(np.mean(s.diameters))
-    data, coeffs, r0 = sample.structure, sample.coefficients, sample.bond_lengths
-    masses = s.densities * np.pi / 6 * s.diameters**3
-    plate = contact_properties(DIAMOND)
     given = {k: v for k, v in (("friction", spec.contacts.friction), ("restitution", spec.contacts.restitution))
              if v is not None}
     law = CONTACT_LAWS[spec.contacts.model]
-    loading = LOADINGS[c.loading]
-    contacts = {k + 1: law.prepare(dataclasses.replace(contact_properties(particle_material(n, spec.material)), **given),
-                                   0.5 * float(np.mean(s.diameters[s.types == k + 1])) if np.any(s.types == k + 1)
-                                   else 0.5 * d_mean)
-                for k, n in enumerate(s.type_names)}
-    plate_E = {t: plate_contact_E(cp, plate) for t, cp in contacts.items()}
-    estimate = estimate_timestep(data, coeffs, contacts if spec.contacts.enabled else {},
-                                 plate_E, contacts, r0, spectral=not METHODS[spec.compression.method].linear)
-    limit_ns = estimate.limit_ns
-    if c.timestep_s:
-        dt = c.timestep_s * 1e9
-        if dt > limit_ns:
-            raise SpecError("compression.timestep_s", c.timestep_s,
-                            f"above the stability limit {limit_ns * 1e-9:.3g} s estimated from the "
-                            f"stiffest mode ({estimate.stiffest}); use <= that or 0 for the estimate")
-    else:
-        dt = c.timestep_safety * limit_ns
+    contacts = {}
+    for k, n in enumerate(s.type_names):
+        props = dataclasses.replace(contact_properties(particle_material(n, spec.material)), **given)
+        on = s.types == k + 1
+        contacts[k + 1] = law.prepare(props, 0.5 * float(np.mean(s.diameters[on])) if np.any(on) else 0.5 * d_mean)
+    plate = contact_properties(DIAMOND)
+    return law, contacts, {t: plate_contact_E(cp, plate) for t, cp in contacts.items()}
 
-    substrate = s.groups["substrate"]
-    top, base, height, area = sample.plate_z0_nm, sample.base_nm, sample.height_nm, sample.area_nm2
-    top_group = sample.top_layer
-    v = c.plate_speed_m_s                       # m/s = nm/ns
-    steps_per_strain = height / v / dt
+
+def time_step(spec: BpmWorkflow, sample: LoadedSample, contacts: dict, plate_E: dict) -> tuple[TimestepEstimate, float]:
+    """The stability estimate (:func:`opalflow.bpm.timestep.estimate_timestep`) and the time step (ns): the
+    one given, refused above the limit, or ``timestep_safety`` of the limit."""
+    c = spec.compression
+    estimate = estimate_timestep(sample.structure, sample.coefficients, contacts if spec.contacts.enabled else {},
+                                 plate_E, contacts, sample.bond_lengths,
+                                 spectral=not METHODS[spec.compression.method].linear)
+    limit_ns = estimate.limit_ns
+    if not c.timestep_s:
+        return estimate, c.timestep_safety * limit_ns
+    dt = c.timestep_s * 1e9
+    if dt > limit_ns:
+        raise SpecError("compression.timestep_s", c.timestep_s,
+                        f"above the stability limit {limit_ns * 1e-9:.3g} s estimated from the "
+                        f"stiffest mode ({estimate.stiffest}); use <= that or 0 for the estimate")
+    return estimate, dt
+
+
+def schedule(spec: BpmWorkflow, height: float, dt: float) -> tuple[int, int, int, list[int]]:
+    """(steps, output interval, restart interval, snapshot steps) of a run at the plate speed to
+    ``strain_max`` over the loading's length ``height``."""
+    c = spec.compression
+    steps_per_strain = height / c.plate_speed_m_s / dt           # m/s = nm/ns
     steps = int(math.ceil(c.strain_max * steps_per_strain))
     if steps > MAX_STEPS:
         raise SpecError("compression.timestep_s", c.timestep_s,
@@ -233,17 +237,42 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
     # restart files at whole output intervals: a run resumed from one writes its first averaged
     # curve row one interval later, so no row is lost or written twice
     restart_every = every * max(1, int(round(c.restart_every_strain * steps_per_strain / every)))
-    snaps = sorted({max(1, int(round(e * steps_per_strain))) for e in c.snapshot_strains})
+    return steps, every, restart_every, sorted({max(1, int(round(e * steps_per_strain))) for e in c.snapshot_strains})
 
-    omega1, modulus_affine = fundamental_mode(data, coeffs, height, area, masses, r0)
+
+def damping(spec: BpmWorkflow, sample: LoadedSample) -> tuple[float, float, float, float]:
+    """(omega_1, the affine modulus, the drag gamma, the kinetic energy of the start): the drag is
+    ``global_damping`` of critical for the fundamental mode (:func:`fundamental_mode`) at the moving particles'
+    mean mass; a glued loading starts the mobile particles on the affine field and the top layer at the wall's
+    speed."""
+    s, v = sample.source, spec.compression.plate_speed_m_s
+    substrate, top_group = s.groups["substrate"], sample.top_layer
+    masses = s.densities * np.pi / 6 * s.diameters**3
+    omega1, modulus_affine = fundamental_mode(sample.structure, sample.coefficients, sample.height_nm,
+                                              sample.area_nm2, masses, sample.bond_lengths)
     initial_ke = 0.0
-    if loading.glued:     # the start gives the mobile particles the affine field, fix move the top v
+    if LOADINGS[spec.compression.loading].glued:     # the start gives the mobile particles the affine field
         moving = ~substrate & ~top_group
-        v_z = v * np.clip((s.positions[:, 2] - base) / height, 0.0, 1.0)
+        v_z = v * np.clip((s.positions[:, 2] - sample.base_nm) / sample.height_nm, 0.0, 1.0)
         initial_ke = float(0.5 * np.sum(masses[moving] * v_z[moving] ** 2) + 0.5 * np.sum(masses[top_group]) * v**2)
-    gamma = 2 * c.global_damping * omega1 * float(np.mean(masses[~substrate]))
+    gamma = 2 * spec.compression.global_damping * omega1 * float(np.mean(masses[~substrate]))
+    return omega1, modulus_affine, gamma, initial_ke
 
-    substrate_type = s.type_names.index("substrate") + 1
+
+def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
+    """Decks (fresh and resume) for the loading of ``s``: the loaded sample (:func:`loaded_sample`) and what a
+    dynamic run adds to it (contacts, time step, schedule, damping: the functions above), as blocks."""
+    c = spec.compression
+    sample = loaded_sample(spec, s)
+    d_mean = float(np.mean(s.diameters))
+    coeffs, r0 = sample.coefficients, sample.bond_lengths
+    loading = LOADINGS[c.loading]
+    law, contacts, plate_E = particle_contacts(spec, s)
+    estimate, dt = time_step(spec, sample, contacts, plate_E)
+    steps, every, restart_every, snaps = schedule(spec, sample.height_nm, dt)
+    omega1, modulus_affine, gamma, initial_ke = damping(spec, sample)
+    v, top, height = c.plate_speed_m_s, sample.plate_z0_nm, sample.height_nm
+
     style = BOND_MODELS[spec.bonds.model]
     bond_lines = "\n".join(f"bond_coeff      {t + 1} " + " ".join(num(x) for x in style.coefficients(cf))
                            for t, cf in enumerate(coeffs))
@@ -258,43 +287,47 @@ def compression_deck(spec: BpmWorkflow, s: Structure) -> CompressionDeck:
         "integrate": render("integrate", skin=num(0.2 * d_mean), timestep=num(dt)),
         "damping": render("damping", zeta=num(c.global_damping), gamma=num(gamma),
                           plate_speed=num(loading.sense * v if loading.affine else 0.0),
-                          base=num(base), height=num(height)),
-        **loading.blocks(sample, v, substrate_type, top - 0.75 * d_mean,
+                          base=num(sample.base_nm), height=num(height)),
+        **loading.blocks(sample, v, s.type_names.index("substrate") + 1, top - 0.75 * d_mean,
                          law.args(contacts[1], plate_E[1], 2 * contacts[1].stiffness)),
         "snapshots": render("snapshots", next_snapshot=_next_snapshot(snaps), count_bonds=COUNT_BONDS),
         "run": render("run", restart_every=num(restart_every), steps=num(steps)),
+        "output": dict(height=num(height), every=num(every), strain_sign=loading.strain_expression(),
+                       substrate_fz=loading.support_force),
+        "resume": {"system": render("system_restart", ghost_cutoff=common["ghost_cutoff"],
+                                    restart_file="restart.*.bin"),
+                   "snapshots": render("snapshots", next_snapshot=_next_snapshot(snaps),
+                                       count_bonds="# i_bonds0: the bond counts at the start, from the restart file")},
     }
     wanted = ["system", "groups", "bonds"] + (["contacts"] if spec.contacts.enabled else []) + \
              ["integrate"] + (["damping"] if c.global_damping > 0 else []) + \
              ["plate"] + (["affine_start"] if "affine_start" in blocks else []) + ["output"] + \
              (["snapshots"] if snaps else []) + ["run"]
     title = f"# opalflow {__version__}: {name(spec.name)} - {loading.title}\n"
-
-    def deck(fresh: bool) -> str:
-        parts = []
-        for b in wanted:
-            if b == "output":
-                parts.append(render("output", height=num(height), every=num(every), strain_sign=loading.strain_expression(),
-                                    substrate_fz=loading.support_force, curve_file="file" if fresh else "append"))
-            elif fresh:
-                parts.append(blocks[b])
-            elif b == "system":
-                parts.append(render("system_restart", ghost_cutoff=common["ghost_cutoff"],
-                                    restart_file="restart.*.bin"))
-            elif b == "snapshots":     # the bond counts at the start come back from the restart file
-                parts.append(render("snapshots", next_snapshot=_next_snapshot(snaps),
-                                    count_bonds="# i_bonds0: the bond counts at the start, from the restart file"))
-            elif b not in ("groups", "affine_start"):  # groups are stored in restart files, velocities too
-                # bonds and contacts are given again: pair granular read back from a restart file
-                # blows up the first contacts of pairs whose bond broke (see templates/system_restart.lmp)
-                parts.append(blocks[b])
-        return title + "\n".join(parts)
-
     return CompressionDeck(**{f.name: getattr(sample, f.name) for f in dataclasses.fields(LoadedSample)},
-                           in_lmp=deck(True), resume_lmp=deck(False), timestep=estimate, dt_ns=dt, steps=steps,
-                           every=every, restart_every=restart_every, snapshot_steps=snaps, plate_speed_nm_ns=v,
-                           blocks=wanted, modulus_affine_MPa=modulus_affine, omega1_per_ns=omega1,
+                           in_lmp=title + _deck(wanted, blocks, fresh=True),
+                           resume_lmp=title + _deck(wanted, blocks, fresh=False), timestep=estimate, dt_ns=dt,
+                           steps=steps, every=every, restart_every=restart_every, snapshot_steps=snaps,
+                           plate_speed_nm_ns=v, blocks=wanted, modulus_affine_MPa=modulus_affine, omega1_per_ns=omega1,
                            viscous_gamma=gamma, initial_ke_zJ=initial_ke)
+
+
+def _deck(wanted: list[str], blocks: dict, fresh: bool) -> str:
+    """The fresh deck, or the one that resumes from the newest restart file: groups and velocities come back
+    from it (no groups, no affine start), so do the bond counts at the start; the curve is appended to."""
+    parts = []
+    for b in wanted:
+        if b == "output":
+            parts.append(render("output", **blocks["output"], curve_file="file" if fresh else "append"))
+        elif fresh:
+            parts.append(blocks[b])
+        elif b in blocks["resume"]:
+            parts.append(blocks["resume"][b])
+        elif b not in ("groups", "affine_start"):
+            # bonds and contacts are given again: pair granular read back from a restart file
+            # blows up the first contacts of pairs whose bond broke (see templates/system_restart.lmp)
+            parts.append(blocks[b])
+    return "\n".join(parts)
 
 
 def fundamental_mode(s: Structure, coeffs: list[BondCoefficients], height: float, area: float,

@@ -42,7 +42,7 @@ are held still (they carry nothing).
 
 Re-solves (measured in bench/bench_quasistatic.py, kept: ``auto``):
 
-- ``direct``: K_ff factorised once (sparse Cholesky, :class:`opalflow.bpm.static.Factor`); each broken bond
+- ``direct``: K_ff factorised once (sparse Cholesky, :class:`opalflow.linalg.direct.Factor`); each broken bond
   removes its 12 x 12 block, a rank <= 6 change, applied by the Sherman-Morrison-Woodbury formula on the old
   factor; the factor is renewed when the updates have cost as much time as it did, and when particles come
   loose;
@@ -76,15 +76,17 @@ from numba import njit
 from opalflow.bpm.contacts import Contacts, joined
 from opalflow.bpm.loading import Supports
 from opalflow.bpm.spec import RESOLVERS
-from opalflow.bpm.static import (DIRECT_MAX_DOFS, Factor, Stop, block_amg_preconditioner, block_matrix, bond_blocks,
-                                  loose_particles, particle_amg, pcg)
+from opalflow.bpm.static import (DIRECT_MAX_DOFS, block_amg_preconditioner, block_matrix, bond_blocks, loose_particles,
+                                  particle_amg)
 from opalflow.bpm.stiffness import BondNetwork
+from opalflow.linalg.direct import Factor
+from opalflow.linalg.krylov import Stop, pcg
 from opalflow.spec import InputError
 
 
 #: ``auto`` takes ``amg`` up to this many bonds, ~9 GiB (a bound of memory, where the static solver's
 #: AMG_MAX_BONDS is one of speed): a run with its 6 x 6 hierarchy (and the reversed copies of
-#: :func:`opalflow.bpm.static.v_cycle`) peaked at 4.15 GiB at 1.81 M bonds (the paper's sample at d = 30 nm);
+#: :func:`opalflow.linalg.multigrid.v_cycle`) peaked at 4.15 GiB at 1.81 M bonds (the paper's sample at d = 30 nm);
 #: at the paper's own 17.5 M bonds its K alone is 9.8 GiB (15.9 GiB while assembled), with the copy and the
 #: hierarchy past 20: ``block-amg`` above
 RESOLVE_AMG_MAX_BONDS = 4_000_000
@@ -373,7 +375,7 @@ LOCAL_MAX_PARTICLES = 20_000
 class LocalSettle:
     """The local step of an event (``compression.local_rtol``): the load a broken bond carried is released
     into the particles within :data:`LOCAL_HOPS` intact bonds of it, the rest held (a Dirichlet patch,
-    factorised by :class:`opalflow.bpm.static.Factor`); the internal force f = K x is kept up to date, so the
+    factorised by :class:`opalflow.linalg.direct.Factor`); the internal force f = K x is kept up to date, so the
     residual left (f on the free dofs: a broken bond's load the patch did not take up, at its rim) is known
     without a product over the whole network.  The caller re-solves globally once it passes the bound.
 

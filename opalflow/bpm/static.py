@@ -14,11 +14,11 @@ The stress is the top layer's reaction force over the area, the strain delta / H
 run's ``youngs_modulus_specimen_GPa`` at zero loading rate.  Particle stresses are eq. 21 of Dosta et al.
 with the bond forces of the solution.
 
-Solvers (measured in bench/bench_static.py; the iterative ones stop on CG's energy error, :class:`Stop`):
+Solvers (measured in bench/bench_static.py; the iterative ones stop on CG's energy error, :class:`opalflow.linalg.krylov.Stop`):
 
 - ``auto`` (default): ``direct`` up to DIRECT_MAX_DOFS dofs, ``amg`` up to AMG_MAX_BONDS bonds,
   ``block-amg`` above;
-- ``direct``: K factorised by MKL PARDISO (:class:`Factor`), one pair of triangular solves;
+- ``direct``: K factorised by MKL PARDISO (:class:`opalflow.linalg.direct.Factor`), one pair of triangular solves;
 - ``amg``: K assembled in 6 x 6 blocks, smoothed-aggregation AMG (pyamg) aggregating particles with the
   six rigid-body modes as near-null space, as the preconditioner of conjugate gradients;
 - ``block-amg``: matrix-free CG (the numba bond operator) preconditioned by AMG on the translational part of
@@ -28,9 +28,7 @@ Solvers (measured in bench/bench_static.py; the iterative ones stop on CG's ener
 """
 from __future__ import annotations
 
-import functools
 import math
-import os
 import resource
 import time
 from dataclasses import dataclass, field
@@ -41,6 +39,9 @@ from numba import njit
 from opalflow.bpm.loading import Supports
 from opalflow.bpm.spec import STATIC_SOLVERS as SOLVERS
 from opalflow.bpm.stiffness import BondNetwork
+from opalflow.linalg.direct import Factor, solver_threads
+from opalflow.linalg.krylov import Stop, pcg
+from opalflow.linalg.multigrid import amg_preconditioner
 from opalflow.spec import InputError
 
 
@@ -49,7 +50,7 @@ from opalflow.spec import InputError
 #: bench/results/static_quickstart.json
 DIRECT_MAX_DOFS = 100_000
 AMG_MAX_BONDS = 200_000
-#: CG's energy stop (:class:`Stop`) in static solves: E to 1e-7 of the exact (quickstart at d = 30 nm,
+#: CG's energy stop (:class:`opalflow.linalg.krylov.Stop`) in static solves: E to 1e-7 of the exact (quickstart at d = 30 nm,
 #: block-amg: 49 iterations and E within 3e-8 of the factor's, where the residual rule 1e-6 takes 70)
 ENERGY_TOL = 1e-7
 
@@ -138,7 +139,7 @@ def solve_compression(net: BondNetwork, positions: np.ndarray, supports: Support
     strain is small and the answer linear in it; the stress is reported for ``strain``.  E is taken from the
     elastic energy W of the solution, E = 2 W / (A H e^2) (Clapeyron: W = 1/2 F delta at equilibrium, A and H
     the loading's area and gauge length), which converges quadratically in the solution's error where the
-    driven particles' reaction force converges linearly; CG stops (:class:`Stop`) at relative residual
+    driven particles' reaction force converges linearly; CG stops (:class:`opalflow.linalg.krylov.Stop`) at relative residual
     ``rtol`` or when the estimated energy error is below ``energy_tol`` of W (0: the residual alone).
     Particles with no bond path to the anchored ones make K singular: refused, or with ``drop_loose`` held
     still (they carry nothing).
@@ -193,7 +194,8 @@ def solve_compression(net: BondNetwork, positions: np.ndarray, supports: Support
     x_f, iterations = prepared.solve(rhs, stop, progress)
     x = x_p.ravel() + np.where(free, x_f, 0.0)
     reaction = net.matvec(x)                      # K x: the force the supports apply, zero elsewhere
-    modulus = float(x @ reaction) / (supports.area_nm2 * supports.gauge_nm * strain ** 2)      # 2 W / (A H e^2), W = 1/2 x^T K x
+    # 2 W / (A H e^2), W = 1/2 x^T K x
+    modulus = float(x @ reaction) / (supports.area_nm2 * supports.gauge_nm * strain ** 2)
     x = x.reshape(n, 6)
     seconds = time.perf_counter() - t0
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
@@ -274,127 +276,6 @@ def solve_tensor(net: BondNetwork, positions: np.ndarray, volume: float, *, solv
                         peak_memory_MiB=peak, solver=solver, loose=int(loose.sum()))
 
 
-def amg_preconditioner(K, B):
-    """One V-cycle of the smoothed-aggregation AMG of ``K`` (BSR) with near-null space ``B`` (pyamg; Jacobi-smoothed
-    prolongation, omega 4/3 over a row-sum (Gershgorin) bound of the spectral radius instead of pyamg's
-    Lanczos estimate: at 1.1 M dofs block-amg's set-up 11.6 -> 10.1 s for 46 iterations instead of 45; the
-    rigid-body modes taken as they are: pyamg's default of improving them by four Gauss-Seidel sweeps each
-    costs 40 % of the set-up and saves no iteration; one forward Gauss-Seidel sweep before and one
-    backward after the coarse correction (a symmetric V-cycle, as CG needs) instead of two symmetric ones:
-    10-40 % more iterations at half the cost each; measured at 140 k dofs, amg 5.3 -> 4.7 s, block-amg
-    9.0 -> 7.4 s).  pyamg starts its spectral-radius estimates from numpy's global random generator: it is
-    seeded here (and restored after), so the same matrix gives the same hierarchy, and the same solve to
-    the last digit, in any process (a local pool, a Dask worker, a SLURM task).  The sweeps are
-    :func:`v_cycle`'s own (pyamg sets up no smoother).  Returns b -> the V-cycle's approximation of K^-1 b."""
-    import pyamg
-
-    state = np.random.get_state()
-    np.random.seed(20240901)
-    try:
-        ml = pyamg.smoothed_aggregation_solver(K, B=B, strength=("symmetric", {"theta": 0.0}), max_coarse=500,
-                                               smooth=("jacobi", {"omega": 4.0 / 3.0, "weighting": "local"}),
-                                               improve_candidates=None, presmoother=None, postsmoother=None)
-        return v_cycle(ml)
-    finally:
-        np.random.set_state(state)
-
-
-def v_cycle(ml):
-    """b -> one V-cycle from x = 0 on pyamg's hierarchy ``ml`` (as MultilevelSolver.__solve: R, P and its
-    coarse solver), a forward block Gauss-Seidel sweep (:func:`gauss_seidel`) before the coarse correction and
-    a backward one after, run as a forward sweep over a copy of the level's matrix with its rows and columns
-    reversed (:func:`smoothers`: this CPU reads memory in descending order 2.4x slower; the copy doubles
-    the hierarchy's memory).  pyamg's own preconditioner (``aspreconditioner``) also forms the fine-level
-    residual before the cycle and after it, two products with the finest matrix that a preconditioner does
-    not need, and its block Gauss-Seidel loops over a block size it learns at run time.  Measured: block-amg's
-    preconditioner 41 -> 27 ms a call at 140 k dofs (own sweeps in single precision); amg's at the paper's
-    sample at d = 45 nm (310 k dofs), the first 40 quasi-static events, 124 -> 65 ms a call for the same
-    405 CG iterations (pyamg's sweeps 115 ms forward and 210 backward a sweep at d = 30 nm, these 70 and 70)."""
-    levels = ml.levels
-    sweeps = [smoothers(lv.A if lv.A.format == "bsr" else lv.A.tobsr(blocksize=(1, 1))) for lv in levels[:-1]]
-
-    def cycle(lvl: int, b: np.ndarray) -> np.ndarray:
-        A = levels[lvl].A
-        if lvl == len(levels) - 1:
-            return np.asarray(ml.coarse_solver(A, b), b.dtype).reshape(b.shape)
-        x = np.zeros_like(b)
-        sweeps[lvl][0](x, b)
-        x += levels[lvl].P @ cycle(lvl + 1, levels[lvl].R @ (b - A @ x))
-        sweeps[lvl][1](x, b)
-        return x
-
-    return lambda b: cycle(0, np.ascontiguousarray(b))
-
-
-def smoothers(A):
-    """(forward, backward) for a BSR matrix ``A``: (x, b) -> one block Gauss-Seidel sweep over A in place, rows
-    in order (:func:`gauss_seidel`) or reversed (the same kernel over :func:`_reversed`, x and b in reversed
-    block order)."""
-    from pyamg.util.utils import get_block_diag
-
-    bs = A.blocksize[0]
-    D = get_block_diag(A, bs, inv_flag=True).astype(A.dtype)
-    rev = _reversed(A)
-    D_rev = np.ascontiguousarray(D[::-1])
-    sweep = gauss_seidel(bs)
-
-    def flip(v: np.ndarray) -> np.ndarray:
-        return np.ascontiguousarray(v.reshape(-1, bs)[::-1]).ravel()
-
-    def forward(x: np.ndarray, b: np.ndarray) -> None:
-        sweep(A.indptr, A.indices, A.data, D, x, b)
-
-    def backward(x: np.ndarray, b: np.ndarray) -> None:
-        x_rev = flip(x)
-        sweep(rev.indptr, rev.indices, rev.data, D_rev, x_rev, flip(b))
-        x[:] = flip(x_rev)
-
-    return forward, backward
-
-
-def _reversed(A):
-    """A with its block rows and columns in reverse order (P A P, P the block reversal): a backward sweep over A
-    is a forward one over it, which this CPU runs 2.4x faster (memory read in descending order)."""
-    import scipy.sparse as sp
-
-    n = A.shape[0] // A.blocksize[0]
-    counts = np.diff(A.indptr)[::-1]
-    indptr = np.concatenate([[0], np.cumsum(counts)]).astype(A.indptr.dtype)
-    # (every stored block in reverse order: the rows reversed, and within each row the columns)
-    return sp.bsr_matrix((np.ascontiguousarray(A.data[::-1]), (n - 1 - A.indices[::-1]).astype(A.indices.dtype),
-                          indptr), shape=A.shape)
-
-
-@functools.cache
-def gauss_seidel(bs: int):
-    """One forward block Gauss-Seidel sweep over a BSR matrix of ``bs`` x ``bs`` blocks, compiled for that block
-    size (the loops over it unrolled: 6 x 6 blocks 70 ms a sweep at 3.8 M blocks where a block size known
-    only at run time takes 130 and pyamg's amg_core.block_gauss_seidel 110): ``sweep(indptr, indices, data,
-    Dinv, x, b)`` sets x_i = D_i^-1 (b_i - sum over j != i of A_ij x_j), rows in order (a backward sweep is
-    this one over :func:`_reversed`)."""
-
-    @njit(cache=True, nogil=True)
-    def sweep(indptr, indices, data, Dinv, x, b):
-        r = np.empty(bs, data.dtype)
-        for row in range(len(indptr) - 1):
-            for a in range(bs):
-                r[a] = b[row * bs + a]
-            for jj in range(indptr[row], indptr[row + 1]):
-                col = indices[jj]
-                if col != row:
-                    for c in range(bs):
-                        xc = x[col * bs + c]
-                        for a in range(bs):
-                            r[a] -= data[jj, a, c] * xc
-            for a in range(bs):
-                acc = 0.0
-                for c in range(bs):
-                    acc += Dinv[row, a, c] * r[c]
-                x[row * bs + a] = acc
-
-    return sweep
-
-
 class Prepared:
     """``solver`` set up once for the network with free dofs ``free`` (bool (6 N,)): the assembled matrix,
     the AMG hierarchy or the factor, reused by every loading of the sample (the stiffness tensor's six).
@@ -419,80 +300,8 @@ class Prepared:
             return self._solve(b, stop, progress)
 
 
-def thread_budget() -> int:
-    """The threads this process may use: the smallest thread count of its loaded BLAS and OpenMP libraries
-    (the CPUs it may run on, or less where a job set a limit: opalflow.runs.jobs.run_job)."""
-    import scipy.linalg  # noqa: F401 - numpy's and scipy's BLAS loaded: their limit is the job's
-    from threadpoolctl import threadpool_info
-
-    counts = [lib["num_threads"] for lib in threadpool_info() if lib.get("num_threads")]
-    return max(1, min(counts, default=len(os.sched_getaffinity(0))))
-
-
-def solver_threads(solver: str) -> int:
-    """BLAS/OpenMP threads for ``solver``: the iterative ones run sparse products and vector sums that are
-    bound by memory, not arithmetic, and lose 3-6x to thread contention on a loaded machine (measured,
-    bench/results/static_threads.json): one thread; the direct factor (dense supernodes, BLAS 3) gains
-    from every thread it is given (x1.8 at 140 k dofs on 2 cores): the whole budget."""
-    return thread_budget() if solver == "direct" else 1
-
-
-class Factor:
-    """A sparse Cholesky (LL^T) factor of a symmetric positive definite K: MKL PARDISO (pypardiso; METIS
-    nested-dissection ordering, supernodes with BLAS 3, the threads of :func:`thread_budget`).  Measured on the
-    quickstart's network at 140 k dofs: factor 4.1 s on 2 cores where CHOLMOD through cholespy (no METIS,
-    simplicial) took 96 s (bench/results/static_quickstart.json).  ``solve`` takes one right-hand side (n,) or
-    several (n, k)."""
-
-    def __init__(self, K):
-        import scipy.sparse as sp
-        from threadpoolctl import threadpool_limits
-
-        pypardiso = _pardiso()
-        K = K.tocsr()
-        K.sum_duplicates()
-        rows = np.repeat(np.arange(K.shape[0], dtype=np.int32), np.diff(K.indptr))
-        # the upper triangle without the zeros (decoupled prescribed dofs, the blocks' structural zeros: half
-        # of the stored entries), straight from the sorted rows (scipy's triu goes through coordinates: 10x)
-        keep = (K.indices >= rows) & (K.data != 0)
-        indptr = np.concatenate([[0], np.cumsum(np.bincount(rows[keep], minlength=K.shape[0]))])
-        self.U = sp.csr_matrix((K.data[keep], K.indices[keep], indptr), shape=K.shape)
-        self.U.has_sorted_indices = True
-        self.size = self.U.shape[0]
-        self.pardiso = pypardiso.PyPardisoSolver(mtype=2)          # real symmetric positive definite
-        self.pardiso.size_limit_storage = 0                          # remember the matrix by its hash
-        self.threads = thread_budget()
-        with threadpool_limits(limits=self.threads):
-            self.pardiso.factorize(self.U)
-
-    def solve(self, b: np.ndarray) -> np.ndarray:
-        from threadpoolctl import threadpool_limits
-
-        with threadpool_limits(limits=self.threads):
-            return self.pardiso.solve(self.U, np.asarray(b, float))
-
-    def __del__(self):
-        try:
-            self.pardiso.free_memory(everything=True)
-        except Exception:       # interpreter shutdown: MKL may be gone already
-            pass
-
-
-def _pardiso():
-    """pypardiso, told where the mkl wheel put libmkl_rt (else it searches all of sys.prefix, 0.3 s a solver)."""
-    import glob
-    import sys
-
-    found = sorted(glob.glob(os.path.join(sys.prefix, "lib", "libmkl_rt.so*")), key=len)
-    if found:
-        os.environ.setdefault("PYPARDISO_MKL_RT", found[0])
-    import pypardiso
-
-    return pypardiso
-
-
 def _prepare_direct(net, free, positions):
-    """K (prescribed dofs decoupled) factorised (:class:`Factor`); each solve one pair of triangular solves:
+    """K (prescribed dofs decoupled) factorised (:class:`opalflow.linalg.direct.Factor`); each solve one pair of triangular solves:
     no iterations, a residual at round-off (checked by the caller)."""
     factor = Factor(block_matrix(net, free)[0])
     return lambda b, stop, progress: (factor.solve(b), 1)
@@ -507,77 +316,11 @@ def _prepare_amg(net, free, positions):
 def particle_amg(net: BondNetwork, free: np.ndarray, positions: np.ndarray):
     """(K, V-cycle): K on all dofs in 6 x 6 blocks, prescribed dofs decoupled (:func:`block_matrix`), and
     smoothed-aggregation AMG that aggregates particles (the blocks), the six rigid-body modes (zero on
-    prescribed dofs) as near-null space (:func:`amg_preconditioner`)."""
+    prescribed dofs) as near-null space (:func:`opalflow.linalg.multigrid.amg_preconditioner`)."""
     K = block_matrix(net, free)[0]
     K.sum_duplicates()
     B = np.where(free[:, None], rigid_body_modes(positions), 0.0)
     return K, amg_preconditioner(K, B)
-
-
-@dataclass
-class Stop:
-    """When conjugate gradients stop: at relative residual ``rtol``, or (``energy_tol`` > 0) when the
-    estimated energy error has fallen below ``energy_tol`` of the energy, after at most ``maxiter`` iterations.
-
-    The energy criterion (Strakos and Tichy, ETNA 13:56, 2002; Meurant, The Lanczos and Conjugate Gradient
-    Algorithms, 2006, ch. 5): CG minimises J(x) = 1/2 x^T K x - b^T x over growing Krylov spaces, and step k
-    lowers it by exactly 1/2 alpha_k r_k^T z_k, so the energy W_k = ``energy0`` + J(x_k) of the loaded sample
-    (``energy0``: the energy of the prescribed displacements alone) is known at every step and falls to its
-    minimum W*, with W_k - W* = 1/2 |x_k - x*|_K^2.  The error left is estimated from the decreases
-    (:func:`_energy_error`; their rate over the last fifth of the iterations, at least ``window`` steps: a
-    slowly converging CG's decreases swing from step to step).  A modulus taken from the energy (E = 2 W / (A H e^2),
-    Clapeyron) has relative error (W_k - W*) / W*: quadratic in the error of x, where the reaction force's
-    is linear, so E to 1e-8 needs a residual of ~1e-4 instead of ~1e-8."""
-
-    rtol: float = 1e-6
-    maxiter: int = 20000
-    energy_tol: float = 0.0
-    energy0: float = 0.0
-    window: int = 10
-
-
-def pcg(matvec, precondition, b, stop: Stop, progress, dot=np.dot):
-    """Preconditioned conjugate gradients (Hestenes-Stiefel; Saad, Iterative Methods, alg. 9.1) from x = 0,
-    until ``stop`` (:class:`Stop`) says; ``progress(k, |r| / |b|)`` after every iteration.  Returns
-    (x, iterations)."""
-    x = b * 0.0
-    r = b
-    z = precondition(r)
-    p = z
-    rz = dot(r, z)
-    b_norm = float(np.sqrt(dot(b, b)))
-    k = 0
-    if b_norm == 0.0:            # nothing to relax (an affine strain of a perfect lattice): x = 0
-        return x, 0
-    energy, drops = stop.energy0, []
-    for k in range(1, stop.maxiter + 1):
-        Ap = matvec(p)
-        alpha = rz / dot(p, Ap)
-        x = x + alpha * p
-        r = r - alpha * Ap
-        res = float(np.sqrt(dot(r, r))) / b_norm
-        progress(k, res)
-        drops.append(0.5 * float(alpha * rz))
-        energy -= drops[-1]
-        if res <= stop.rtol or (stop.energy_tol > 0
-                                and _energy_error(drops, max(stop.window, k // 5)) <= stop.energy_tol * energy):
-            break
-        z = precondition(r)
-        rz_new = dot(r, z)
-        p = z + (rz_new / rz) * p
-        rz = rz_new
-    return x, k
-
-
-def _energy_error(drops: list[float], window: int) -> float:
-    """The energy still to lose after the last step: the last decrease continued geometrically at the mean
-    rate q of the last ``window`` steps (sum of q^j, j >= 1), and at least the decrease over the last three
-    steps (the error three steps ago by Strakos and Tichy's delayed estimate: guards a plateau that the
-    rate misreads); infinite before the window is full or while the decreases do not fall."""
-    if len(drops) <= window or drops[-1] <= 0 or drops[-1 - window] <= 0:
-        return math.inf
-    q = (drops[-1] / drops[-1 - window]) ** (1.0 / window)
-    return max(drops[-1] * q / (1.0 - q), math.fsum(drops[-3:])) if q < 1 else math.inf
 
 
 def _bond_parts(net: BondNetwork, sel: slice, part: str = "all"):

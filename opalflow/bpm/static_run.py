@@ -121,7 +121,6 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
     sample, net, info, _, written = network_run(spec, s, out, t0, launcher="in-process (static solve)")
     build_s = info["build_s"]
     data = sample.structure
-    substrate = data.groups["substrate"]
     say(f"static solve ({c.solver}): {s.n_particles} particles, {s.n_bonds} bonds, {6 * s.n_particles} dofs")
     res = solve_compression(net, data.positions, LOADINGS[c.loading].supports(sample), strain=STRAIN,
                             solver=c.solver, drop_loose=c.drop_loose, say=say)

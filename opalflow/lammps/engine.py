@@ -17,6 +17,8 @@ from functools import lru_cache
 from importlib import metadata
 from pathlib import Path
 
+from opalflow.runs.progress import Progress
+
 #: LAMMPS packages whose presence ``opalflow info`` reports.
 REPORTED_PACKAGES = ("BPM", "GRANULAR", "MANYBODY", "OPENMP", "KOKKOS", "GPU")
 
@@ -186,36 +188,6 @@ def stop_requested() -> bool:
         _STOP.clear()
         return True
     return False
-
-
-class Progress:
-    """Prints step, strain, rate and time left (to stderr) at most every ``interval`` seconds; with a
-    ``folder``, the same in ``folder/progress.json`` for ``python -m opalflow status``."""
-
-    def __init__(self, total_steps: int, start_step: int = 0, label: str = "", interval: float = 5.0,
-                 out=None, folder: Path | None = None):
-        self.total, self.start, self.label, self.interval = total_steps, start_step, label, interval
-        self.t0 = self.last = time.perf_counter()
-        self.out = out or sys.stderr
-        self.folder = folder
-
-    def update(self, step: int, strain: float | None = None, force: bool = False) -> None:
-        now = time.perf_counter()
-        if not force and now - self.last < self.interval:
-            return
-        self.last = now
-        done = max(step - self.start, 0)
-        rate = done / max(now - self.t0, 1e-9)
-        left = (self.total - step) / rate if rate > 0 else float("inf")
-        strain_txt = f", strain {strain:.4f}" if strain is not None else ""
-        print(f"{self.label}step {step}/{self.total} ({100 * step / max(self.total, 1):.0f} %)"
-              f"{strain_txt}, {rate:.0f} steps/s, {left:.0f} s left", file=self.out, flush=True)
-        if self.folder is not None:
-            from opalflow.store import write_json_atomic
-
-            write_json_atomic(Path(self.folder) / "progress.json", {
-                "step": step, "total": self.total, "rate_steps_s": rate, "left_s": left if rate > 0 else None,
-                "strain": strain, "time": time.time()})
 
 
 @contextmanager

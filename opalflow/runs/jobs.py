@@ -19,6 +19,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from opalflow.runs.progress import note
 from opalflow.runs.record import finished_summary, run_kind, slurm_job
 from opalflow.spec import WorkflowSpec
 from opalflow.store import DamagedFile, read_json, write_json_atomic
@@ -136,18 +137,17 @@ def _run_job(folder: Path, np_: int) -> dict:
         print(f"[{label}] {msg}", file=sys.stderr, flush=True)
         if time.time() - last[0] > 2.0:          # what the job says last, for status (a LAMMPS run's
             last[0] = time.time()                # step counter writes progress.json itself)
-            write_json_atomic(folder / "progress.json", {"message": msg, "time": last[0]})
+            note(folder, msg)
 
     update_job(folder, state="running", host=os.uname().nodename, slurm_job=slurm_job(), pid=os.getpid(),
                attempted=time.time(), error="", log_tail="")
     _stop_on_signals()
-    # where a stopped run left its state: LAMMPS restart files, or the quasi-static method's events
-    resume = (folder / "run.json").exists() and (any(folder.glob("restart.*.bin"))
-                                                 or (folder / "quasistatic_state.json").exists())
     try:
         spec = registry.spec_from_dict(meta["spec"])
         kind = registry.get(spec.kind)
-        resume = resume and "resume" in kind.options
+        # a stopped run goes on from what it left (the kind knows what: restart files, the quasi-static events)
+        resume = ((folder / "run.json").exists() and "resume" in kind.options
+                  and (not kind.resumable or registry.resolve(kind.resumable)(folder)))
         summary = run_kind(kind, spec, folder, np_=np_, resume=resume, say=say)
     except Preempted as exc:
         update_job(folder, state="requeued", stopped_step=exc.step)

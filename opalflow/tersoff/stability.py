@@ -29,7 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-from opalflow.lammps.engine import Progress, session
+from opalflow.lammps.engine import session
+from opalflow.runs.progress import Progress
 from opalflow.tersoff.parameters import TersoffParameters, write_tersoff
 from opalflow.tersoff.properties import POTENTIAL_FILE, relax_lattice, setup_commands
 

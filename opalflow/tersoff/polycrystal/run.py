@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from opalflow.runs.progress import Progress
 from opalflow.runs.record import RunRecord, finish
 from opalflow.store import h5_bytes, new_figure, read_json, save_figure, write_json_atomic
 from opalflow.tersoff.parameters import load_parameters
@@ -32,23 +33,6 @@ REFERENCE = {"youngs_modulus_GPa": 160.0, "poisson_ratio": 0.22, "wave_speed_pla
 SOURCE = ("Zhuravlev, Abgaryan, Reviznikov, Multiscale Discrete Element Modeling, Symmetry 13, 219 (2021), "
           "doi:10.3390/sym13020219, section 3")
 VOIGT = ((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))
-
-
-class Progress:
-    """Prints step, rate and time left every few seconds."""
-
-    def __init__(self, say, label: str, total: int, every_s: float = 5.0):
-        self.say, self.label, self.total, self.every = say, label, max(total, 1), every_s
-        self.t0 = self.last = time.perf_counter()
-
-    def __call__(self, step: int, extra: str = "") -> None:
-        now = time.perf_counter()
-        if now - self.last < self.every and step < self.total:
-            return
-        self.last = now
-        rate = step / max(now - self.t0, 1e-9)
-        left = max(self.total - step, 0) / rate if rate > 0 else math.inf
-        self.say(f"  {self.label}: macro step {step}/{self.total}, {rate:.1f} steps/s, ~{left:.0f} s left {extra}")
 
 
 def setup(spec: PolycrystalWorkflow, out: Path) -> tuple:
@@ -115,19 +99,20 @@ def tension_job(spec: TensionWorkflow, samples: Samples, crystal: dict, cubes: i
     volume0 = pc.volume()
     rows = [[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0, 0]]
     steps = 0
-    progress = Progress(say, label, points * (deform + 100) if t.method == "dynamic" else points)
+    meter = Progress(points * (deform + 100) if t.method == "dynamic" else points, 0, f"  {label}: ", say=say,
+                     unit="macro step")
     for k in range(1, points + 1):
         relax = 0
         if t.method == "static":
             _stretch(pc, mesh.box[0] * (1.0 + k * t.strain_step))
             relax = pc.solve_static(t.residual_tol)
-            progress(k)
+            meter.update(k)
         else:
             for _ in range(deform):
                 _stretch(pc, pc.box[0] + mesh.box[0] * t.strain_step / deform)
                 pc.verlet(dt, gamma)
                 steps += 1
-                progress(steps, f"(stretching to strain {k * t.strain_step:g})")
+                meter.update(steps, extra=f" (stretching to strain {k * t.strain_step:g})")
             while pc.residual > t.residual_tol:
                 if relax >= t.max_relax_steps:
                     raise RuntimeError(f"{label}: residual {pc.residual:.3g} after {relax} relaxation steps at strain "
@@ -135,8 +120,8 @@ def tension_job(spec: TensionWorkflow, samples: Samples, crystal: dict, cubes: i
                 pc.verlet(dt, gamma)
                 relax += 1
                 steps += 1
-                progress(steps, f"(strain {k * t.strain_step:g}, residual {pc.residual:.1e})")
-            progress.total = steps + (points - k) * (deform + relax)
+                meter.update(steps, extra=f" (strain {k * t.strain_step:g}, residual {pc.residual:.1e})")
+            meter.total = steps + (points - k) * (deform + relax)
         s = pc.mean_stress()
         rows.append([pc.box[0] / mesh.box[0] - 1.0, *(s[a, b] for a, b in VOIGT), pc.volume() / volume0,
                      pc.residual, relax, pc.evaluations])
@@ -409,11 +394,11 @@ def wave_job(spec: WavesWorkflow, samples: Samples, crystal: dict, bounds: dict,
     prescribed = np.where(fixed, v0, 0.0)
     pc.v[fixed] = v0
     history = [np.zeros(len(counts))]
-    progress = Progress(say, f"{name} wave", steps)
+    meter = Progress(steps, 0, f"  {name} wave: ", say=say, unit="macro step")
     for step in range(1, steps + 1):
         pc.verlet(dt, 0.0, fixed, prescribed)
         history.append(np.bincount(layer, pc.v[:, axis], minlength=len(counts)) / counts)
-        progress(step)
+        meter.update(step)
     profile = np.array(history) / v0                 # (steps + 1, layers): section velocity / piston velocity
     times = np.arange(steps + 1) * dt
     stations = np.arange(len(counts)) * w.cube_nm

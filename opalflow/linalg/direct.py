@@ -1,0 +1,79 @@
+"""The sparse direct factor (MKL PARDISO) and the threads each solver runs on.
+
+Used by the static method's ``direct`` solver and the quasi-static method's direct re-solves
+(:mod:`opalflow.bpm.static`, :mod:`opalflow.bpm.quasistatic`).
+"""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+
+def thread_budget() -> int:
+    """The threads this process may use: the smallest thread count of its loaded BLAS and OpenMP libraries
+    (the CPUs it may run on, or less where a job set a limit: opalflow.runs.jobs.run_job)."""
+    import scipy.linalg  # noqa: F401 - numpy's and scipy's BLAS loaded: their limit is the job's
+    from threadpoolctl import threadpool_info
+
+    counts = [lib["num_threads"] for lib in threadpool_info() if lib.get("num_threads")]
+    return max(1, min(counts, default=len(os.sched_getaffinity(0))))
+
+def solver_threads(solver: str) -> int:
+    """BLAS/OpenMP threads for ``solver``: the iterative ones run sparse products and vector sums that are
+    bound by memory, not arithmetic, and lose 3-6x to thread contention on a loaded machine (measured,
+    bench/results/static_threads.json): one thread; the direct factor (dense supernodes, BLAS 3) gains
+    from every thread it is given (x1.8 at 140 k dofs on 2 cores): the whole budget."""
+    return thread_budget() if solver == "direct" else 1
+
+class Factor:
+    """A sparse Cholesky (LL^T) factor of a symmetric positive definite K: MKL PARDISO (pypardiso; METIS
+    nested-dissection ordering, supernodes with BLAS 3, the threads of :func:`thread_budget`).  Measured on the
+    quickstart's network at 140 k dofs: factor 4.1 s on 2 cores where CHOLMOD through cholespy (no METIS,
+    simplicial) took 96 s (bench/results/static_quickstart.json).  ``solve`` takes one right-hand side (n,) or
+    several (n, k)."""
+
+    def __init__(self, K):
+        import scipy.sparse as sp
+        from threadpoolctl import threadpool_limits
+
+        pypardiso = _pardiso()
+        K = K.tocsr()
+        K.sum_duplicates()
+        rows = np.repeat(np.arange(K.shape[0], dtype=np.int32), np.diff(K.indptr))
+        # the upper triangle without the zeros (decoupled prescribed dofs, the blocks' structural zeros: half
+        # of the stored entries), straight from the sorted rows (scipy's triu goes through coordinates: 10x)
+        keep = (K.indices >= rows) & (K.data != 0)
+        indptr = np.concatenate([[0], np.cumsum(np.bincount(rows[keep], minlength=K.shape[0]))])
+        self.U = sp.csr_matrix((K.data[keep], K.indices[keep], indptr), shape=K.shape)
+        self.U.has_sorted_indices = True
+        self.size = self.U.shape[0]
+        self.pardiso = pypardiso.PyPardisoSolver(mtype=2)          # real symmetric positive definite
+        self.pardiso.size_limit_storage = 0                          # remember the matrix by its hash
+        self.threads = thread_budget()
+        with threadpool_limits(limits=self.threads):
+            self.pardiso.factorize(self.U)
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        from threadpoolctl import threadpool_limits
+
+        with threadpool_limits(limits=self.threads):
+            return self.pardiso.solve(self.U, np.asarray(b, float))
+
+    def __del__(self):
+        try:
+            self.pardiso.free_memory(everything=True)
+        except Exception:       # interpreter shutdown: MKL may be gone already
+            pass
+
+def _pardiso():
+    """pypardiso, told where the mkl wheel put libmkl_rt (else it searches all of sys.prefix, 0.3 s a solver)."""
+    import glob
+    import sys
+
+    found = sorted(glob.glob(os.path.join(sys.prefix, "lib", "libmkl_rt.so*")), key=len)
+    if found:
+        os.environ.setdefault("PYPARDISO_MKL_RT", found[0])
+    import pypardiso
+
+    return pypardiso
