@@ -580,56 +580,12 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
     n, m = net.n_particles, len(net.L)
     events = [Event(**e) for e in state["events"]] if state else []
     alive = _intact(m, events)
-
-    def loose_of(alive):
-        return loose_particles(net.part(alive), supports.anchored)
-
-    def constraints(loose):
-        held = supports.without(loose)
-        return ~held.held.ravel(), held.drive.ravel(), held                 # x_p: unit strain
-
-    loose = loose_of(alive)
-    free, x_p, held = constraints(loose)
-    if resolver == "auto":
-        resolver = "direct" if free.sum() <= DIRECT_MAX_DOFS else "amg" if m <= RESOLVE_AMG_MAX_BONDS else "block-amg"
-    whole = joined(net, contacts.net) if contacts else net
-    engaged = contacts.usable(alive, loose) if contacts else np.zeros(0, bool)
-    solver = _resolver(resolver, whole, np.concatenate([alive, engaged]), free, positions, rtol)
+    loaded = LoadedNetwork(net, supports, positions, alive, contacts, resolver, rtol)
     adjacency = Adjacency(net)
     settle = LocalSettle(net, adjacency) if local_rtol > 0 else None
     setup = time.perf_counter() - t0
 
-    def stress_of(force):
-        return held.stress(force)      # per unit strain, > 0
-
-    def linear_solve(x_prev):
-        b = np.where(free, -solver.matvec(x_p), x_p)
-        x, its = solver.solve(b, x_prev)
-        force = solver.matvec(x)
-        return x, force, stress_of(force), its, float(np.linalg.norm(b))
-
-    def solve(x_prev):
-        """(x, the internal force K x, the stress per unit strain, CG iterations, |b|): the linear solve, and with
-        contacts the active set: those in tension open, those pressed close, solved again until none changes."""
-        x, force, stress, its, b_norm = linear_solve(x_prev)
-        opened = np.zeros(len(engaged), bool)
-        for _ in range(CONTACT_ITERATIONS if contacts else 0):
-            usable = contacts.usable(alive, loose)
-            stretch = contacts.stretch(x.reshape(n, 6))
-            tol = 1e-9 * float(np.abs(x).max())          # (a pair that neither presses nor separates stays)
-            opening = np.flatnonzero(engaged & ((stretch > tol) | ~usable))
-            closing = np.flatnonzero(~engaged & usable & ~opened & (stretch < -tol))
-            if not len(opening) and not len(closing):
-                break
-            engaged[opening], engaged[closing] = False, True
-            opened[opening] = True
-            solver.remove(m + opening, free)
-            solver.add(m + closing)
-            x, force, stress, more, b_norm = linear_solve(x)
-            its += more
-        return x, force, stress, its, b_norm
-
-    x, force, stress_unit, its, b_norm = solve(x_p.copy())
+    x, force, stress_unit, its, b_norm = loaded.solve(loaded.x_p.copy())
     modulus = float(state["modulus_MPa"]) if state else stress_unit
     peak = int(np.argmax([e.stress_MPa for e in events])) if events else 0
     peak_stress = events[peak].stress_MPa if events else 0.0
@@ -646,20 +602,15 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
                         "peak_x": peak_x})
 
     stopped = "events_max"
-    touched = None
+    touched, B = None, None
     last_said = time.perf_counter()
     last_saved = time.perf_counter()
     try:
         while len(events) < events_max:
-            if stress_unit <= 0 or not held.loaded.any():
+            if stress_unit <= 0 or not loaded.held.loaded.any():
                 stopped = "no load path"
                 break
-            if touched is None:         # (after a global re-solve: every bond; after a local step: its bonds)
-                B = breaking_index(net, x.reshape(n, 6), strengths)
-                B[~alive] = -np.inf
-            else:
-                parts, sub = _subnetwork(net, touched)
-                B[touched] = breaking_index(sub, x.reshape(n, 6)[parts], strengths.part(touched))
+            B = _breaking_indices(net, x, strengths, B, alive, touched)
             worst = float(B.max(initial=-np.inf))
             if worst <= 0:
                 stopped = "no bond loaded towards breaking"
@@ -673,41 +624,24 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
                 peak_stress, peak_alive, peak_x = stress, alive.copy(), strain * x.reshape(n, 6)
                 peak_event = len(events)
             broken = np.flatnonzero(B >= worst / (1.0 + tolerance))
-            ends, pair = _subnetwork(net, broken)
-            normal, shear = bond_checks(pair, x.reshape(n, 6)[ends], strengths.part(broken))
-            checks = (shear > normal).astype(int).tolist()
+            checks = _checks(net, x, strengths, broken)
             if settle:
                 settle.release(x, force, broken)
-            alive[broken] = False
-            came_loose = False
-            if not adjacency.still_joined(alive, net.i[broken], net.j[broken]):
-                new_loose = loose_of(alive)
-                came_loose = bool(np.any(new_loose & ~loose))
-                if came_loose:
-                    loose = new_loose
-                    free, x_p, held = constraints(loose)
-            solver.remove(broken, free)
+            came_loose = loaded.break_bonds(broken, adjacency)
             B[broken] = -np.inf
-            touched = settle(x, force, broken, alive, free) if settle and not came_loose else None
-            if touched is not None and np.linalg.norm(force[free]) <= local_rtol * b_norm:
-                stress_unit, its, settled = stress_of(force), 0, True
+            touched = settle(x, force, broken, alive, loaded.free) if settle and not came_loose else None
+            if touched is not None and np.linalg.norm(force[loaded.free]) <= local_rtol * b_norm:
+                stress_unit, its, settled = loaded.stress(force), 0, True
             else:
-                x, force, stress_unit, its, b_norm = solve(x)
+                x, force, stress_unit, its, b_norm = loaded.solve(x)
                 touched, settled = None, False
             events.append(Event(strain, stress, strain * stress_unit, broken.tolist(), its, settled, checks,
-                                int(engaged.sum())))
+                                int(loaded.engaged.sum())))
             now = time.perf_counter()
             stop = should_stop()
             if now - last_said > 10:
                 last_said = now
-                rate = len(events) / max(now - t0 - setup, 1e-9)
-                reached = max(e.strain for e in events)
-                # the rest up to strain_max at the events per strain so far: a lower bound while the events
-                # come faster as damage spreads (before the peak), an upper one after (the run stops early)
-                left = (strain_max - reached) * len(events) / reached / rate
-                say(f"quasi-static: event {len(events)}, {int((~alive).sum())} bonds broken, strain {strain:.5f} "
-                    f"(max {strain_max:g}), stress {stress:.4g} MPa (peak {peak_stress:.4g}), {rate:.1f} events/s, "
-                    f"~{left:.0f} s left to strain_max at the events per strain so far")
+                say(_progress_line(events, alive, strain_max, peak_stress, now - t0 - setup))
             if stop or now - last_saved > checkpoint_s:
                 last_saved = now
                 save()
@@ -720,9 +654,115 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
         save()       # the events so far (an event cut short is not among them)
         raise
     return FractureResult(modulus_MPa=modulus, events=events, alive=alive, stopped=stopped,
-                          seconds=time.perf_counter() - t0, setup_seconds=setup, resolver=solver.name,
-                          factorizations=solver.factorizations, peak_alive=peak_alive, peak_x=peak_x,
-                          end_x=events[-1].strain * x.reshape(n, 6) if events else None, loose=int(loose.sum()))
+                          seconds=time.perf_counter() - t0, setup_seconds=setup, resolver=loaded.solver.name,
+                          factorizations=loaded.solver.factorizations, peak_alive=peak_alive, peak_x=peak_x,
+                          end_x=events[-1].strain * x.reshape(n, 6) if events else None,
+                          loose=int(loaded.loose.sum()))
+
+
+def _breaking_indices(net: BondNetwork, x: np.ndarray, strengths: Strengths, B: np.ndarray | None,
+                      alive: np.ndarray, touched: np.ndarray | None) -> np.ndarray:
+    """B of each bond at unit strain (:func:`breaking_index`; -inf for the broken ones): of every bond after a
+    global re-solve (``touched`` None), else ``B`` with the bonds a local step ``touched`` brought up to date."""
+    n = net.n_particles
+    if touched is None:
+        B = breaking_index(net, x.reshape(n, 6), strengths)
+        B[~alive] = -np.inf
+        return B
+    parts, sub = _subnetwork(net, touched)
+    B[touched] = breaking_index(sub, x.reshape(n, 6)[parts], strengths.part(touched))
+    return B
+
+
+def _checks(net: BondNetwork, x: np.ndarray, strengths: Strengths, broken: np.ndarray) -> list[int]:
+    """Which check (an index into :data:`CHECKS`: normal or shear) breaks each of the ``broken`` bonds."""
+    ends, pair = _subnetwork(net, broken)
+    normal, shear = bond_checks(pair, x.reshape(net.n_particles, 6)[ends], strengths.part(broken))
+    return (shear > normal).astype(int).tolist()
+
+
+def _progress_line(events: list[Event], alive: np.ndarray, strain_max: float, peak_stress: float,
+                   seconds: float) -> str:
+    """The event loop's progress: events, bonds broken, strain and stress reached, the rate and the time left."""
+    rate = len(events) / max(seconds, 1e-9)
+    reached = max(e.strain for e in events)
+    # the rest up to strain_max at the events per strain so far: a lower bound while the events come faster as
+    # damage spreads (before the peak), an upper one after (the run stops early)
+    left = (strain_max - reached) * len(events) / reached / rate
+    return (f"quasi-static: event {len(events)}, {int((~alive).sum())} bonds broken, strain {events[-1].strain:.5f} "
+            f"(max {strain_max:g}), stress {events[-1].stress_MPa:.4g} MPa (peak {peak_stress:.4g}), "
+            f"{rate:.1f} events/s, ~{left:.0f} s left to strain_max at the events per strain so far")
+
+
+class LoadedNetwork:
+    """The bond network under its loading's supports while bonds break: the particles that came loose held
+    still, the re-solver over the intact bonds (with contacts: and the contacts pressing), and the solve
+    (:meth:`solve`) with the contacts' active set.  ``alive`` (the intact bonds) is the caller's, changed in
+    place by :meth:`break_bonds`."""
+
+    def __init__(self, net: BondNetwork, supports: Supports, positions: np.ndarray, alive: np.ndarray,
+                 contacts: Contacts | None, resolver: str, rtol: float):
+        self.net, self.supports, self.contacts, self.alive = net, supports, contacts, alive
+        self.n, self.m = net.n_particles, len(net.L)
+        self.constrain(self.loose_of(alive))
+        if resolver == "auto":
+            resolver = ("direct" if self.free.sum() <= DIRECT_MAX_DOFS
+                        else "amg" if self.m <= RESOLVE_AMG_MAX_BONDS else "block-amg")
+        whole = joined(net, contacts.net) if contacts else net
+        self.engaged = contacts.usable(alive, self.loose) if contacts else np.zeros(0, bool)
+        self.solver = _resolver(resolver, whole, np.concatenate([alive, self.engaged]), self.free, positions, rtol)
+
+    def loose_of(self, alive: np.ndarray) -> np.ndarray:
+        return loose_particles(self.net.part(alive), self.supports.anchored)
+
+    def constrain(self, loose: np.ndarray) -> None:
+        """Hold the ``loose`` particles still: the free dofs and the prescribed displacements at unit strain."""
+        self.loose = loose
+        self.held = self.supports.without(loose)
+        self.free, self.x_p = ~self.held.held.ravel(), self.held.drive.ravel()
+
+    def stress(self, force: np.ndarray) -> float:
+        return self.held.stress(force)      # per unit strain, > 0
+
+    def break_bonds(self, broken: np.ndarray, adjacency: "Adjacency") -> bool:
+        """Take the ``broken`` bonds out (of ``alive`` and the re-solver); True when particles came loose."""
+        self.alive[broken] = False
+        came_loose = False
+        if not adjacency.still_joined(self.alive, self.net.i[broken], self.net.j[broken]):
+            new_loose = self.loose_of(self.alive)
+            came_loose = bool(np.any(new_loose & ~self.loose))
+            if came_loose:
+                self.constrain(new_loose)
+        self.solver.remove(broken, self.free)
+        return came_loose
+
+    def linear_solve(self, x_prev: np.ndarray):
+        b = np.where(self.free, -self.solver.matvec(self.x_p), self.x_p)
+        x, its = self.solver.solve(b, x_prev)
+        force = self.solver.matvec(x)
+        return x, force, self.stress(force), its, float(np.linalg.norm(b))
+
+    def solve(self, x_prev: np.ndarray):
+        """(x, the internal force K x, the stress per unit strain, CG iterations, |b|): the linear solve, and with
+        contacts the active set: those in tension open, those pressed close, solved again until none changes."""
+        x, force, stress, its, b_norm = self.linear_solve(x_prev)
+        contacts, engaged = self.contacts, self.engaged
+        opened = np.zeros(len(engaged), bool)
+        for _ in range(CONTACT_ITERATIONS if contacts else 0):
+            usable = contacts.usable(self.alive, self.loose)
+            stretch = contacts.stretch(x.reshape(self.n, 6))
+            tol = 1e-9 * float(np.abs(x).max())          # (a pair that neither presses nor separates stays)
+            opening = np.flatnonzero(engaged & ((stretch > tol) | ~usable))
+            closing = np.flatnonzero(~engaged & usable & ~opened & (stretch < -tol))
+            if not len(opening) and not len(closing):
+                break
+            engaged[opening], engaged[closing] = False, True
+            opened[opening] = True
+            self.solver.remove(self.m + opening, self.free)
+            self.solver.add(self.m + closing)
+            x, force, stress, more, b_norm = self.linear_solve(x)
+            its += more
+        return x, force, stress, its, b_norm
 
 
 def _intact(m: int, events: list[Event]) -> np.ndarray:
