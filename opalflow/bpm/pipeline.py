@@ -245,24 +245,7 @@ def analyze(out: Path, started: float | None = None, lammps_s: float | None = No
     n_bonds0 = info["n_bonds"]
     broken = n_bonds0 - curve["intact_bonds"]
 
-    # curve rows are averages over the preceding `every` steps: they belong to the middle step
-    mid_step = curve["step"] - (info["output_every_steps"] - 1) / 2
-    snapshots = {}
-    for step, path in (mech.snapshot_files(out, "particles", "dump") or mech.snapshot_files(out, "stress")).items():
-        dump = mech.read_dump_custom(path)
-        sigma = mech.particle_stress(dump)
-        types = dump["type"].astype(np.int32)
-        snapshots[step] = {"strain": float(np.interp(step, mid_step, strain)), "id": dump["id"].astype(np.int64),
-                           "position_nm": np.column_stack([dump["x"], dump["y"], dump["z"]]),
-                           "radius_nm": dump["radius"], "type": types, "sigma_MPa": sigma,
-                           "broken_bonds": dump.get("broken_bonds", np.zeros(len(types))).astype(np.int32),
-                           "by_material": mech.stress_by_material(sigma, types, info["type_names"])}
-    bond_strains = {step: mech.bond_strains(mech.read_dump_local(path))
-                    for step, path in mech.snapshot_files(out, "bonds").items()}
-    edges = mech.strain_bins(list(bond_strains.values()))
-    histograms = {step: {"strain": float(np.interp(step, mid_step, strain)),
-                         "fraction": mech.histogram_fraction(e, edges), "edges": edges}
-                  for step, e in bond_strains.items()}
+    snapshots, histograms = read_snapshots(out, info, curve, strain)
 
     E_GPa = fit.modulus_MPa / 1e3
     summary = {
@@ -318,6 +301,30 @@ def analyze(out: Path, started: float | None = None, lammps_s: float | None = No
     # all results or none (a full disk leaves the earlier set whole); summary.json is renamed last
     return finish(out, summary, lambda: report.compression_report(info, summary, fit, bool(frames)), files=files,
                   record=record, started=started)
+
+
+def read_snapshots(out: Path, info: dict, curve: dict, strain: np.ndarray) -> tuple[dict, dict]:
+    """The run's snapshots, by step: particles (positions, radii, types, the stress of eq. 21 and its means by
+    material, bonds broken so far) and the histograms of the bonds' strains (Fig. 7), each at its strain."""
+    # curve rows are averages over the preceding `every` steps: they belong to the middle step
+    mid_step = curve["step"] - (info["output_every_steps"] - 1) / 2
+    snapshots = {}
+    for step, path in (mech.snapshot_files(out, "particles", "dump") or mech.snapshot_files(out, "stress")).items():
+        dump = mech.read_dump_custom(path)
+        sigma = mech.particle_stress(dump)
+        types = dump["type"].astype(np.int32)
+        snapshots[step] = {"strain": float(np.interp(step, mid_step, strain)), "id": dump["id"].astype(np.int64),
+                           "position_nm": np.column_stack([dump["x"], dump["y"], dump["z"]]),
+                           "radius_nm": dump["radius"], "type": types, "sigma_MPa": sigma,
+                           "broken_bonds": dump.get("broken_bonds", np.zeros(len(types))).astype(np.int32),
+                           "by_material": mech.stress_by_material(sigma, types, info["type_names"])}
+    bond_strains = {step: mech.bond_strains(mech.read_dump_local(path))
+                    for step, path in mech.snapshot_files(out, "bonds").items()}
+    edges = mech.strain_bins(list(bond_strains.values()))
+    histograms = {step: {"strain": float(np.interp(step, mid_step, strain)),
+                         "fraction": mech.histogram_fraction(e, edges), "edges": edges}
+                  for step, e in bond_strains.items()}
+    return snapshots, histograms
 
 
 def _fill_h5(h, info, curve, strain, stress, stress_plate, stress_substrate, broken, snapshots, histograms,

@@ -92,13 +92,7 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
     """Build the scene, run the event loop, write the results (see the module docstring)."""
     t0 = time.perf_counter()
     c = spec.compression
-    state = None
-    if resume:
-        if not (out / STATE).exists():
-            raise SpecError("--resume", str(out), f"no {STATE} in the folder (the run saved none yet): run it anew")
-        state = load_state(out)
-        say(f"quasi-static: resuming from {STATE} ({len(state['events'])} events done"
-            + (", the peak's displacements kept" if state["peak_x"] is not None else "") + ")")
+    state = resumed_state(out, say) if resume else None
     s = scene_of(spec).structure(spec, say)
     loading = LOADINGS[c.loading]
     sample, net, info, record, written = network_run(spec, s, out, t0, launcher="in-process (quasi-static)",
@@ -138,18 +132,7 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
         "broken_bonds_by_check_at_peak": broken_by_check(res, sample, peak_only=True),
         "n_particles": s.n_particles, "n_bonds": s.n_bonds, "solid_fraction": info["solid_fraction"],
         "complete": True, "build_s": info["build_s"],
-        "quasistatic": {"events": got["events"], "stopped": res.stopped, "resolver": res.resolver,
-                        "tolerance": c.event_tolerance, "setup_s": round(res.setup_seconds, 3),
-                        "events_s": round(res.seconds - res.setup_seconds, 3),
-                        "factorizations": res.factorizations,
-                        "cg_iterations": int(sum(e.iterations for e in res.events)) if res.resolver != "direct" else 0,
-                        "local_rtol": c.local_rtol, "settled_locally": int(sum(e.settled for e in res.events)),
-                        "loose_particles": res.loose,
-                        "contacts": spec.contacts.quasistatic,
-                        "contact_pairs": len(contacts.bond) if contacts else 0,
-                        "contacts_pressing_at_peak": res.events[max(res.peak - 1, 0)].contacts if res.events else 0,
-                        "contacts_pressing_at_end": res.events[-1].contacts if res.events else 0,
-                        "peak_memory_MiB": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0},
+        "quasistatic": _event_facts(spec, res, got["events"], contacts),
         **info.get("structure", {}),
         "headline": f"E = {E:.4g} GPa, strength = {got['strength_MPa']:.4g} MPa (strain at peak "
                     f"{got['strain_at_peak']:.4f}; quasi-static, {got['events']} events, {got['broken_bonds']} "
@@ -175,6 +158,34 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
     (out / STATE).unlink(missing_ok=True)
     (out / PEAK).unlink(missing_ok=True)
     return summary
+
+
+def resumed_state(out: Path, say) -> dict:
+    """The state a killed or stopped run saved (``--resume``); one line where it saved none."""
+    if not (out / STATE).exists():
+        raise SpecError("--resume", str(out), f"no {STATE} in the folder (the run saved none yet): run it anew")
+    state = load_state(out)
+    say(f"quasi-static: resuming from {STATE} ({len(state['events'])} events done"
+        + (", the peak's displacements kept" if state["peak_x"] is not None else "") + ")")
+    return state
+
+
+def _event_facts(spec: BpmWorkflow, res, events: int, contacts) -> dict:
+    """summary.json's ``quasistatic``: how the events went (where they stopped, the re-solves, the local steps,
+    the contacts) and what they cost."""
+    c = spec.compression
+    return {"events": events, "stopped": res.stopped, "resolver": res.resolver,
+            "tolerance": c.event_tolerance, "setup_s": round(res.setup_seconds, 3),
+            "events_s": round(res.seconds - res.setup_seconds, 3),
+            "factorizations": res.factorizations,
+            "cg_iterations": int(sum(e.iterations for e in res.events)) if res.resolver != "direct" else 0,
+            "local_rtol": c.local_rtol, "settled_locally": int(sum(e.settled for e in res.events)),
+            "loose_particles": res.loose,
+            "contacts": spec.contacts.quasistatic,
+            "contact_pairs": len(contacts.bond) if contacts else 0,
+            "contacts_pressing_at_peak": res.events[max(res.peak - 1, 0)].contacts if res.events else 0,
+            "contacts_pressing_at_end": res.events[-1].contacts if res.events else 0,
+            "peak_memory_MiB": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
 
 
 def _length_bins(sample) -> tuple[np.ndarray, list[str]]:
