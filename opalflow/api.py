@@ -148,18 +148,18 @@ def submit(spec: WorkflowSpec, out: str | Path, ex, *, np_: int = 1, say=_stderr
     its log tail when it failed."""
     from opalflow.lammps.engine import EngineError
     from opalflow.runs.executors import executor
-    from opalflow.runs.jobs import JOB_FILE, read_job, spec_hash
-    from opalflow.store import write_json_atomic
+    from opalflow.runs.jobs import job_record, spec_hash
+    from opalflow.runs.record import RunRecord
 
     out = Path(out).resolve()
     out.mkdir(parents=True, exist_ok=True)
-    if read_job(out).get("hash") != spec_hash(spec) or read_job(out).get("state") == "finished":
-        write_json_atomic(out / JOB_FILE, {"label": spec.name, "hash": spec_hash(spec), "spec": spec.to_dict(),
-                                           "state": "pending"})
+    rec = job_record(out)
+    if rec is None or rec.spec_hash != spec_hash(spec):
+        RunRecord.job(spec, spec.name, spec_hash(spec)).write(out)
     (_, got), = list(executor(ex, np_).run([str(out)], say))
-    if "failed" in got:
-        raise EngineError(f"{got['failed']}\n--- log tail ---\n{got.get('log_tail', '')}")
-    return got
+    if not got.ok:
+        raise EngineError(f"{got.error or got.state}\n--- log tail ---\n{got.log_tail}")
+    return got.summary
 
 
 def build(workflow: str | Path | dict | WorkflowSpec, out: str | Path, *, set: Settings = None,

@@ -74,14 +74,14 @@ def cmd_check(args) -> int:
 
 
 def cmd_job(args) -> int:
-    """One job folder (job.json), as a SLURM array task runs it: exit 0 finished or requeued, 1 failed."""
+    """One job folder (its run.json), as a SLURM array task runs it: exit 0 finished or requeued, 1 failed."""
     from opalflow.runs.jobs import run_job
 
     got = run_job(args.folder, args.np, args.threads)
-    if "failed" in got:
-        print(f"error: {got['failed']}\n{got.get('log_tail', '')}", file=sys.stderr)
+    if got.state == "failed":
+        print(f"error: {got.error}\n{got.log_tail}", file=sys.stderr)
         return 1
-    print(got.get("headline", "requeued" if got.get("requeued") else "done"))
+    print(got.summary.get("headline", "done") if got.ok else got.state)
     return 0
 
 

@@ -2,7 +2,7 @@
 
 A finished result is therefore never replaced by a half-written one, and a run folder is
 held by one process at a time (:func:`folder_lock`).  Every JSON file opalflow reads back (run.json,
-job.json, states, references, progress) is read by :func:`read_json`: damage is one line naming the file
+states, references, progress) is read by :func:`read_json`: damage is one line naming the file
 and what to do (:class:`DamagedFile`, exit 2: never a regression's 1, never a traceback).
 """
 from __future__ import annotations

@@ -17,7 +17,7 @@ PACKAGE = Path(opalflow.__file__).resolve().parent
 TRACKS = ("bpm", "opal", "lattice", "datafile", "tersoff", "studies", "granular")
 #: modules every track may use; they import no track
 SHARED = ("spec", "registry", "structure", "units", "materials", "store", "resources", "neighbors", "packing", "io", "api",
-          "version", "lammps", "analysis", "runs", "linalg")
+          "version", "lammps", "analysis", "runs", "linalg", "progress")
 
 
 def module_name(path: Path) -> str:

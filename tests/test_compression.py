@@ -218,8 +218,9 @@ def test_opal_run_carries_its_structure_statistics(tmp_path, quick_spec, quick_s
     from opalflow.bpm.pipeline import prepare
     from opalflow.opal.scene import STRUCTURE_KEYS
 
-    prepare(quick_spec, tmp_path)
+    _, record = prepare(quick_spec, tmp_path)
     info = RunRecord.read(tmp_path).facts()
+    assert info == record.facts()
     stats = structure_statistics(quick_structure)
     assert info["structure"] == pytest.approx({k: stats[k] for k in STRUCTURE_KEYS})
     assert 0.3 < info["structure"]["porosity"] < 0.9

@@ -208,7 +208,7 @@ def test_a_failed_job_keeps_its_failure_in_its_folder_and_status_shows_it(tmp_pa
     from opalflow.bpm.pipeline import build_structure
     from opalflow.registry import load_spec
     from opalflow.runs.executors import run_jobs
-    from opalflow.runs.jobs import Job, read_job
+    from opalflow.runs.jobs import Job
 
     good = Job("good", load_spec(WORKFLOWS / "lattice_sc.toml", LATTICE))
     s = build_structure(good.spec)
@@ -219,11 +219,11 @@ def test_a_failed_job_keeps_its_failure_in_its_folder_and_status_shows_it(tmp_pa
         f'datafile.path="{tmp_path / "bad.lmp"}"',
         'datafile.materials=["silica","substrate"]']))
     res = run_jobs([bad, good], tmp_path / "study", say=lambda m: None)
-    assert "LAMMPS failed" in res["bad"]["failed"] and "ERROR" in res["bad"]["log_tail"]
-    assert "youngs_modulus_GPa" in res["good"]
-    meta = read_job(bad.folder(tmp_path / "study"))
-    assert meta["state"] == "failed" and "ERROR" in meta["log_tail"]
-    assert RunRecord.read(bad.folder(tmp_path / "study")).state == "failed"
+    assert res["bad"].state == "failed" and "LAMMPS failed" in res["bad"].error and "ERROR" in res["bad"].log_tail
+    assert res["good"].ok and "youngs_modulus_GPa" in res["good"].summary
+    record = RunRecord.read(bad.folder(tmp_path / "study"))
+    assert record.state == "failed" and "ERROR" in record.log_tail and record.label == "bad"
+    assert record.spec_hash == bad.key and record.attempts == 1
     assert main(["status", str(tmp_path / "study")]) == 0
     out = capsys.readouterr().out
     assert "2 job(s): 1 finished, 1 failed" in out and "FAILED    bad: LAMMPS failed" in out and "| ERROR" in out
@@ -276,7 +276,9 @@ def test_job_command_runs_a_prepared_job_folder(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "opalflow", "job", str(job.folder(tmp_path))],
                           capture_output=True, text=True)
     assert proc.returncode == 0 and proc.stdout.startswith("E = "), proc.stderr
-    assert json.loads((job.folder(tmp_path) / "job.json").read_text())["state"] == "finished"
+    record = json.loads((job.folder(tmp_path) / "run.json").read_text())
+    assert record["state"] == "finished" and record["label"] == "one" and record["peak_rss_MiB"] > 0
+    assert not (job.folder(tmp_path) / "job.json").exists()       # one record of the run state
 
 
 def test_plan_prices_a_study_without_running_it(tmp_path, capsys, monkeypatch):

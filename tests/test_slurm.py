@@ -59,8 +59,8 @@ def test_slurm_array_gives_the_local_numbers(slurm, tmp_path):
     assert len(local) == 4 and local == on_slurm
     script = next((tmp_path / "slurm" / "slurm").glob("array-*.sh")).read_text()
     assert "#SBATCH --array=0-3" in script and "#SBATCH --signal=B:USR1@" in script and "#SBATCH --requeue" in script
-    meta = json.loads(next((tmp_path / "slurm").glob("jobs/*/job.json")).read_text())
-    assert meta["slurm_job"] and meta["state"] == "finished"
+    record = json.loads(next((tmp_path / "slurm").glob("jobs/*/run.json")).read_text())
+    assert record["sessions"][-1]["slurm_job"] and record["state"] == "finished" and record["attempts"] == 1
 
 
 def _wait_for(cond, timeout=120.0):

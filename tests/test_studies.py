@@ -32,7 +32,7 @@ def lattice_jobs(spacings=(20.0, 22.0, 24.0)):
 def test_rerun_of_a_finished_sweep_does_no_lammps_work(tmp_path, monkeypatch):
     jobs = lattice_jobs()
     first = run_jobs(jobs, tmp_path, LOCAL1, say=lambda m: None)
-    assert list(first) == ["a20", "a22", "a24"]
+    assert list(first) == ["a20", "a22", "a24"] and all(o.state == "finished" for o in first.values())
     assert all((tmp_path / "jobs" / f"{j.label}-{j.key[:12]}" / "log.lammps").exists() for j in jobs)
 
     def no_lammps(*args):
@@ -145,15 +145,18 @@ def test_bad_study_field_is_one_line(tmp_path, capsys):
 
 
 def test_summary_json_of_a_study_is_written_last(tmp_path):
-    """Jobs are marked by job.json before they run; a folder without summary.json is not finished."""
+    """Jobs are marked by their record (run.json, state pending) before they run; a folder without
+    summary.json is not finished, nor one whose record is another spec's."""
+    from opalflow.runs.record import RunRecord
+
     job = lattice_jobs((20.0,))[0]
     folder = job.folder(tmp_path)
-    folder.mkdir(parents=True)
-    (folder / "job.json").write_text(json.dumps({"hash": job.key}))
+    jobs_mod.prepare([job], tmp_path)
+    assert RunRecord.read(folder).state == "pending" and RunRecord.read(folder).spec_hash == job.key
     assert jobs_mod.finished(job, tmp_path) is None
     (folder / "summary.json").write_text("{}")
     assert jobs_mod.finished(job, tmp_path) == {}
-    (folder / "job.json").write_text(json.dumps({"hash": "other"}))
+    RunRecord.job(job.spec, job.label, "other").write(folder)
     assert jobs_mod.finished(job, tmp_path) is None
 
 
@@ -162,11 +165,11 @@ def test_a_damaged_job_summary_is_run_again(tmp_path, damage):
     """A job whose summary.json is cut short, binary, of the wrong shape or empty is not finished: the
     rerun runs it again (no traceback) and gets the numbers of the first run."""
     job = lattice_jobs((20.0,))[0]
-    first = run_jobs([job], tmp_path, LOCAL1, say=lambda m: None)["a20"]
+    first = run_jobs([job], tmp_path, LOCAL1, say=lambda m: None)["a20"].summary
     (job.folder(tmp_path) / "summary.json").write_bytes(damage)
-    (job.folder(tmp_path) / "job.json").write_bytes(damage[:3])
+    (job.folder(tmp_path) / "run.json").write_bytes(damage[:3])
     assert jobs_mod.finished(job, tmp_path) is None
-    again = run_jobs([job], tmp_path, LOCAL1, say=lambda m: None)["a20"]
+    again = run_jobs([job], tmp_path, LOCAL1, say=lambda m: None)["a20"].summary
     assert again["youngs_modulus_GPa"] == pytest.approx(first["youngs_modulus_GPa"], rel=1e-9)
     assert jobs_mod.finished(job, tmp_path)["peak_stress_MPa"] == pytest.approx(first["peak_stress_MPa"], rel=1e-9)
 
@@ -186,8 +189,8 @@ def test_a_failed_job_does_not_end_the_sweep(tmp_path):
         f'datafile.path="{tmp_path / "bad.lmp"}"',
         'datafile.materials=["silica","substrate"]']))
     res = run_jobs([bad, good], tmp_path / "study", LOCAL1, say=lambda m: None)
-    assert "LAMMPS failed" in res["bad"]["failed"]
-    assert "youngs_modulus_GPa" in res["a20"]
+    assert res["bad"].state == "failed" and "LAMMPS failed" in res["bad"].error
+    assert res["a20"].ok and "youngs_modulus_GPa" in res["a20"].summary
     assert jobs_mod.finished(bad, tmp_path / "study") is None and (bad.folder(tmp_path / "study") / "log.lammps").exists()
 
 

@@ -40,8 +40,9 @@ def build_structure(spec: BpmWorkflow, progress=None) -> Structure:
     return scene_of(spec).structure(spec, progress)
 
 
-def prepare(spec: BpmWorkflow, out: Path, progress=None) -> CompressionDeck:
-    """Build the scene and write the run folder's inputs (data.lmp, decks, run.sh, run.json)."""
+def prepare(spec: BpmWorkflow, out: Path, progress=None) -> tuple[CompressionDeck, RunRecord]:
+    """Build the scene and write the run folder's inputs (data.lmp, decks, run.sh, run.json); returns the deck
+    and the run's record, which the run then holds in memory (run.json is for a resume and for users)."""
     t = time.perf_counter()
     scene = scene_of(spec)
     s = scene.structure(spec, progress)
@@ -68,8 +69,9 @@ def prepare(spec: BpmWorkflow, out: Path, progress=None) -> CompressionDeck:
         info["statistics"] = stats
         info["structure"] = {k: stats[k] for k in scene.run_keys}
     info["build_timings_s"] = dict(deck.structure.meta.get("timings_s", {}))
-    RunRecord.new(spec, deck=info).write(out)
-    return deck
+    record = RunRecord.new(spec, deck=info, folder=out)
+    record.write(out)
+    return deck, record
 
 
 def dynamic_steps(spec: BpmWorkflow, deck: CompressionDeck) -> int:
@@ -119,7 +121,7 @@ def build(spec: BpmWorkflow, out: Path, say=print) -> dict:
     start = time.perf_counter()
     refuse_finished(out)
     say(f"building {spec.name} ({spec.kind})")
-    deck = prepare(spec, out, progress=say)
+    deck, _ = prepare(spec, out, progress=say)
     scene = scene_of(spec)
     summary = {"workflow": spec.name, "opalflow_version": __version__}
     if scene.statistics:
@@ -138,12 +140,11 @@ def build(spec: BpmWorkflow, out: Path, say=print) -> dict:
     return summary
 
 
-def execute(out: Path, *, np_: int = 1, resume: bool = False, label: str = "", suffix: str | None = None,
-            say=print) -> float:
-    """Run the deck of a prepared folder with the launcher for ``np_`` ranks (:mod:`opalflow.runs.launch`);
-    returns LAMMPS wall seconds.  The run record's current session says where it started (restart file,
-    step) and how it was launched; a resume says so (and the steps it runs again)."""
-    record = RunRecord.read(out)
+def execute(out: Path, record: RunRecord, *, np_: int = 1, resume: bool = False, label: str = "",
+            suffix: str | None = None, say=print) -> float:
+    """Run the deck of a prepared folder (its ``record``) with the launcher for ``np_`` ranks
+    (:mod:`opalflow.runs.launch`); returns LAMMPS wall seconds.  The record's new session says where it started
+    (restart file, step) and how it was launched; a resume says so (and the steps it runs again)."""
     info = record.deck
     launcher = launch.choose(np_)
     first, restart = 0, ""
@@ -224,11 +225,12 @@ def curve_strain_stress(curve: dict, info: dict) -> tuple[np.ndarray, np.ndarray
 
 
 def analyze(out: Path, started: float | None = None, lammps_s: float | None = None,
-            extra: dict | None = None) -> dict:
+            extra: dict | None = None, record: RunRecord | None = None) -> dict:
     """Curves, modulus, strength, particle stresses -> results.h5, summary.json, report.md, plots.
-    ``started``: when the run began (``time.perf_counter()``): its wall time then covers this analysis too."""
+    ``started``: when the run began (``time.perf_counter()``): its wall time then covers this analysis too;
+    ``record``: the run's, held since it was prepared (else read: a folder run by ``bash run.sh``)."""
     wall_s = None if started is None else time.perf_counter() - started
-    record = RunRecord.read(out)
+    record = record or RunRecord.read(out)
     info = record.facts()
     mech.tidy_curve(out / "curve.txt")
     try:
@@ -396,25 +398,26 @@ def run_dynamic(spec: BpmWorkflow, out: Path, *, np_: int = 1, resume: bool = Fa
                 suffix: str | None = None) -> dict:
     """prepare (unless resuming) -> execute -> analyze; the rate check runs a half-speed twin."""
     t = time.perf_counter()
-    if not resume:
-        deck = prepare(spec, out, progress=say)
+    if resume:
+        record = RunRecord.read(out)         # what the run left: the one read of run.json
+    else:
+        deck, record = prepare(spec, out, progress=say)
         say(f"deck: {len(deck.bins.lengths)} bond types, dt = {deck.dt_ns * 1e-9:.3g} s "
             f"(limit {deck.timestep.limit_ns * 1e-9:.3g} s, stiffest: {deck.timestep.stiffest}), {deck.steps} steps")
         estimate = long_run_estimate(spec, deck, np_)
         if estimate:
             say(estimate)
-    lammps_s = execute(out, np_=np_, resume=resume, label=f"{spec.name}: ", suffix=suffix, say=say)
+    lammps_s = execute(out, record, np_=np_, resume=resume, label=f"{spec.name}: ", suffix=suffix, say=say)
     extra = {}
     if spec.compression.check_rate and not resume:
         half = dataclasses.replace(spec, compression=dataclasses.replace(
             spec.compression, plate_speed_m_s=spec.compression.plate_speed_m_s / 2, check_rate=False))
         sub = out / "rate_half"
-        prepare(half, sub)
-        lammps_s += execute(sub, np_=np_, label=f"{spec.name} (half speed): ", suffix=suffix)
-        slow = analyze(sub)
+        _, half_record = prepare(half, sub)
+        lammps_s += execute(sub, half_record, np_=np_, label=f"{spec.name} (half speed): ", suffix=suffix)
+        slow = analyze(sub, record=half_record)
         fast_curve = mech.read_curve(out / "curve.txt")
-        info = RunRecord.read(out).deck
-        fast_strain, fast_stress, _, _ = curve_strain_stress(fast_curve, info)
+        fast_strain, fast_stress, _, _ = curve_strain_stress(fast_curve, record.deck)
         fast_fit = mech.fit_elastic(fast_strain, fast_stress)
         fast_strength = float(np.max(fast_stress))
         extra["rate_check"] = {
@@ -423,4 +426,4 @@ def run_dynamic(spec: BpmWorkflow, out: Path, *, np_: int = 1, resume: bool = Fa
                                 else None),
             "half_speed_youngs_modulus_GPa": slow["youngs_modulus_GPa"],
             "half_speed_strength_MPa": slow["strength_MPa"]}
-    return analyze(out, started=t, lammps_s=lammps_s, extra=extra)
+    return analyze(out, started=t, lammps_s=lammps_s, extra=extra, record=record)

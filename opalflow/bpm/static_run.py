@@ -91,7 +91,7 @@ def network_run(spec: BpmWorkflow, s, out: Path, t0: float, *, launcher: str, re
     if scene.run_keys:
         stats = scene.statistics(sample.source)
         info["structure"] = {k: stats[k] for k in scene.run_keys}
-    record = RunRecord.read(out) if resume else _record(spec, info)
+    record = RunRecord.read(out) if resume else _record(spec, info, out)
     record.begin(out, launcher=launcher, restart=resume or "")
     return sample, net, info, record, written
 
@@ -173,10 +173,10 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
     return finish(out, summary, lambda: _report(spec, info, summary, res, sides, sample), files=files, started=t0)
 
 
-def _record(spec: BpmWorkflow, info: dict) -> RunRecord:
+def _record(spec: BpmWorkflow, info: dict, out: Path) -> RunRecord:
     """The run record of a static solve: its facts without what the record holds itself."""
     return RunRecord.new(spec, deck={k: v for k, v in info.items()
-                                     if k not in ("workflow", "spec", "references", "opalflow_version")})
+                                     if k not in ("workflow", "spec", "references", "opalflow_version")}, folder=out)
 
 
 def _write_h5(path: Path, data, res: StaticResult, sigma_unit, strain_unit, snapshots, summary, info) -> None:
@@ -223,7 +223,8 @@ def _report(spec: BpmWorkflow, info: dict, summary: dict, res: StaticResult, sid
              f"{info['n_particles']} particles, {info['n_bonds']} bonds; the bond network linearised from LAMMPS's "
              f"bpm/rotational (opalflow/bpm/stiffness.py); {loading.held_text(info['top_layer_particles'])}, by "
              f"strain {res.strain:g} x H (H = {info['height_nm']:.1f} nm); sides {sides}. Contacts carry no load at "
-             "the reference state and bonds do not break: no strength.", "", *sample_lines(info), *network_inputs(info, sample), "## Results", "",
+             "the reference state and bonds do not break: no strength.", "", *sample_lines(info),
+             *network_inputs(info, sample), "## Results", "",
              "| quantity | value | reference | error |", "|---|---|---|---|"]
     ref = summary["reference"].get("youngs_modulus_specimen_GPa") or summary["reference"].get("youngs_modulus_GPa")
     lines.append(f"| Young's modulus (GPa) | {summary['youngs_modulus_GPa']:.4g} | "
@@ -260,7 +261,7 @@ def run_tensor(spec: BpmWorkflow, s, out: Path, t0: float, say=print) -> dict:
             "references": spec.references(), "volume_nm3": volume}
     out.mkdir(parents=True, exist_ok=True)
     write_data(out / "data.lmp", data, title=f"opalflow {__version__} {spec.name} (static, periodic)")
-    _record(spec, info).begin(out, launcher="in-process (static solve)")
+    _record(spec, info, out).begin(out, launcher="in-process (static solve)")
     summary = {
         "workflow": spec.name, "method": "static", "loading": "periodic",
         "stiffness_tensor_GPa": C.tolist(), "voigt_order": "xx yy zz yz xz xy",

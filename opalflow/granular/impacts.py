@@ -110,7 +110,7 @@ def run_impacts(spec: ImpactsWorkflow, out: Path, say=print) -> dict:
     liggghts_executable("kind", "granular_impacts")
     t0 = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
-    RunRecord.new(spec).begin(out)
+    RunRecord.new(spec, folder=out).begin(out)
     i, m = spec.impact, spec.material
     rows, diffs = [], {}
     for case in CASES:

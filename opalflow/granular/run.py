@@ -66,7 +66,7 @@ def run_granular(spec: GranularWorkflow, out: Path, say=print) -> dict:
         liggghts_executable("engine", spec.engine)
     out.mkdir(parents=True, exist_ok=True)
     scene = build_scene(spec, out)
-    RunRecord.new(spec, deck=scene).begin(out)
+    RunRecord.new(spec, deck=scene, folder=out).begin(out)
     curves, walls = {}, {}
     for engine in engines:
         say(f"{spec.name}: {scene['n_particles']} spheres, {spec.plate.steps} steps on {engine}")

@@ -17,7 +17,7 @@ from functools import lru_cache
 from importlib import metadata
 from pathlib import Path
 
-from opalflow.runs.progress import Progress
+from opalflow.progress import Progress
 
 #: LAMMPS packages whose presence ``opalflow info`` reports.
 REPORTED_PACKAGES = ("BPM", "GRANULAR", "MANYBODY", "OPENMP", "KOKKOS", "GPU")

@@ -24,11 +24,11 @@ from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
-from opalflow.runs.jobs import outcome, read_job, run_job
+from opalflow.runs.jobs import Outcome, job_record, outcome, run_job
 from opalflow.runs.spec import ExecutorSpec
 from opalflow.spec import InputError
 
-Outcome = tuple[str, dict]          # (job folder, summary or {"failed": ...})
+Collected = tuple[str, Outcome]          # (job folder, what it came to)
 
 
 class Planned(Exception):
@@ -49,13 +49,13 @@ class LocalExecutor:
         self.np, self.threads = np_, spec.cpus_per_rank
         self.workers = spec.workers or max(1, (os.cpu_count() or 1) // (np_ * spec.cpus_per_rank))
 
-    def run(self, folders: list[str], say: Callable[[str], None]) -> Iterator[Outcome]:
+    def run(self, folders: list[str], say: Callable[[str], None]) -> Iterator[Collected]:
         workers = max(1, min(self.workers, len(folders)))
         if workers == 1:
             for f in folders:
                 yield f, run_job(f, self.np, self.threads)
             return
-        # a fresh process per job: its peak memory is its own (job.json), nothing leaks to the next job
+        # a fresh process per job: its peak memory is its own (its record), nothing leaks to the next job
         with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
                                  max_tasks_per_child=1) as pool:
             futures = {pool.submit(run_job, f, self.np, self.threads): f for f in folders}
@@ -73,7 +73,7 @@ class DaskExecutor:
     def __init__(self, spec: ExecutorSpec, np_: int = 1):
         self.spec, self.np = spec, np_
 
-    def run(self, folders: list[str], say: Callable[[str], None]) -> Iterator[Outcome]:
+    def run(self, folders: list[str], say: Callable[[str], None]) -> Iterator[Collected]:
         try:
             from distributed import Client, LocalCluster, as_completed as dask_completed
         except ImportError:
@@ -145,7 +145,7 @@ class SlurmExecutor:
                   f'--threads {s.cpus_per_rank}', ""]
         return "\n".join(lines)
 
-    def run(self, folders: list[str], say: Callable[[str], None]) -> Iterator[Outcome]:
+    def run(self, folders: list[str], say: Callable[[str], None]) -> Iterator[Collected]:
         first = Path(folders[0]).resolve()
         root = first.parent.parent if first.parent.name == "jobs" else first     # a study's, or one run's
         (root / "slurm").mkdir(exist_ok=True)
@@ -163,20 +163,22 @@ class SlurmExecutor:
         say(f"slurm: submitted array {array} ({len(folders)} tasks) with {script}")
         yield from self._wait(array, folders, say)
 
-    def _wait(self, array: str, folders: list[str], say) -> Iterator[Outcome]:
+    def _wait(self, array: str, folders: list[str], say) -> Iterator[Collected]:
         left = {str(Path(f).resolve()): k for k, f in enumerate(folders)}
         missing: dict[str, int] = {}
         said: dict[str, float] = {}             # the session after which each requeued task was announced
         quiet_since = None
         while left:
             for f in list(left):
-                meta = read_job(f)
-                if meta.get("state") in ("finished", "failed"):
+                rec = job_record(f)
+                state = rec.state if rec is not None else "pending"
+                if state in ("finished", "failed"):
                     del left[f]
                     yield f, outcome(f)
-                elif meta.get("state") == "requeued" and said.get(f) != meta.get("attempted"):
-                    said[f] = meta.get("attempted")
-                    say(f"slurm: task {meta.get('slurm_job', array)} requeued itself from its restart file; SLURM "
+                elif state == "requeued" and said.get(f) != rec.attempted:
+                    said[f] = rec.attempted
+                    task = rec.sessions[-1].slurm_job if rec.sessions and rec.sessions[-1].slurm_job else array
+                    say(f"slurm: task {task} requeued itself from its restart file; SLURM "
                         "starts it again once its job credential has expired (AuthInfo cred_expire, 120 s by "
                         "default)")
             if not left:
@@ -190,15 +192,16 @@ class SlurmExecutor:
             else:
                 quiet_since = None
                 for f, k in list(left.items()):
-                    gone = k not in queued and read_job(f).get("state") not in ("finished", "failed")
+                    rec = job_record(f)
+                    gone = k not in queued and (rec is None or rec.state not in ("finished", "failed"))
                     missing[f] = missing.get(f, 0) + 1 if gone else 0
                     # absent from the queue for three polls and 5 s: cancelled, killed or out of time (a task
                     # that just ended or is being requeued shows up again or settles its folder first)
                     if missing[f] >= 3 and missing[f] * self.spec.poll_s >= 5:
                         del left[f]
                         got = outcome(f)
-                        got["failed"] = (f"SLURM task {array}_{k} ended without a result (cancelled, killed or "
-                                         f"out of time; {got['failed']}); a rerun continues it")
+                        got.state, got.error = "failed", (f"SLURM task {array}_{k} ended without a result (cancelled, "
+                                                          f"killed or out of time; {got.error}); a rerun continues it")
                         yield f, got
             time.sleep(self.spec.poll_s)
 
@@ -234,10 +237,10 @@ def executor(spec: ExecutorSpec, np_: int = 1):
 
 
 def run_jobs(jobs, root: Path, ex: ExecutorSpec | None = None, *, np_: int = 1,
-             say: Callable[[str], None] = print) -> dict[str, dict]:
+             say: Callable[[str], None] = print) -> dict[str, Outcome]:
     """Run every unfinished job of ``jobs`` (:class:`opalflow.runs.jobs.Job`) through the executor ``ex``
-    (local by default) and return label -> summary, or ``{"failed": reason, "log_tail": ..., "folder": ...}``
-    for a job that failed.  Finished jobs are read from their folders."""
+    (local by default) and return label -> :class:`opalflow.runs.jobs.Outcome` (finished with its summary,
+    failed with its reason and log tail).  Finished jobs are read from their folders."""
     from opalflow.runs.jobs import prepare
 
     ex = ex or ExecutorSpec()
@@ -246,13 +249,14 @@ def run_jobs(jobs, root: Path, ex: ExecutorSpec | None = None, *, np_: int = 1,
     root = Path(root)
     done, todo = prepare(jobs, root)
     say(f"{len(jobs)} jobs: {len(done)} finished before, {len(todo)} to run ({ex.type} executor)")
-    results = dict(done)
+    results = {j.label: Outcome("finished", str(j.folder(root).resolve()), done[j.label])
+               for j in jobs if j.label in done}
     if todo:
         labels = {str(j.folder(root).resolve()): j.label for j in todo}
         t0 = time.perf_counter()
         for n, (folder, got) in enumerate(executor(ex, np_).run(list(labels), say), 1):
             label = labels[str(Path(folder).resolve())]
             results[label] = got
-            say(f"job {label} {'FAILED: ' + got['failed'] if 'failed' in got else 'done'} "
+            say(f"job {label} {'done' if got.ok else got.state.upper() + ': ' + got.error} "
                 f"({n}/{len(todo)}, {time.perf_counter() - t0:.0f} s)")
     return {j.label: results[j.label] for j in jobs}

@@ -1,15 +1,14 @@
 """Jobs: runs of one workflow spec each, in folders named by the spec's hash, so that each is done once.
 
-A job's folder is ``<root>/jobs/<label>-<hash12>``; its ``job.json`` holds the label, the hash (SHA-256
-of the spec's canonical JSON), the spec and the job's state: ``pending`` -> ``running`` -> ``finished``
-or ``failed`` (with the error and the LAMMPS log tail) or ``requeued`` (a scheduler stopped it; it
-continues from its restart file).  Whatever ran it (a local pool, Dask, a SLURM array), a job's result
-lives in its folder: a rerun skips finished jobs, and :mod:`opalflow.runs.status` reads any of them.
+A job's folder is ``<root>/jobs/<label>-<hash12>``, a run folder like any other: its record (``run.json``,
+:class:`opalflow.runs.record.RunRecord`) holds the label, the hash (SHA-256 of the spec's canonical JSON),
+the spec and the state: ``pending`` -> ``running`` -> ``finished`` or ``failed`` (with the error and the
+LAMMPS log tail) or ``requeued`` (a scheduler stopped it; it continues from where it stopped).  Whatever
+ran it (a local pool, Dask, a SLURM array), a job's result lives in its folder: a rerun skips finished jobs,
+and :mod:`opalflow.runs.status` reads any of them.  What a job came to is an :class:`Outcome`.
 """
 from __future__ import annotations
 
-import hashlib
-import json
 import os
 import signal
 import subprocess
@@ -19,18 +18,14 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from opalflow.runs.progress import note
-from opalflow.runs.record import finished_summary, run_kind, slurm_job
+from opalflow.progress import note
+from opalflow.runs.record import RunRecord, finished_summary, run_kind, spec_digest
 from opalflow.spec import WorkflowSpec
-from opalflow.store import DamagedFile, read_json, write_json_atomic
-
-JOB_FILE = "job.json"
 
 
 def spec_hash(spec: WorkflowSpec) -> str:
     """SHA-256 of the spec's canonical JSON (keys sorted): equal specs, equal jobs."""
-    text = json.dumps(spec.to_dict(), sort_keys=True, separators=(",", ":"))
-    return hashlib.sha256(text.encode()).hexdigest()
+    return spec_digest(spec.to_dict())
 
 
 @dataclass
@@ -46,45 +41,58 @@ class Job:
         return Path(root) / "jobs" / f"{self.label}-{self.key[:12]}"
 
 
-def read_job(folder: str | os.PathLike, *, strict: bool = False) -> dict:
-    """The job.json of a job folder: {} where there is none, and where it is damaged unless ``strict``
-    (then :class:`opalflow.store.DamagedFile`; a study runs a job with a damaged job.json anew)."""
-    path = Path(folder) / JOB_FILE
-    if not path.exists():
-        return {}
-    try:
-        return read_json(path, "a study job's state", "run the study again: the job runs anew")
-    except DamagedFile:
-        if strict:
-            raise
-        return {}
+@dataclass
+class Outcome:
+    """What a job came to: ``finished`` (its ``summary``), ``failed`` (``error`` and the LAMMPS ``log_tail``),
+    ``requeued`` (its scheduler stopped it at ``step``; the requeued job goes on from there), or ``pending`` /
+    ``running`` where it was collected before it ended (``error`` says so)."""
+
+    state: str
+    folder: str
+    summary: dict | None = None
+    error: str = ""
+    log_tail: str = ""
+    step: int | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.state == "finished"
 
 
-def update_job(folder: str | os.PathLike, **fields) -> dict:
-    meta = {**read_job(folder), **fields}
-    write_json_atomic(Path(folder) / JOB_FILE, meta)
-    return meta
+def job_record(folder: str | os.PathLike) -> RunRecord | None:
+    """The record of a job folder: None where there is none or it is damaged (a study runs such a job anew)."""
+    return RunRecord.read_or_none(folder)
 
 
 def finished(job: Job, root: Path) -> dict | None:
     """The job's summary if it has completed with this very spec, else None."""
     folder = job.folder(root)
-    return finished_summary(folder) if read_job(folder).get("hash") == job.key else None
+    rec = job_record(folder)
+    return finished_summary(folder) if rec is not None and rec.spec_hash == job.key else None
 
 
-def outcome(folder: str | os.PathLike) -> dict:
-    """What a job folder holds now: its summary when finished, else ``{"failed": ..., "log_tail": ...}``
-    (with ``"state"``: failed, or pending / running / requeued for one that has not ended)."""
+def outcome(folder: str | os.PathLike) -> Outcome:
+    """What a job folder holds now: finished with its summary, failed with its error and log tail, or where
+    it stands (pending, running, requeued) when it has not ended."""
     summary = finished_summary(folder)
     if summary is not None:
-        return summary
-    meta = read_job(folder)
-    state = meta.get("state", "pending")
+        return Outcome("finished", str(folder), summary)
+    rec = job_record(folder)
+    state = rec.state if rec is not None else "pending"
     if state == "failed":
-        return {"failed": meta.get("error", "failed"), "log_tail": meta.get("log_tail", ""), "folder": str(folder),
-                "state": "failed"}
-    return {"failed": f"not finished ({state})", "log_tail": meta.get("log_tail", ""), "folder": str(folder),
-            "state": state}
+        return Outcome("failed", str(folder), error=rec.error or "failed", log_tail=rec.log_tail)
+    return Outcome(state, str(folder), error=f"not finished ({state})", log_tail=rec.log_tail if rec else "")
+
+
+def _settle(folder: Path, state: str, **fields) -> None:
+    """The job's record ends ``state`` (with ``fields``: error, log tail, peak memory)."""
+    rec = job_record(folder)
+    if rec is None:
+        return
+    rec.state = state
+    for k, v in fields.items():
+        setattr(rec, k, v)
+    rec.write(folder)
 
 
 def log_tail(folder: Path, lines: int = 15) -> str:
@@ -104,11 +112,10 @@ def _stop_on_signals() -> None:
             signal.signal(sig, request_stop)
 
 
-def run_job(folder: str, np_: int = 1, threads: int = 1) -> dict:
-    """Run the job in ``folder`` (its job.json says what) and return its outcome: the summary, or
-    ``{"failed": first line, "log_tail": ..., "folder": ...}``; a job stopped by its scheduler's signal
-    writes a restart file, is requeued (SLURM) and returns ``{"requeued": True}``.  It never raises:
-    one failed job must not end a study.
+def run_job(folder: str, np_: int = 1, threads: int = 1) -> Outcome:
+    """Run the job in ``folder`` (its record says what) and return its :class:`Outcome`: finished, failed
+    (the error's first line and the log tail), or requeued (a job stopped by its scheduler's signal writes a
+    restart file and is put back in the queue).  It never raises: one failed job must not end a study.
 
     BLAS and OpenMP run ``threads`` threads in the job (threadpoolctl), whatever the executor's process
     inherited: the same sums in the same order, so a job gives the same numbers to the last digit on a
@@ -121,15 +128,15 @@ def run_job(folder: str, np_: int = 1, threads: int = 1) -> dict:
         return _run_job(Path(folder).resolve(), np_)
 
 
-def _run_job(folder: Path, np_: int) -> dict:
+def _run_job(folder: Path, np_: int) -> Outcome:
     from opalflow import registry
     from opalflow.lammps.engine import Preempted
 
-    meta = read_job(folder)
-    label = meta.get("label", folder.name)
+    rec = job_record(folder)
+    label = rec.label if rec is not None and rec.label else folder.name
     done = finished_summary(folder)
     if done is not None:
-        return done
+        return Outcome("finished", str(folder), done)
 
     last = [0.0]
 
@@ -139,27 +146,30 @@ def _run_job(folder: Path, np_: int) -> dict:
             last[0] = time.time()                # step counter writes progress.json itself)
             note(folder, msg)
 
-    update_job(folder, state="running", host=os.uname().nodename, slurm_job=slurm_job(), pid=os.getpid(),
-               attempted=time.time(), error="", log_tail="")
     _stop_on_signals()
     try:
-        spec = registry.spec_from_dict(meta["spec"])
+        if rec is None:
+            raise RuntimeError(f"{folder} holds no job (no readable run.json): run its study again")
+        rec.state, rec.error, rec.log_tail = "running", "", ""
+        rec.attempts, rec.attempted = rec.attempts + 1, time.time()
+        rec.write(folder)
+        spec = registry.spec_from_dict(rec.spec)
         kind = registry.get(spec.kind)
         # a stopped run goes on from what it left (the kind knows what: restart files, the quasi-static events)
-        resume = ((folder / "run.json").exists() and "resume" in kind.options
+        resume = (bool(rec.deck) and "resume" in kind.options
                   and (not kind.resumable or registry.resolve(kind.resumable)(folder)))
         summary = run_kind(kind, spec, folder, np_=np_, resume=resume, say=say)
     except Preempted as exc:
-        update_job(folder, state="requeued", stopped_step=exc.step)
+        _settle(folder, "requeued")
         requeue_self(say)
-        return {"requeued": True, "folder": str(folder)}
+        return Outcome("requeued", str(folder), step=exc.step)
     except (Exception, KeyboardInterrupt) as exc:  # noqa: BLE001 - the job's failure is its result
         first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         tail = log_tail(folder)
-        update_job(folder, state="failed", error=first, log_tail=tail, ended=time.time())
-        return {"failed": first, "log_tail": tail, "folder": str(folder), "state": "failed"}
-    update_job(folder, state="finished", ended=time.time(), peak_rss_MiB=peak_rss_MiB())
-    return summary
+        _settle(folder, "failed", error=first, log_tail=tail)
+        return Outcome("failed", str(folder), error=first, log_tail=tail)
+    _settle(folder, "finished", peak_rss_MiB=peak_rss_MiB())
+    return Outcome("finished", str(folder), summary)
 
 
 def peak_rss_MiB() -> float:
@@ -179,7 +189,8 @@ def requeue_self(say) -> None:
 
 
 def prepare(jobs: list[Job], root: Path) -> tuple[dict[str, dict], list[Job]]:
-    """Summaries of the jobs finished before, and the others, each with a job.json (state pending)."""
+    """Summaries of the jobs finished before, and the others, each with its record (state pending; a job
+    stopped before keeps its record and where it stood, and goes on from there)."""
     labels = [j.label for j in jobs]
     if len(set(labels)) != len(labels):
         raise ValueError("job labels must be unique")
@@ -191,9 +202,11 @@ def prepare(jobs: list[Job], root: Path) -> tuple[dict[str, dict], list[Job]]:
             continue
         folder = job.folder(root)
         folder.mkdir(parents=True, exist_ok=True)
-        old = read_job(folder)
-        state = "pending" if old.get("state") in (None, "finished", "failed") else old["state"]
-        write_json_atomic(folder / JOB_FILE, {"label": job.label, "hash": job.key, "spec": job.spec.to_dict(),
-                                              "state": state})
+        rec = job_record(folder)
+        if rec is None or rec.spec_hash != job.key:
+            rec = RunRecord.job(job.spec, job.label, job.key)
+        elif rec.state in ("built", "finished", "failed"):
+            rec.state = "pending"
+        rec.write(folder)
         todo.append(job)
     return done, todo

@@ -28,7 +28,7 @@ from pathlib import Path
 from opalflow import registry
 from opalflow.resources import ROOT
 from opalflow.runs.executors import Planned
-from opalflow.runs.jobs import Job, read_job
+from opalflow.runs.jobs import Job, job_record
 from opalflow.runs.record import read_summary
 from opalflow.runs.spec import ExecutorSpec
 from opalflow.spec import SpecError
@@ -124,7 +124,8 @@ def measured(folder: Path, label: str, single: bool) -> dict | None:
     s = read_summary(job)
     if not s or s.get("state") == "built":
         return None
-    return {"wall_s": s.get("wall_s"), "peak_MiB": read_job(job).get("peak_rss_MiB")}
+    rec = job_record(job)
+    return {"wall_s": s.get("wall_s"), "peak_MiB": rec.peak_rss_MiB if rec is not None else None}
 
 
 def plan(spec, *, ranks: int = 1, sample: int = 3, against: Path | None = None, say=print) -> dict:

@@ -3,9 +3,12 @@
 
 A run folder's ``run.json`` is a :class:`RunRecord` (typed and versioned by ``schema``): the kind and
 spec, the references, the facts of its deck that the analysis needs (``deck``: heights, areas, steps,
-bond types ... as the track wrote them), its state (built / running / finished / failed /
-interrupted), one :class:`Session` per stretch of execution (a resume or a SLURM requeue starts a new
-one: steps done, restart file continued from, launcher, host, SLURM job) and provenance.
+bond types ... as the track wrote them), its state (:data:`STATES`: one vocabulary for the record, the
+executors and ``status``), one :class:`Session` per stretch of execution (a resume or a SLURM requeue
+starts a new one: steps done, restart file continued from, launcher, host, process, SLURM job) and
+provenance.  A study's job is a run folder like any other: its record also holds the job's label, the
+hash of its spec, its attempts, the log tail of a failure and the peak memory (there is no other file
+of run state).
 
 :func:`finish` writes a run's results all or none (results.h5, plots, report.md, summary.json last,
 under temporary names, then renamed), keeps the keys that ``build`` wrote into summary.json, and marks
@@ -15,6 +18,7 @@ would be overwritten.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import os
 import platform
@@ -29,10 +33,15 @@ from pathlib import Path
 from opalflow.spec import SpecError
 from opalflow.store import json_text, staged_files, write_json_atomic
 
-#: version of the run.json layout; :meth:`RunRecord.read` upgrades older files
-SCHEMA = 2
-STATES = ("built", "running", "finished", "failed", "interrupted")
+#: version of the run.json layout; :meth:`RunRecord.read` upgrades older files (schema 2: a study job's state
+#: in job.json beside it)
+SCHEMA = 3
+#: where a run stands: pending (a job not started), built (its inputs written), running, finished, failed,
+#: interrupted (Ctrl-C, SIGTERM: it resumes) and requeued (stopped by its scheduler, it goes on by itself)
+STATES = ("pending", "built", "running", "finished", "failed", "interrupted", "requeued")
 RECORD = "run.json"
+#: schema 2's file of a study job's state (read once to upgrade a record, never written)
+OLD_JOB_FILE = "job.json"
 SUMMARY = "summary.json"
 REPORT = "report.md"
 
@@ -69,6 +78,7 @@ class Session:
     launcher: str = "in-process"
     host: str = ""
     slurm_job: str = ""
+    pid: int | None = None       # the process that ran it (status: gone without ending it = died)
     restart: str = ""            # the restart file this session continued from ("" for a fresh start)
     first_step: int = 0
     last_step: int | None = None
@@ -89,14 +99,33 @@ class RunRecord:
     sessions: list[Session] = field(default_factory=list)
     requeues: int = 0
     error: str = ""
+    log_tail: str = ""           # the LAMMPS log's last lines where the run failed
+    label: str = ""              # a study job's label ("" for a run of its own)
+    spec_hash: str = ""          # a study job's spec hash (opalflow.runs.jobs.spec_hash): done once per spec
+    attempts: int = 0            # how often a job started (a rerun of its study, a requeue)
+    attempted: float | None = None      # when it last started (time.time())
+    peak_rss_MiB: float | None = None   # the job's peak memory, its LAMMPS processes included
     provenance: dict = field(default_factory=provenance)
     schema: int = SCHEMA
 
     @classmethod
-    def new(cls, spec, *, deck: dict | None = None) -> RunRecord:
-        """A built run of ``spec`` (its references from the spec where it has them)."""
-        return cls(kind=spec.kind, workflow=spec.name, spec=spec.to_dict(), references=_references(spec),
-                   deck=deck or {})
+    def new(cls, spec, *, deck: dict | None = None, folder: str | os.PathLike | None = None) -> RunRecord:
+        """A built run of ``spec`` (its references from the spec where it has them); in a ``folder`` whose
+        record is a study job's of the same spec, the job's label, hash and attempts are kept."""
+        rec = cls(kind=spec.kind, workflow=spec.name, spec=spec.to_dict(), references=_references(spec),
+                  deck=deck or {})
+        old = cls.read_or_none(folder) if folder is not None else None
+        if old is not None and old.spec_hash and old.spec_hash == spec_digest(rec.spec):
+            rec.label, rec.spec_hash = old.label, old.spec_hash
+            rec.attempts, rec.attempted = old.attempts, old.attempted
+        return rec
+
+    @classmethod
+    def job(cls, spec, label: str, spec_hash: str) -> RunRecord:
+        """A study job not started yet (state pending)."""
+        rec = cls.new(spec)
+        rec.state, rec.label, rec.spec_hash = "pending", label, spec_hash
+        return rec
 
     # ------------------------------------------------------------------ disk
     @classmethod
@@ -107,13 +136,22 @@ class RunRecord:
             raise SpecError(field_name, str(folder), "no run.json: this folder holds no prepared run")
         try:
             raw = json.loads(path.read_text())
-            return cls.from_dict(raw)
+            old = Path(folder) / OLD_JOB_FILE
+            return cls.from_dict(raw, json.loads(old.read_text()) if old.exists() else None)
         except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError, AttributeError) as exc:
             raise SpecError(field_name, str(folder), f"run.json is damaged ({type(exc).__name__}: {exc}); build "
                             "the folder again") from None
 
     @classmethod
-    def from_dict(cls, raw: dict) -> RunRecord:
+    def read_or_none(cls, folder: str | os.PathLike) -> RunRecord | None:
+        """The record of ``folder``, None where there is none or it is damaged."""
+        try:
+            return cls.read(folder) if cls.exists(folder) else None
+        except SpecError:
+            return None
+
+    @classmethod
+    def from_dict(cls, raw: dict, job: dict | None = None) -> RunRecord:
         if raw.get("schema", 1) < 2:          # schema 1: the deck facts at the top level beside the spec
             spec = raw["spec"]
             top = {"workflow", "spec", "references", "opalflow_version", "kind"}
@@ -124,6 +162,11 @@ class RunRecord:
         rec = cls(**{k: v for k, v in raw.items() if k in names})
         rec.spec["kind"]                      # noqa: B018 - a record without a kind is damaged
         rec.sessions = [Session(**s) for s in raw.get("sessions", [])]
+        if job and rec.schema < 3:            # schema 2: a study job's state in job.json beside run.json
+            rec.label, rec.spec_hash, rec.attempted = job.get("label", ""), job.get("hash", ""), job.get("attempted")
+            rec.log_tail, rec.peak_rss_MiB = job.get("log_tail", ""), job.get("peak_rss_MiB")
+            rec.state = job.get("state", rec.state) if job.get("state") in STATES else rec.state
+            rec.schema = SCHEMA
         return rec
 
     def write(self, folder: str | os.PathLike) -> None:
@@ -145,7 +188,7 @@ class RunRecord:
         if job and any(s.slurm_job == job for s in self.sessions):
             self.requeues += 1
             self.sessions[-1].ended = self.sessions[-1].ended or "requeued"
-        s = Session(started=_now(), launcher=launcher, host=socket.gethostname(), slurm_job=job,
+        s = Session(started=_now(), launcher=launcher, host=socket.gethostname(), pid=os.getpid(), slurm_job=job,
                     restart=restart, first_step=first_step)
         self.sessions.append(s)
         self.state, self.error = "running", ""
@@ -165,6 +208,12 @@ class RunRecord:
             if wall_s is not None:
                 s.wall_s = wall_s
         self.write(folder)
+
+
+def spec_digest(spec: dict) -> str:
+    """SHA-256 of a spec's canonical JSON (keys sorted): equal specs, equal digests (a study job's identity)."""
+    text = json.dumps(spec, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()
 
 
 def _references(spec) -> dict:
@@ -278,11 +327,12 @@ def tracked(spec, folder: str | os.PathLike):
                 record = RunRecord.read(folder)
             except SpecError:
                 record = None
-        if record is None or record.spec != spec.to_dict():
+        if record is None or record.spec != spec.to_dict() or record.state == "pending":
             if not folder.exists():
                 return
-            record = RunRecord.new(spec)
-            record.sessions.append(Session(started=_now(), host=socket.gethostname(), slurm_job=slurm_job()))
+            record = RunRecord.new(spec, folder=folder)
+            record.sessions.append(Session(started=_now(), host=socket.gethostname(), pid=os.getpid(),
+                                           slurm_job=slurm_job()))
         elif record.state != "running":
             return                        # the track settled it (finish() marks it finished)
         record.end(folder, state, last_step=step, wall_s=time.perf_counter() - t0, error=error)

@@ -1,8 +1,8 @@
 """``python -m opalflow status DIR``: what the runs of a folder are doing, whatever ran them.
 
-Everything comes from the folders: a study's ``jobs/*/job.json`` (state, error, log tail, host, SLURM
-job), each run's ``run.json`` (sessions, requeues) and ``progress.json`` (step, rate, time left, written
-by the running LAMMPS loop), and ``summary.json`` (the headline of a finished run).
+Everything comes from the folders: each run's record (``run.json``: state, sessions, requeues, error and
+log tail; a study's jobs are ``jobs/*/``), ``progress.json`` (step, rate, time left, or the job's last
+message: :mod:`opalflow.progress`) and ``summary.json`` (the headline of a finished run).
 """
 from __future__ import annotations
 
@@ -10,11 +10,12 @@ import time
 from collections import Counter
 from pathlib import Path
 
-from opalflow.runs.jobs import read_job
 from opalflow.runs.record import RunRecord, is_finished, read_summary
 from opalflow.spec import SpecError
 from opalflow.store import DamagedFile, lock_owner, process_alive, read_json
 
+#: the record's states (opalflow.runs.record.STATES, built shown as pending) and what status sees besides:
+#: died (running, its process gone) and damaged (the record cannot be read)
 STATES = ("pending", "running", "requeued", "interrupted", "died", "finished", "failed", "damaged")
 
 
@@ -34,43 +35,42 @@ def _progress(folder: Path) -> tuple[str, float | None]:
 
 
 def run_state(folder: Path) -> tuple[str, dict]:
-    """(state, facts: job.json's, with ``error`` and ``where``) of one run or job folder, from its record
-    (job.json, else run.json) and the process that holds it (the folder's lock, else job.json's pid and host):
+    """(state, facts: label, error, log tail, host, SLURM job, ``where``) of one run or job folder, from its
+    record and the process that holds it (the folder's lock, else the last session's process and host):
 
     - ``running``: the record says so and the process lives (or runs on another host: ``where`` says so);
     - ``died``: the record says running but its process is gone (killed by SIGKILL, the machine lost);
     - ``interrupted`` (Ctrl-C, SIGTERM) and ``requeued`` (stopped by SLURM to go on in a requeued job);
-    - ``damaged``: job.json or run.json cannot be read (``error`` names the file and what to do).
+    - ``damaged``: run.json cannot be read (``error`` names the file and what to do).
     """
-    try:
-        meta = read_job(folder, strict=True)
-    except DamagedFile as exc:
-        return "damaged", {"error": str(exc)}
     if is_finished(folder):
-        return "finished", meta
-    state = meta.get("state")
-    if state not in STATES:
-        state = "pending"
-        if RunRecord.exists(folder):
-            try:
-                rec = RunRecord.read(folder)
-            except SpecError as exc:
-                return "damaged", {**meta, "error": str(exc)}
-            state = {"built": "pending"}.get(rec.state, rec.state)
-            if state == "interrupted" and rec.sessions and rec.sessions[-1].slurm_job:
-                state = "requeued"
-            meta = {"error": rec.error, **meta}
+        rec = RunRecord.read_or_none(folder)
+        return "finished", {"label": rec.label} if rec is not None and rec.label else {}
+    if not RunRecord.exists(folder):
+        return "pending", {}
+    try:
+        rec = RunRecord.read(folder)
+    except SpecError as exc:
+        return "damaged", {"error": str(exc)}
+    last = rec.sessions[-1] if rec.sessions else None
+    meta = {"error": rec.error, "log_tail": rec.log_tail, "host": last.host if last else "",
+            "slurm_job": last.slurm_job if last else ""}
+    if rec.label:
+        meta["label"] = rec.label
+    state = {"built": "pending"}.get(rec.state, rec.state)
+    if state == "interrupted" and last and last.slurm_job:
+        state = "requeued"
     if state == "running":
-        owner = lock_owner(folder) or ((meta["pid"], meta.get("host", "")) if "pid" in meta else None)
+        owner = lock_owner(folder) or ((last.pid, last.host) if last and last.pid else None)
         alive = process_alive(*owner) if owner else False
         if alive is False:
             state = "died"
-            meta = {**meta, "error": (f"its process (pid {owner[0]}) is gone" if owner else "no process holds it")
-                    + " without ending the run (killed?): "
-                    + ("run the study again: it continues this job" if "hash" in meta else
-                       f"continue it with `python -m opalflow run --out {folder} --resume`")}
+            meta["error"] = ((f"its process (pid {owner[0]}) is gone" if owner else "no process holds it")
+                             + " without ending the run (killed?): "
+                             + ("run the study again: it continues this job" if rec.spec_hash else
+                                f"continue it with `python -m opalflow run --out {folder} --resume`"))
         elif alive is None:
-            meta = {**meta, "where": f"on {owner[1]}, not checked from here"}
+            meta["where"] = f"on {owner[1]}, not checked from here"
     return state, meta
 
 
@@ -78,10 +78,10 @@ def status_lines(folder: str | Path, tail: int = 8) -> list[str]:
     folder = Path(folder)
     if not folder.is_dir():
         raise SpecError("folder", str(folder), "is not a folder")
-    jobs = sorted(p.parent for p in folder.glob("jobs/*/job.json"))
+    jobs = sorted(p.parent for p in folder.glob("jobs/*/run.json"))
     if not jobs:
-        if not RunRecord.exists(folder) and not (folder / "job.json").exists():
-            raise SpecError("folder", str(folder), "holds neither a study (jobs/*/job.json) nor a run (run.json)")
+        if not RunRecord.exists(folder):
+            raise SpecError("folder", str(folder), "holds neither a study (jobs/*/run.json) nor a run (run.json)")
         jobs = [folder]
     rows, counts, lefts = [], Counter(), []
     for job in jobs:

@@ -1,7 +1,7 @@
 """A study's jobs: the base workflow with each job's overrides, run through the run layer
 (:mod:`opalflow.runs.jobs`: one folder per spec hash, each job done once; :mod:`opalflow.runs.executors`:
 a local pool, Dask or SLURM job arrays, as the workflow's ``[executor]`` says).  A job that fails keeps
-its failure in its own folder (job.json: the error and the log tail); the study lists those of its
+its failure in its own folder (its run.json: the error and the log tail); the study lists those of its
 jobs."""
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from pathlib import Path
 from opalflow import registry
 from opalflow.resources import WORKFLOWS
 from opalflow.runs.executors import run_jobs
-from opalflow.runs.jobs import Job, read_job
+from opalflow.runs.jobs import Job, job_record
 from opalflow.spec import SpecError, WorkflowSpec
 
 __all__ = ["Job", "job_spec", "sweep", "failed_jobs", "fmt_value", "label_number"]
@@ -34,18 +34,18 @@ def sweep(spec, out: Path, jobs: list[Job], say) -> dict[str, dict]:
     """Run a study's jobs through its executor (``spec.executor``); the failed ones are left out of the
     result (their folders say why: :func:`failed_jobs`)."""
     res = run_jobs(jobs, out, spec.executor, np_=spec.study.np, say=say)
-    return {k: v for k, v in res.items() if "failed" not in v}
+    return {k: v.summary for k, v in res.items() if v.ok}
 
 
 def failed_jobs(out: Path, since: float) -> dict[str, dict]:
     """label -> {error, log_tail, folder} of the study's jobs that failed in a run started at ``since``
     (time.time()), read from each job's folder."""
     failed = {}
-    for meta_path in sorted(Path(out).glob("jobs/*/job.json")):
-        meta = read_job(meta_path.parent)
-        if meta.get("state") == "failed" and meta.get("attempted", 0) >= since:
-            failed[meta.get("label", meta_path.parent.name)] = {
-                "error": meta.get("error", ""), "log_tail": meta.get("log_tail", ""), "folder": str(meta_path.parent)}
+    for path in sorted(Path(out).glob("jobs/*/run.json")):
+        rec = job_record(path.parent)
+        if rec is not None and rec.state == "failed" and (rec.attempted or 0) >= since:
+            failed[rec.label or path.parent.name] = {"error": rec.error, "log_tail": rec.log_tail,
+                                                     "folder": str(path.parent)}
     return failed
 
 

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from opalflow.lammps.engine import session
-from opalflow.runs.progress import Progress
+from opalflow.progress import Progress
 from opalflow.tersoff.parameters import TersoffParameters, write_tersoff
 from opalflow.tersoff.properties import POTENTIAL_FILE, relax_lattice, setup_commands
 

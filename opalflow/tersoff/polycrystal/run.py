@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from opalflow.runs.progress import Progress
+from opalflow.progress import Progress
 from opalflow.runs.record import RunRecord, finish
 from opalflow.store import h5_bytes, new_figure, read_json, save_figure, write_json_atomic
 from opalflow.tersoff.parameters import load_parameters
@@ -49,7 +49,7 @@ def setup(spec: PolycrystalWorkflow, out: Path) -> tuple:
 def start_folder(out: Path, spec: PolycrystalWorkflow) -> None:
     """The run folder with ``run.json`` (the spec, for ``--resume``) and ``jobs/`` (one JSON per finished run)."""
     (out / "jobs").mkdir(parents=True, exist_ok=True)
-    RunRecord.new(spec).begin(out)
+    RunRecord.new(spec, folder=out).begin(out)
 
 
 def finished(path: Path, job: dict) -> dict:
