@@ -10,7 +10,6 @@ docs/figures/lattice_bending.png (the dynamic run's flexural stress-strain curve
 from __future__ import annotations
 
 import json
-import math
 import platform
 import subprocess
 import sys
@@ -41,11 +40,7 @@ def euler_bernoulli() -> float:
     from opalflow.resources import WORKFLOWS
 
     spec = load_spec(WORKFLOWS / "lattice_bending.toml", [])
-    lat, props = spec.lattice, material(spec.material, spec.materials)
-    a, n, r_b = lat.spacing_nm, lat.cells_z, spec.bonds.radius_factor / 2 * lat.spacing_nm
-    EI = lat.cells_y * props["bond_youngs_modulus_GPa"] * (
-        math.pi * r_b**2 * sum(((k - (n - 1) / 2) * a) ** 2 for k in range(n)) + n * math.pi * r_b**4 / 4)
-    return 12 * EI / (lat.cells_y * a * (n * a) ** 3)
+    return spec.flexural_modulus(material(spec.material, spec.materials), spec.bonds.radius_factor / 2, shear=False)
 
 
 def main() -> None:

@@ -53,7 +53,7 @@ class LatticeWorkflow(BpmWorkflow):
                                     "analytic: sigma_b pi r_b^2 / a^2 (simple-cubic lattice in tension)")
         return refs
 
-    def flexural_modulus(self, props: dict, r: float) -> float:
+    def flexural_modulus(self, props: dict, r: float, shear: bool = True) -> float:
         """The flexural modulus E_f = F L^3 / (4 b h^3 delta) (ASTM D790) that beam theory gives a simple-cubic
         beam of n_x x n_y x n_z cells (spacing a, bond radius r_b = r a) in three-point bending over the span
         L = (n_x - 1) a between its bottom end particles: Timoshenko's mid-span deflection (Timoshenko and Gere,
@@ -62,7 +62,8 @@ class LatticeWorkflow(BpmWorkflow):
         heights z_k from the mid-plane, stretched, and bent themselves; A_b = pi r_b^2, I_b = pi r_b^4 / 4; that
         is E b h^3 / 12 (1 - 1/n_z^2) plus the bonds' own), G = G_b A_b / (2 a^2) (each bond's shear spring
         G_b A_b / a, the particles turning by half the shear: C44 of the periodic lattice's static tensor, to
-        round-off), A = b h.  E_b, G_b = E_b / (2 (1 + nu_b)) from the material."""
+        round-off), A = b h.  E_b, G_b = E_b / (2 (1 + nu_b)) from the material.  ``shear`` False: Euler-Bernoulli's
+        beam (the first term alone)."""
         lat = self.lattice
         a, n = lat.spacing_nm, lat.cells_z
         span, depth, width = (lat.cells_x - 1) * a, n * a, lat.cells_y * a
@@ -71,7 +72,7 @@ class LatticeWorkflow(BpmWorkflow):
         heights = [(k - (n - 1) / 2) * a for k in range(n)]
         EI = lat.cells_y * E_b * (area_b * sum(h * h for h in heights) + n * i_b)
         GA = E_b / (2 * (1 + props["bond_poisson_ratio"])) * area_b / (2 * a**2) * width * depth
-        compliance = span**3 / (48 * EI) + span / (4 * 5 / 6 * GA)
+        compliance = span**3 / (48 * EI) + (span / (4 * 5 / 6 * GA) if shear else 0.0)
         return span**3 / (4 * width * depth**3 * compliance)
 
     def validate(self) -> None:
