@@ -11,7 +11,6 @@ temporary names and renamed, so a failed run never replaces earlier results.
 from __future__ import annotations
 
 import dataclasses
-import json
 import time
 from pathlib import Path
 
@@ -22,6 +21,7 @@ from opalflow.analysis import fracture
 from opalflow.bpm import report
 from opalflow.bpm.deck import CompressionDeck, compression_deck, particle_material
 from opalflow.bpm.methods import METHODS
+from opalflow.bpm.result import CompressionResult
 from opalflow.bpm.scene import scene_of, solid_fraction
 from opalflow.bpm.spec import BpmWorkflow
 from opalflow.lammps.datafile import write_data
@@ -225,9 +225,11 @@ def curve_strain_stress(curve: dict, info: dict) -> tuple[np.ndarray, np.ndarray
 
 
 def analyze(out: Path, started: float | None = None, lammps_s: float | None = None,
-            extra: dict | None = None, record: RunRecord | None = None) -> dict:
-    """Curves, modulus, strength, particle stresses -> results.h5, summary.json, report.md, plots.
+            rate_check: dict | None = None, record: RunRecord | None = None) -> dict:
+    """Curves, modulus, strength, particle stresses -> results.h5, summary.json, report.md, plots
+    (:class:`opalflow.bpm.result.CompressionResult`).
     ``started``: when the run began (``time.perf_counter()``): its wall time then covers this analysis too;
+    ``rate_check``: the half-speed twin's changes;
     ``record``: the run's, held since it was prepared (else read: a folder run by ``bash run.sh``)."""
     wall_s = None if started is None else time.perf_counter() - started
     record = record or RunRecord.read(out)
@@ -249,50 +251,40 @@ def analyze(out: Path, started: float | None = None, lammps_s: float | None = No
 
     snapshots, histograms = read_snapshots(out, info, curve, strain)
 
-    E_GPa = fit.modulus_MPa / 1e3
-    summary = {
-        "workflow": info["workflow"],
-        "youngs_modulus_GPa": E_GPa,
-        "elastic_window_strain": list(fit.window), "elastic_fit_r2": fit.r2,
-        "youngs_modulus_specimen_GPa": fit_top.modulus_MPa / 1e3,
-        "strength_MPa": float(stress[peak]), "strain_at_peak": float(strain[peak]),
-        "strain_at_peak_specimen": float(strain_top[peak]),      # the top layer's (no plate settling)
-        "timestep_s": info["timestep_s"], "steps": int(curve["step"][-1]),
-        # the last averaged row lies within one output interval of the last step of a whole run
-        "complete": bool(curve["step"][-1] > info["steps"] - info["output_every_steps"]),
-        "steps_planned": info["steps"],
-        "wall_s": wall_s, "lammps_s": lammps_s,
-        "broken_bonds": int(broken[-1]), "n_particles": info["n_particles"], "n_bonds": n_bonds0,
-        "stress_by_material": {f"{v['strain']:.4f}": v["by_material"] for v in snapshots.values()},
-        "solid_fraction": info["solid_fraction"],
-        "bond_stiffness_error_max": info["bond_stiffness_error_max"],
-        "timestep_estimate_s": info["timestep_estimate_s"],
-        **info.get("structure", {}),
-    }
     breakable = info["spec"]["bonds"]["breakable"]
-    if not breakable:            # the peak of a loading that breaks nothing is not a strength
-        summary["peak_stress_MPa"], summary["strength_MPa"] = summary["strength_MPa"], None
-    summary["headline"] = report.headline(summary, info.get("references", {}), breakable)
-    summary.update({k: v for k, v in info.get("statistics", {}).items() if k not in summary})
-    if "build_timings_s" in info:
-        summary["build_timings_s"] = info["build_timings_s"]
-    summary["reference"] = report.reference_errors(summary, info.get("references", {}))
-    if extra:
-        summary.update(extra)
-    if not summary["complete"]:
-        summary["headline"] = (f"INCOMPLETE run (stopped at step {summary['steps']} of {info['steps']}): "
-                               + summary["headline"])
-    frames = fracture.frames_at_peak_and_after(list(snapshots.values()), summary["strain_at_peak"])
+    result = CompressionResult(
+        workflow=info["workflow"], method="dynamic", loading=info["spec"]["compression"]["loading"],
+        youngs_modulus_GPa=fit.modulus_MPa / 1e3, youngs_modulus_specimen_GPa=fit_top.modulus_MPa / 1e3,
+        elastic_window_strain=list(fit.window), elastic_fit_r2=fit.r2,
+        # the peak of a loading that breaks nothing is not a strength
+        strength_MPa=float(stress[peak]) if breakable else None,
+        peak_stress_MPa=None if breakable else float(stress[peak]),
+        strain_at_peak=float(strain[peak]), strain_at_peak_specimen=float(strain_top[peak]),
+        timestep_s=info["timestep_s"], steps=int(curve["step"][-1]),
+        # the last averaged row lies within one output interval of the last step of a whole run
+        complete=bool(curve["step"][-1] > info["steps"] - info["output_every_steps"]),
+        steps_planned=info["steps"], lammps_s=lammps_s,
+        broken_bonds=int(broken[-1]), n_particles=info["n_particles"], n_bonds=n_bonds0,
+        stress_by_material={f"{v['strain']:.4f}": v["by_material"] for v in snapshots.values()},
+        solid_fraction=info["solid_fraction"], bond_stiffness_error_max=info["bond_stiffness_error_max"],
+        timestep_estimate_s=info["timestep_estimate_s"], build_timings_s=info.get("build_timings_s"),
+        structure=info.get("structure", {}), statistics=info.get("statistics", {}), rate_check=rate_check)
+    result.headline = report.headline(result.summary(), info.get("references", {}), breakable)
+    result.refer(info.get("references", {}))
+    if not result.complete:
+        result.headline = f"INCOMPLETE run (stopped at step {result.steps} of {info['steps']}): {result.headline}"
+    frames = fracture.frames_at_peak_and_after(list(snapshots.values()), result.strain_at_peak)
     if record.sessions:          # run by opalflow (not 'bash run.sh' + analyze): what each session did
-        record.sessions[-1].last_step = summary["steps"]
+        record.sessions[-1].last_step = result.steps
         record.sessions[-1].wall_s = wall_s
         record.sessions[-1].ended = "finished"
-        summary["sessions"] = [dataclasses.asdict(x) for x in record.sessions]
-        summary["requeues"] = record.requeues
+        result.sessions = [dataclasses.asdict(x) for x in record.sessions]
+        result.requeues = record.requeues
+    summary = result.summary()
 
     def files(stage):
         stage("results.h5").write_bytes(h5_bytes(lambda h: _fill_h5(
-            h, info, curve, strain, stress, stress_plate, stress_substrate, broken, snapshots, histograms, summary)))
+            h, info, curve, strain, stress, stress_plate, stress_substrate, broken, snapshots, histograms, result)))
         _plots(stage, strain, stress, stress_plate, stress_substrate, fit, snapshots, histograms,
                info["type_names"])
         if frames:
@@ -301,7 +293,7 @@ def analyze(out: Path, started: float | None = None, lammps_s: float | None = No
                                          "sides)")
 
     # all results or none (a full disk leaves the earlier set whole); summary.json is renamed last
-    return finish(out, summary, lambda: report.compression_report(info, summary, fit, bool(frames)), files=files,
+    return finish(out, summary, lambda: report.compression_report(info, summary, result, fit, bool(frames)), files=files,
                   record=record, started=started)
 
 
@@ -330,7 +322,7 @@ def read_snapshots(out: Path, info: dict, curve: dict, strain: np.ndarray) -> tu
 
 
 def _fill_h5(h, info, curve, strain, stress, stress_plate, stress_substrate, broken, snapshots, histograms,
-             summary):
+             result):
     for k, v in curve.items():
         put(h, f"curve/{k}", v, mech.CURVE_UNITS[k])
     for k, v, unit in (("strain", strain, "1"), ("stress_MPa", stress, "MPa"),
@@ -356,8 +348,7 @@ def _fill_h5(h, info, curve, strain, stress, stress_plate, stress_substrate, bro
         g.attrs["strain"] = hist["strain"]
         put(g, "fraction", hist["fraction"], "1", description="fraction of intact bonds per bin")
         put(g, "edges", hist["edges"], "1", description="bin edges of the bond strain r / r0 - 1")
-    report.provenance_group(h, info)
-    h.attrs["summary"] = json.dumps(summary, default=float)
+    result.h5_attrs(h, info)
 
 
 def _plots(stage, strain, stress, stress_plate, stress_substrate, fit, snapshots, histograms, type_names):
@@ -408,7 +399,7 @@ def run_dynamic(spec: BpmWorkflow, out: Path, *, np_: int = 1, resume: bool = Fa
         if estimate:
             say(estimate)
     lammps_s = execute(out, record, np_=np_, resume=resume, label=f"{spec.name}: ", suffix=suffix, say=say)
-    extra = {}
+    rate_check = None
     if spec.compression.check_rate and not resume:
         half = dataclasses.replace(spec, compression=dataclasses.replace(
             spec.compression, plate_speed_m_s=spec.compression.plate_speed_m_s / 2, check_rate=False))
@@ -420,10 +411,10 @@ def run_dynamic(spec: BpmWorkflow, out: Path, *, np_: int = 1, resume: bool = Fa
         fast_strain, fast_stress, _, _ = curve_strain_stress(fast_curve, record.deck)
         fast_fit = mech.fit_elastic(fast_strain, fast_stress)
         fast_strength = float(np.max(fast_stress))
-        extra["rate_check"] = {
+        rate_check = {
             "youngs_modulus_change": slow["youngs_modulus_GPa"] / (fast_fit.modulus_MPa / 1e3) - 1,
             "strength_change": (slow["strength_MPa"] / fast_strength - 1 if slow["strength_MPa"] is not None
                                 else None),
             "half_speed_youngs_modulus_GPa": slow["youngs_modulus_GPa"],
             "half_speed_strength_MPa": slow["strength_MPa"]}
-    return analyze(out, started=t, lammps_s=lammps_s, extra=extra, record=record)
+    return analyze(out, started=t, lammps_s=lammps_s, rate_check=rate_check, record=record)

@@ -25,8 +25,8 @@ from opalflow.materials import contact_properties
 from opalflow.bpm.quasistatic import CHECKS, Event, Stopped, Strengths, solve_fracture, summary_of
 from opalflow.bpm.scene import scene_of
 from opalflow.bpm.spec import BREAKING_RULES, BpmWorkflow
-from opalflow.bpm.report import (network_inputs, provenance_group, reference_errors, sample_lines, structure_cost,
-                                 why)
+from opalflow.bpm.report import network_inputs, sample_lines, structure_cost
+from opalflow.bpm.result import CompressionResult
 from opalflow.bpm.static_run import network_run, particle_stress
 from opalflow.bpm.stiffness import per_bond
 from opalflow.runs.record import finish
@@ -122,29 +122,28 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
     broken = ~res.alive
     by_material = {m: int(np.sum(broken & (materials == m))) for m in sorted(set(sample.bins.materials))}
     E = got["youngs_modulus_GPa"]
-    summary = {
-        "workflow": spec.name, "method": "quasistatic", "loading": loading.name,
-        "youngs_modulus_GPa": E, "youngs_modulus_specimen_GPa": E,
-        "strength_MPa": got["strength_MPa"], "strain_at_peak": got["strain_at_peak"],
-        "broken_bonds": got["broken_bonds"], "broken_bonds_by_material": by_material,
-        "broken_bonds_at_peak": got.get("broken_bonds_at_peak", 0),
-        "broken_bonds_by_check": broken_by_check(res, sample, peak_only=False),
-        "broken_bonds_by_check_at_peak": broken_by_check(res, sample, peak_only=True),
-        "n_particles": s.n_particles, "n_bonds": s.n_bonds, "solid_fraction": info["solid_fraction"],
-        "complete": True, "build_s": info["build_s"],
-        "quasistatic": _event_facts(spec, res, got["events"], contacts),
-        **info.get("structure", {}),
-        "headline": f"E = {E:.4g} GPa, strength = {got['strength_MPa']:.4g} MPa (strain at peak "
-                    f"{got['strain_at_peak']:.4f}; quasi-static, {got['events']} events, {got['broken_bonds']} "
-                    f"bonds broken)" if got["events"] else
-                    f"E = {E:.4g} GPa, no strength: no bond reached its limit up to strain {c.strain_max:g} "
-                    "(quasi-static)",
-    }
-    summary["reference"] = reference_errors(summary, info["references"])
+    result = CompressionResult(
+        workflow=spec.name, method="quasistatic", loading=loading.name,
+        youngs_modulus_GPa=E, youngs_modulus_specimen_GPa=E,
+        strength_MPa=got["strength_MPa"], strain_at_peak=got["strain_at_peak"],
+        broken_bonds=got["broken_bonds"], broken_bonds_by_material=by_material,
+        broken_bonds_at_peak=got.get("broken_bonds_at_peak", 0),
+        broken_bonds_by_check=broken_by_check(res, sample, peak_only=False),
+        broken_bonds_by_check_at_peak=broken_by_check(res, sample, peak_only=True),
+        n_particles=s.n_particles, n_bonds=s.n_bonds, solid_fraction=info["solid_fraction"],
+        build_s=info["build_s"], quasistatic=_event_facts(spec, res, got["events"], contacts),
+        structure=info.get("structure", {}),
+        headline=f"E = {E:.4g} GPa, strength = {got['strength_MPa']:.4g} MPa (strain at peak "
+                 f"{got['strain_at_peak']:.4f}; quasi-static, {got['events']} events, {got['broken_bonds']} "
+                 f"bonds broken)" if got["events"] else
+                 f"E = {E:.4g} GPa, no strength: no bond reached its limit up to strain {c.strain_max:g} "
+                 "(quasi-static)",
+    ).refer(info["references"])
+    summary = result.summary()
     record.sessions[-1].last_step = got["events"]
 
     def files(stage):
-        stage("results.h5").write_bytes(h5_bytes(lambda h: _fill_h5(h, res, data, summary, sample, info)))
+        stage("results.h5").write_bytes(h5_bytes(lambda h: _fill_h5(h, res, data, result, sample, info)))
         _plot_curve(stage("stress_strain.png"), res, summary)
         frames = _frames(net, data, res)
         if frames:
@@ -153,7 +152,7 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
             for tag, (_, snap) in zip(("peak", "end"), frames):
                 _write_dump(stage(f"fracture.{tag}.dump"), data, snap)
 
-    summary = finish(out, summary, lambda: _report(spec, info, summary, res, loading, sample), files=files,
+    summary = finish(out, summary, lambda: _report(spec, info, summary, result, res, loading, sample), files=files,
                      record=record, started=t0)
     (out / STATE).unlink(missing_ok=True)
     (out / PEAK).unlink(missing_ok=True)
@@ -268,9 +267,8 @@ def _write_dump(path: Path, data, snap: dict) -> None:
         np.savetxt(f, rows, fmt=["%d", "%d", "%.6f", "%.6f", "%.6f", "%.6f", "%d"])
 
 
-def _fill_h5(h, res, data, summary, sample, info) -> None:
-    h.attrs["method"] = "quasistatic"
-    h.attrs["youngs_modulus_GPa"] = summary["youngs_modulus_GPa"]
+def _fill_h5(h, res, data, result, sample, info) -> None:
+    result.h5_attrs(h, info)
     g = h.create_group("quasistatic")
     ev = res.events
     put(g, "strain", np.array([e.strain for e in ev]), "1", description="strain of each event (the next bond's limit)")
@@ -289,7 +287,6 @@ def _fill_h5(h, res, data, summary, sample, info) -> None:
         description="length bin (data.lmp bond type - 1) of each broken bond")
     put(g, "intact", res.alive.astype(np.int8), "1", description="1 for each bond intact at the end")
     put(g, "position_nm", data.positions, "nm", ["x", "y", "z"])
-    provenance_group(h, info)
 
 
 def _plot_curve(path: Path, res, summary) -> None:
@@ -325,7 +322,7 @@ def _check_table(summary) -> list[str]:
     return lines
 
 
-def _report(spec, info, summary, res, loading, sample) -> str:
+def _report(spec, info, summary, result, res, loading, sample) -> str:
     q = summary["quasistatic"]
     lines = [f"# {spec.name}: quasi-static {loading.title}", "",
              f"{info['n_particles']} particles, {info['n_bonds']} bonds; the bond network linearised from LAMMPS's "
@@ -338,17 +335,7 @@ def _report(spec, info, summary, res, loading, sample) -> str:
                 f"{100 * spec.contacts.reference_strain:g} % overlap, in compression only; pressing just before the "
                 f"peak: {q['contacts_pressing_at_peak']}, at the end: {q['contacts_pressing_at_end']}.", ""]
                if q["contacts"] != "off" else []),
-             "| quantity | value | reference | error | why the error |", "|---|---|---|---|---|"]
-    d = float(sample.structure.diameters.mean())
-    for key, label in (("youngs_modulus_GPa", "Young's modulus, first branch (GPa)"),
-                       ("strength_MPa", "strength (MPa)"), ("strain_at_peak", "strain at peak")):
-        ref = summary["reference"].get(key) or (summary["reference"].get("youngs_modulus_specimen_GPa")
-                                                if key == "youngs_modulus_GPa" else None)
-        reason = (why("youngs_modulus_specimen_GPa" if key == "youngs_modulus_GPa" else key, ref["error"], d)
-                  if ref else "")
-        lines.append(f"| {label} | {summary[key]:.4g} | "
-                     + (f"{ref['value']:g} ({ref['source']}) | {100 * ref['error']:+.2f} % | {reason or '-'} |"
-                        if ref else "- | - | - |"))
+             *result.results_table(float(sample.structure.diameters.mean()))]
     lines += ["", f"{q['events']} events, {summary['broken_bonds']} bonds broken "
               f"({', '.join(f'{m}: {k}' for m, k in summary['broken_bonds_by_material'].items())}), "
               f"{summary['broken_bonds_at_peak']} before the peak; stopped: {q['stopped']}.", "",

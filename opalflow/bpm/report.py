@@ -13,6 +13,7 @@ import tomllib
 from functools import lru_cache
 
 from opalflow.analysis import compression as mech
+from opalflow.bpm.loading import LOADINGS
 from opalflow.resources import DATA, ROOT
 
 
@@ -137,11 +138,11 @@ def _session_row(k: int, x: dict) -> str:
             f"{wall} | {x['ended'] or 'running'} |")
 
 
-def compression_report(info: dict, summary: dict, fit, fracture: bool) -> str:
-    """The text of report.md (sections :data:`SECTIONS`)."""
+def compression_report(info: dict, summary: dict, result, fit, fracture: bool) -> str:
+    """The text of report.md (sections :data:`SECTIONS`) of a dynamic run: ``summary`` as written (with its wall
+    time), ``result`` its :class:`opalflow.bpm.result.CompressionResult` (the Results table)."""
     spec = info["spec"]
-    tension = info.get("loading_sense", 1) < 0
-    lines = [f"# {info['workflow']}: uniaxial {'tension' if tension else 'compression'}", ""]
+    lines = [f"# {info['workflow']}: {LOADINGS[result.loading].title}", ""]
     if not summary["complete"]:
         c = spec["compression"]
         lines += [f"**Incomplete run**: the output stops at step {summary['steps']} of {info['steps']} "
@@ -149,23 +150,7 @@ def compression_report(info: dict, summary: dict, fit, fracture: bool) -> str:
                   "figures below cover only that part. `python -m opalflow run --out DIR --resume` continues it "
                   "from its newest restart file.", ""]
     lines += _inputs(info, summary)
-    lines += ["## Results", "", "| quantity | value | reference | error | why the error |", "|---|---|---|---|---|"]
-    for key, label, fmt in (("youngs_modulus_GPa", "Young's modulus, plate strain (GPa)", "{:.4g}"),
-                            ("youngs_modulus_specimen_GPa", "Young's modulus, top-layer strain (GPa)", "{:.4g}"),
-                            ("strength_MPa", f"{'tensile' if tension else 'compressive'} strength (MPa)", "{:.4g}"),
-                            ("strain_at_peak", "strain at peak", "{:.4f}"),
-                            ("broken_bonds", "broken bonds at the end", "{}")):
-        if summary.get("strength_MPa") is None and key == "strain_at_peak":
-            continue
-        if summary.get(key) is None:       # strength of unbreakable bonds
-            lines.append(f"| {label} | none: bonds unbreakable (peak stress {summary['peak_stress_MPa']:.4g} MPa at "
-                         "the end of loading) | - | - | - |")
-            continue
-        ref = summary["reference"].get(key)
-        ref_txt = f"{ref['value']:g} ({ref['source']})" if ref else "-"
-        err_txt = f"{100 * ref['error']:+.1f} %" if ref else "-"
-        reason = why(key, ref["error"], info["mean_diameter_nm"]) if ref else ""
-        lines.append(f"| {label} | {fmt.format(summary[key])} | {ref_txt} | {err_txt} | {reason or '-'} |")
+    lines += ["## Results", "", *result.results_table(info["mean_diameter_nm"])]
     lines += ["", f"Elastic window: strain {fit.window[0]:.4f} - {fit.window[1]:.4f}, R^2 = {fit.r2:.5f} "
               f"({fit.points} points). Bond stiffness error from {spec['bonds']['length_bins']} length bins: max "
               f"{100 * summary['bond_stiffness_error_max']:.2f} %."]

@@ -24,7 +24,8 @@ from opalflow.analysis import compression as mech
 from opalflow.analysis.elasticity import isotropic_average
 from opalflow.bpm.deck import bond_model, loaded_sample
 from opalflow.bpm.loading import LOADINGS
-from opalflow.bpm.report import network_inputs, provenance_group, reference_errors, sample_lines, structure_cost
+from opalflow.bpm.report import network_inputs, sample_lines, structure_cost
+from opalflow.bpm.result import CompressionResult
 from opalflow.bpm.scene import scene_of, solid_fraction
 from opalflow.bpm.spec import BpmWorkflow
 from opalflow.bpm.static import (VOIGT, LooseParticlesError, StaticResult, loose_message, loose_particles,
@@ -139,38 +140,35 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
         sigma = sigma_unit * e
         snapshots[e] = {"sigma_MPa": sigma,
                         "by_material": mech.stress_by_material(sigma, types, data.type_names)}
-    summary = {
-        "workflow": spec.name, "method": "static",
-        "youngs_modulus_GPa": E_GPa, "youngs_modulus_specimen_GPa": E_GPa,
-        "n_particles": s.n_particles, "n_bonds": s.n_bonds, "solid_fraction": info["solid_fraction"],
-        "solver": res.solver, "iterations": res.iterations, "relative_residual": res.residual,
-        "setup_s": res.setup_seconds, "solve_s": res.seconds - res.setup_seconds,
-        "static_s": res.seconds, "peak_memory_MiB": res.peak_memory_MiB,
+    result = CompressionResult(
+        workflow=spec.name, method="static", loading=c.loading,
+        youngs_modulus_GPa=E_GPa, youngs_modulus_specimen_GPa=E_GPa,
+        n_particles=s.n_particles, n_bonds=s.n_bonds, solid_fraction=info["solid_fraction"],
+        solver=res.solver, iterations=res.iterations, relative_residual=res.residual,
+        setup_s=res.setup_seconds, solve_s=res.seconds - res.setup_seconds,
+        static_s=res.seconds, peak_memory_MiB=res.peak_memory_MiB,
         # where the time went: the run's steps (set-up: assembly and AMG or factor; analysis: particle stresses and
         # bond strains; files: results.h5 and the plots), the whole in wall_s
-        "timings_s": {**info["timings_s"], "setup": res.setup_seconds, "solve": res.seconds - res.setup_seconds,
-                      "analysis": time.perf_counter() - t},
-        "build_s": build_s, "complete": True, "loose_particles_left_out": res.loose,
-        # the bonds' strain energy by deformation mode (fractions; BondNetwork.energy_parts)
-        "energy_split": energy_split,
-        "stress_by_material": {f"{e:.4f}": v["by_material"] for e, v in snapshots.items()},
-        "bond_strain_per_strain": {"mean": float(strain_unit.mean()), "std": float(strain_unit.std()),
-                                   "min": float(strain_unit.min()), "max": float(strain_unit.max())},
-        **info.get("structure", {}),
-        "opalflow_version": __version__,
-        "headline": f"E = {E_GPa:.4g} GPa (static, {res.solver}: {res.iterations} iterations, residual "
-                    f"{res.residual:.1e}, {res.seconds:.1f} s)",
-    }
-    summary["reference"] = reference_errors(summary, info["references"])
+        timings_s={**info["timings_s"], "setup": res.setup_seconds, "solve": res.seconds - res.setup_seconds,
+                   "analysis": time.perf_counter() - t},
+        build_s=build_s, loose_particles_left_out=res.loose, energy_split=energy_split,
+        stress_by_material={f"{e:.4f}": v["by_material"] for e, v in snapshots.items()},
+        bond_strain_per_strain={"mean": float(strain_unit.mean()), "std": float(strain_unit.std()),
+                                "min": float(strain_unit.min()), "max": float(strain_unit.max())},
+        structure=info.get("structure", {}),
+        headline=f"E = {E_GPa:.4g} GPa (static, {res.solver}: {res.iterations} iterations, residual "
+                 f"{res.residual:.1e}, {res.seconds:.1f} s)").refer(info["references"])
+    summary = result.summary()
 
     def files(stage):
         t = time.perf_counter()
-        _write_h5(stage("results.h5"), data, res, sigma_unit, strain_unit, snapshots, summary, info)
+        _write_h5(stage("results.h5"), data, res, sigma_unit, strain_unit, snapshots, result, info)
         _plots(stage, data, res, snapshots, strain_unit, c.snapshot_strains)
-        summary["timings_s"]["files"] = time.perf_counter() - t
+        result.timings_s["files"] = time.perf_counter() - t
 
     sides = "periodic" if s.periodic[0] else "open"       # the structure's, whatever section set it
-    return finish(out, summary, lambda: _report(spec, info, summary, res, sides, sample), files=files, started=t0)
+    return finish(out, summary, lambda: _report(spec, info, summary, result, res, sides, sample), files=files,
+                  started=t0)
 
 
 def _record(spec: BpmWorkflow, info: dict, out: Path) -> RunRecord:
@@ -179,10 +177,9 @@ def _record(spec: BpmWorkflow, info: dict, out: Path) -> RunRecord:
                                      if k not in ("workflow", "spec", "references", "opalflow_version")}, folder=out)
 
 
-def _write_h5(path: Path, data, res: StaticResult, sigma_unit, strain_unit, snapshots, summary, info) -> None:
+def _write_h5(path: Path, data, res: StaticResult, sigma_unit, strain_unit, snapshots, result, info) -> None:
     def fill(h):
-        h.attrs["method"] = "static"
-        h.attrs["youngs_modulus_GPa"] = summary["youngs_modulus_GPa"]
+        result.h5_attrs(h, info)
         g = h.create_group("static")
         g.attrs["strain"] = res.strain
         put(g, "position_nm", data.positions, "nm", ["x", "y", "z"])
@@ -197,7 +194,6 @@ def _write_h5(path: Path, data, res: StaticResult, sigma_unit, strain_unit, snap
             sg = h.create_group(f"snapshots/{e:.4f}")
             sg.attrs["strain"] = e
             put(sg, "sigma_MPa", snap["sigma_MPa"], "MPa", mech.STRESS_COLUMNS)
-        provenance_group(h, info)
     path.write_bytes(h5_bytes(fill))
 
 
@@ -217,7 +213,7 @@ def _plots(stage, data, res: StaticResult, snapshots, strain_unit, strains) -> N
             f"strain {100 * e:.2f} %": mech.histogram_fraction(strain_unit * e, edges) for e in strains})
 
 
-def _report(spec: BpmWorkflow, info: dict, summary: dict, res: StaticResult, sides: str, sample) -> str:
+def _report(spec: BpmWorkflow, info: dict, summary: dict, result, res: StaticResult, sides: str, sample) -> str:
     loading = LOADINGS[spec.compression.loading]
     lines = [f"# {spec.name}: static {loading.title}", "",
              f"{info['n_particles']} particles, {info['n_bonds']} bonds; the bond network linearised from LAMMPS's "
@@ -225,10 +221,7 @@ def _report(spec: BpmWorkflow, info: dict, summary: dict, res: StaticResult, sid
              f"strain {res.strain:g} x H (H = {info['height_nm']:.1f} nm); sides {sides}. Contacts carry no load at "
              "the reference state and bonds do not break: no strength.", "", *sample_lines(info),
              *network_inputs(info, sample), "## Results", "",
-             "| quantity | value | reference | error |", "|---|---|---|---|"]
-    ref = summary["reference"].get("youngs_modulus_specimen_GPa") or summary["reference"].get("youngs_modulus_GPa")
-    lines.append(f"| Young's modulus (GPa) | {summary['youngs_modulus_GPa']:.4g} | "
-                 + (f"{ref['value']:g} ({ref['source']}) | {100 * ref['error']:+.1f} % |" if ref else "- | - |"))
+             *result.results_table(float(sample.structure.diameters.mean()))]
     if summary.get("energy_split"):
         lines += ["", "Strain energy of the bonds by mode: " + ", ".join(
             f"{k} {100 * v:.1f} %" for k, v in summary["energy_split"].items()) + " (BondNetwork.energy_parts)."]
@@ -262,20 +255,19 @@ def run_tensor(spec: BpmWorkflow, s, out: Path, t0: float, say=print) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     write_data(out / "data.lmp", data, title=f"opalflow {__version__} {spec.name} (static, periodic)")
     _record(spec, info, out).begin(out, launcher="in-process (static solve)")
-    summary = {
-        "workflow": spec.name, "method": "static", "loading": "periodic",
-        "stiffness_tensor_GPa": C.tolist(), "voigt_order": "xx yy zz yz xz xy",
-        "youngs_modulus_GPa": float(E[2]), "youngs_moduli_GPa": {"x": float(E[0]), "y": float(E[1]), "z": float(E[2])},
-        "poisson_ratio_zx": float(-S[0, 2] / S[2, 2]), "bulk_modulus_GPa": float(1.0 / S[:3, :3].sum()),
-        "youngs_modulus_isotropic_GPa": iso["hill"]["E"], "poisson_ratio_isotropic": iso["hill"]["nu"],
-        "anisotropy_index": iso["anisotropy_index"], "isotropic_average_GPa": iso,
-        "n_particles": s.n_particles, "n_bonds": s.n_bonds, "solver": res.solver, "iterations": res.iterations,
-        "relative_residual": res.residual, "static_s": res.seconds, "peak_memory_MiB": res.peak_memory_MiB,
-        "build_s": build_s, "complete": True, "loose_particles_left_out": res.loose, "opalflow_version": __version__,
-        "headline": f"E_z = {E[2]:.4g} GPa, C11 = {C[0, 0]:.4g}, C12 = {C[0, 1]:.3g}, C44 = {C[3, 3]:.4g} GPa "
-                    f"(static, periodic, {res.solver}: {sum(res.iterations)} iterations, {res.seconds:.1f} s)",
-    }
-    summary["reference"] = reference_errors(summary, info["references"])
+    result = CompressionResult(
+        workflow=spec.name, method="static", loading="periodic", stiffness_tensor_GPa=C.tolist(),
+        youngs_modulus_GPa=float(E[2]), youngs_moduli_GPa={"x": float(E[0]), "y": float(E[1]), "z": float(E[2])},
+        poisson_ratio_zx=float(-S[0, 2] / S[2, 2]), bulk_modulus_GPa=float(1.0 / S[:3, :3].sum()),
+        youngs_modulus_isotropic_GPa=iso["hill"]["E"], poisson_ratio_isotropic=iso["hill"]["nu"],
+        anisotropy_index=iso["anisotropy_index"], isotropic_average_GPa=iso,
+        n_particles=s.n_particles, n_bonds=s.n_bonds, solver=res.solver, iterations=res.iterations,
+        relative_residual=res.residual, static_s=res.seconds, peak_memory_MiB=res.peak_memory_MiB,
+        build_s=build_s, loose_particles_left_out=res.loose,
+        headline=f"E_z = {E[2]:.4g} GPa, C11 = {C[0, 0]:.4g}, C12 = {C[0, 1]:.3g}, C44 = {C[3, 3]:.4g} GPa "
+                 f"(static, periodic, {res.solver}: {sum(res.iterations)} iterations, {res.seconds:.1f} s)",
+    ).refer(info["references"])
+    summary = result.summary()
     names = [f"{'xyz'[a]}{'xyz'[b]}" for a, b in VOIGT]
     lines = [f"# {spec.name}: static stiffness tensor", "",
              f"{s.n_particles} particles, {s.n_bonds} bonds, periodic in x, y and z; six unit macroscopic strains "
@@ -294,7 +286,11 @@ def run_tensor(spec: BpmWorkflow, s, out: Path, t0: float, say=print) -> dict:
         lines.append(f"Reference {k}: {r['value']:.6g} ({r['source']}); error {100 * r['error']:+.4f} %.")
     lines += ["", f"Solver `{res.solver}`: iterations per loading {res.iterations}, worst relative residual "
               f"{res.residual:.1e}; {res.seconds:.1f} s, peak memory {res.peak_memory_MiB:.0f} MiB."]
-    voigt = ["xx", "yy", "zz", "yz", "xz", "xy"]
-    tensor = h5_bytes(lambda h: put(h, "stiffness_tensor_GPa", C, "GPa", voigt, rows=voigt), method="static")
+    voigt = result.voigt_order.split()
+
+    def fill(h):
+        result.h5_attrs(h, info)
+        put(h, "stiffness_tensor_GPa", C, "GPa", voigt, rows=voigt)
+    tensor = h5_bytes(fill)
     return finish(out, summary, "\n".join(lines), files=lambda stage: stage("results.h5").write_bytes(tensor),
                   started=t0)
