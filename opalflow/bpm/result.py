@@ -153,6 +153,6 @@ class CompressionResult:
             solved = self.method != DYNAMIC and name.startswith("youngs_modulus")       # no Hertz settling
             reason = why("youngs_modulus_specimen_GPa" if solved else name, ref["error"], diameter_nm) if ref else ""
             lines.append(f"| {label} | {f.metadata['fmt'].format(value)} | "
-                         + (f"{ref['value']:g} ({ref['source']}) | {100 * ref["error"]:+.2f} % | {reason or "-"} |"
+                         + (f"{ref['value']:g} ({ref['source']}) | {100 * ref['error']:+.2f} % | {reason or '-'} |"
                             if ref else "- | - | - |"))
         return lines
