@@ -65,6 +65,8 @@ class Kind:
         pipeline builds the structure with; "" for kinds that are not bonded-particle scenes.
     cost : ``"module:function"`` called as ``cost(spec)`` -> {method, n_particles, n_bonds, steps, ...}: what
         ``python -m opalflow plan`` prices a run by (:mod:`opalflow.runs.plan`); "" if it has none.
+    jobs : ``"module:function"`` called as ``jobs(spec)`` -> the :class:`opalflow.runs.jobs.Job` list a kind that
+        runs many jobs would run (``python -m opalflow plan`` prices each); "" for a kind that is one run.
     options : the names in :data:`OPTIONS` it takes.
     resumable : ``"module:function"`` called as ``resumable(folder)`` -> bool: whether ``--resume`` has something
         to go on from in the folder (a restart file); "" where a written run record is enough.
@@ -80,6 +82,7 @@ class Kind:
     check: str = ""
     scene: str = ""
     cost: str = ""
+    jobs: str = ""
     options: tuple[str, ...] = ()
     resumable: str = ""
     refusal: str = ""
@@ -166,7 +169,8 @@ BUILTIN = {k.name: k for k in (
     Kind("stability_matrix", "opalflow.bpm.spec:StabilityMatrixWorkflow", "opalflow.bpm.matrix:run_matrix",
          refusal="each row is a short in-process run; matrix.steps sets its length",
          summary="the stability check with bisection over corner cases of bonded-particle scenes"),
-    Kind("study", "opalflow.studies.spec:StudyWorkflow", "opalflow.studies.run:run", options=("executor",),
+    Kind("study", "opalflow.studies.spec:StudyWorkflow", "opalflow.studies.run:run", jobs="opalflow.studies.run:jobs",
+         options=("executor",),
          refusal="a study sets study.np and [executor] (where its jobs run); rerunning it resumes it (finished "
                  "jobs are kept)",
          summary="many compression jobs from one base workflow: the paper's studies"),

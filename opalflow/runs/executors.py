@@ -31,15 +31,6 @@ from opalflow.spec import InputError
 Collected = tuple[str, Outcome]          # (job folder, what it came to)
 
 
-class Planned(Exception):
-    """Raised by :func:`run_jobs` under the planning executor (``python -m opalflow plan``): the jobs a
-    study asked for, none of them run and nothing written."""
-
-    def __init__(self, jobs):
-        super().__init__(f"{len(jobs)} jobs planned")
-        self.jobs = jobs
-
-
 class LocalExecutor:
     """``workers`` spawned processes on this machine (0: cores / ranks per job)."""
 
@@ -244,8 +235,6 @@ def run_jobs(jobs, root: Path, ex: ExecutorSpec | None = None, *, np_: int = 1,
     from opalflow.runs.jobs import prepare
 
     ex = ex or ExecutorSpec()
-    if ex.type == "plan":
-        raise Planned(jobs)
     root = Path(root)
     done, todo = prepare(jobs, root)
     say(f"{len(jobs)} jobs: {len(done)} finished before, {len(todo)} to run ({ex.type} executor)")

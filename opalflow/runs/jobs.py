@@ -32,6 +32,7 @@ def spec_hash(spec: WorkflowSpec) -> str:
 class Job:
     label: str                  # [A-Za-z0-9_.-]+, shown in reports
     spec: WorkflowSpec
+    at: tuple = ()              # where it sits in its study: the values swept (porosity and seed, ...)
 
     @property
     def key(self) -> str:

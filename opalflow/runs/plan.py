@@ -1,7 +1,7 @@
 """``python -m opalflow plan WORKFLOW``: what a run or a study will cost before it is submitted.
 
-The jobs are the ones the workflow would run (a study is asked for its jobs by a planning executor that
-runs none, :class:`opalflow.runs.executors.Planned`); each is priced by its kind's ``cost`` facts
+The jobs are the ones the workflow would run (a study's from its type's ``jobs`` hook,
+:data:`opalflow.studies.spec.STUDY_TYPES`); each is priced by its kind's ``cost`` facts
 (particles, bonds, time steps: the structure is built, nothing is written) and by the cost laws measured on
 this kind of machine (``bench/bench_cost.py`` -> ``bench/results/cost_laws.json``):
 
@@ -19,18 +19,14 @@ finished run or study beside the predicted ones.
 """
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
-import tempfile
 from pathlib import Path
 
 from opalflow import registry
 from opalflow.resources import ROOT
-from opalflow.runs.executors import Planned
 from opalflow.runs.jobs import Job, job_record
 from opalflow.runs.record import read_summary
-from opalflow.runs.spec import ExecutorSpec
 from opalflow.spec import SpecError
 
 LAWS = ROOT / "bench" / "results" / "cost_laws.json"
@@ -60,17 +56,10 @@ def laws() -> dict:
 
 
 def jobs_of(spec) -> list[Job]:
-    """The jobs ``spec`` would run: a study's (asked for, none run), else the run itself."""
+    """The jobs ``spec`` would run: its kind's (:attr:`opalflow.registry.Kind.jobs`: a study's), else the run
+    itself."""
     kind = registry.get(spec.kind)
-    if "executor" not in kind.options:
-        return [Job(spec.name, spec)]
-    planning = dataclasses.replace(spec, executor=dataclasses.replace(ExecutorSpec(), type="plan"))
-    with tempfile.TemporaryDirectory() as tmp:
-        try:
-            registry.resolve(kind.run)(planning, Path(tmp), say=lambda msg: None)
-        except Planned as planned:
-            return planned.jobs
-    return []
+    return registry.resolve(kind.jobs)(spec) if kind.jobs else [Job(spec.name, spec)]
 
 
 def predict(facts: dict, law: dict, ranks: int = 1) -> dict:

@@ -47,21 +47,25 @@ def _mean_std(values: list[float]) -> tuple[float, float]:
     return (float(v.mean()), float(v.std(ddof=1)) if len(v) > 1 else 0.0) if len(v) else (float("nan"), 0.0)
 
 
-def aerogel_models(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
+def aerogel_models_jobs(spec: StudyWorkflow) -> list[Job]:
+    """Each bond model x contact law x seed, the static parallel-bond solve per seed and one half-speed twin
+    (the rate check)."""
     st = spec.study
     base = job_spec(spec, [])
-    jobs: dict[str, Job] = {}
-    for bond, contact in COMBINATIONS:
-        for s in st.seeds:
-            jobs[f"{bond}_{contact}_s{s}"] = Job(f"{bond}_{contact}_s{s}", job_spec(
+    jobs = [Job(f"{bond}_{contact}_s{s}", job_spec(
                 spec, [f'bonds.model="{bond}"', f'contacts.model="{contact}"', f"aggregate.seed={s}"]))
-    for s in st.seeds:
-        jobs[f"static_s{s}"] = Job(f"static_s{s}", job_spec(
-            spec, ['bonds.model="parallel"', "compression.method=static", f"aggregate.seed={s}"]))
+            for bond, contact in COMBINATIONS for s in st.seeds]
+    jobs += [Job(f"static_s{s}", job_spec(spec, ['bonds.model="parallel"', "compression.method=static",
+                                                 f"aggregate.seed={s}"])) for s in st.seeds]
     half = base.compression.plate_speed_m_s / 2
-    jobs["half_speed"] = Job("half_speed", job_spec(spec, [
+    return jobs + [Job("half_speed", job_spec(spec, [
         'bonds.model="parallel"', 'contacts.model="hertz"', f"aggregate.seed={st.seeds[0]}",
-        f"compression.plate_speed_m_s={label_number(half)}"]))
+        f"compression.plate_speed_m_s={label_number(half)}"]))]
+
+
+def aerogel_models(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
+    st = spec.study
+    jobs = {j.label: j for j in aerogel_models_jobs(spec)}
     res = sweep(spec, out, list(jobs.values()), say)
     rows, curves = [], {}
     for bond, contact in COMBINATIONS:
@@ -79,7 +83,7 @@ def aerogel_models(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]
     if first in res and "half_speed" in res:
         e1, e2 = res[first]["youngs_modulus_GPa"], res["half_speed"]["youngs_modulus_GPa"]
         s1, s2 = res[first]["strength_MPa"], res["half_speed"]["strength_MPa"]
-        rate = {"speed_m_s": base.compression.plate_speed_m_s, "E_change": e2 / e1 - 1,
+        rate = {"speed_m_s": job_spec(spec, []).compression.plate_speed_m_s, "E_change": e2 / e1 - 1,
                 "strength_change": s2 / s1 - 1, "quasi_static": abs(e2 / e1 - 1) < 0.02}
     _plot_models(curves, out / "models.png")
     ph = rows[0]
@@ -145,10 +149,12 @@ def _scatter(runs: list[dict]) -> float:
     return worst
 
 
-def aerogel_density(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
+def aerogel_density_jobs(spec: StudyWorkflow) -> list[Job]:
+    """Each loop model x solid fraction x seed: a static solve and (study.method = "dynamic") a LAMMPS run
+    (``at``: model, solid fraction, seed, the pair's name)."""
     st = spec.study
     many = len(st.loop_models) > 1
-    jobs, keys = [], []
+    jobs = []
     for model in st.loop_models:
         prefix = f"{model}_" if many else ""
         for f in st.solid_fractions:
@@ -157,10 +163,17 @@ def aerogel_density(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str
                 if many:
                     common.append(f'aggregate.loops="{model}"')
                 name = f"{prefix}phi{label_number(f)}_s{s}"
-                jobs.append(Job(f"{name}_static", job_spec(spec, [*common, "compression.method=static"])))
+                at = (model, f, s, name)
+                jobs.append(Job(f"{name}_static", job_spec(spec, [*common, "compression.method=static"]), at=at))
                 if st.method == "dynamic":            # study.method = "static": E only, no strength
-                    jobs.append(Job(name, job_spec(spec, common)))
-                keys.append((model, f, s, name))
+                    jobs.append(Job(name, job_spec(spec, common), at=at))
+    return jobs
+
+
+def aerogel_density(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
+    st = spec.study
+    jobs = aerogel_density_jobs(spec)
+    keys = list(dict.fromkeys(j.at for j in jobs))
     res = sweep(spec, out, jobs, say)
     series: dict[str, list[dict]] = {m: [] for m in st.loop_models}
     for model, f, s, name in keys:

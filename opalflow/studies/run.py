@@ -23,8 +23,8 @@ from opalflow.resources import DATA, resource
 from opalflow.spec import SpecError
 from opalflow.runs.record import finish
 from opalflow.store import new_figure, save_figure
-from opalflow.studies.aerogel import aerogel_density, aerogel_models
-from opalflow.studies.spec import StudyWorkflow
+from opalflow.registry import resolve
+from opalflow.studies.spec import STUDY_TYPES, StudyWorkflow
 from opalflow.studies.sweep import Job, failed_jobs, fmt_value, job_spec, label_number, sweep
 from opalflow.version import __version__
 
@@ -35,6 +35,35 @@ def paper() -> dict:
 
 
 # ----------------------------------------------------------------------------- calibration
+def _calibration_start(spec: StudyWorkflow) -> np.ndarray:
+    """Bond E_b and strength where the iteration starts (the study's, else the material's)."""
+    base = job_spec(spec, [])
+    silica = material(base.material, base.materials)
+    return np.array([spec.study.start_E_GPa or silica["bond_youngs_modulus_GPa"],
+                     spec.study.start_strength_MPa or silica["bond_strength_MPa"]])
+
+
+def _fd_points(spec: StudyWorkflow, x: np.ndarray) -> list[np.ndarray]:
+    """The finite-difference points of eq. 19 beside ``x`` (decoupled: one; full: one per parameter)."""
+    h = spec.study.fd_step
+    return [x * (1 + h)] if spec.study.jacobian == "decoupled" else [x * np.array([1 + h, 1.0]),
+                                                                     x * np.array([1.0, 1 + h])]
+
+
+def _calibration_job(spec: StudyWorkflow, p) -> Job:
+    name = job_spec(spec, []).material
+    return Job(f"Eb{label_number(p[0])}_sb{label_number(p[1])}",
+               job_spec(spec, [f"materials.{name}.bond_youngs_modulus_GPa={float(p[0])!r}",
+                               f"materials.{name}.bond_strength_MPa={float(p[1])!r}"]), at=tuple(map(float, p)))
+
+
+def calibration_jobs(spec: StudyWorkflow) -> list[Job]:
+    """The first iteration's jobs (the start and its finite-difference points); each later one is one job,
+    up to ``study.max_runs`` in all."""
+    x = _calibration_start(spec)
+    return [_calibration_job(spec, p) for p in ([x] + _fd_points(spec, x))[:spec.study.max_runs]]
+
+
 def calibration(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
     """Newton iteration on bond E_b and strength (eqs. 18-19) to E* and sigma*.
 
@@ -45,30 +74,18 @@ def calibration(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
     step; Broyden's update for the full Jacobian), so each costs one DEM run.
     """
     st = spec.study
-    base = job_spec(spec, [])
-    silica = material(base.material, base.materials)
-    x = np.array([st.start_E_GPa or silica["bond_youngs_modulus_GPa"],
-                  st.start_strength_MPa or silica["bond_strength_MPa"]])
+    x = _calibration_start(spec)
     target = np.array([st.target_E_GPa, st.target_strength_MPa])
     history, runs, jac, prev = [], 0, None, None
-
-    def job(p) -> Job:
-        return Job(f"Eb{label_number(p[0])}_sb{label_number(p[1])}",
-                   job_spec(spec, [f"materials.{base.material}.bond_youngs_modulus_GPa={float(p[0])!r}",
-                                   f"materials.{base.material}.bond_strength_MPa={float(p[1])!r}"]))
 
     def result(summary) -> np.ndarray:
         return np.array([summary["youngs_modulus_GPa"], summary["strength_MPa"]])
 
     converged = False
     while runs < st.max_runs:
-        points = [x.copy()]
-        if jac is None:
-            h = st.fd_step
-            points += ([x * (1 + h)] if st.jacobian == "decoupled"
-                       else [x * np.array([1 + h, 1.0]), x * np.array([1.0, 1 + h])])
+        points = [x.copy()] + (_fd_points(spec, x) if jac is None else [])
         points = points[:st.max_runs - runs]
-        jobs = [job(p) for p in points]
+        jobs = [_calibration_job(spec, p) for p in points]
         summaries = sweep(spec, out, jobs, say)
         if len(summaries) < len(jobs):
             bad = {k: v["error"] for k, v in failed_jobs(out, 0).items() if k in {j.label for j in jobs}}
@@ -135,11 +152,16 @@ def calibration(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
 
 
 # ----------------------------------------------------------------------------- K_E
+def bulk_jobs(spec: StudyWorkflow) -> list[Job]:
+    """A pore-free sample at each diameter."""
+    return [Job(f"bulk_d{label_number(d)}", job_spec(spec, ['pores.arrangement="none"', f"packing.diameter_nm={d!r}"]),
+                at=(d,)) for d in spec.study.diameters_nm]
+
+
 def bulk(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
     """K_E = E_macro / E_b (eq. 20) from pore-free samples at each particle diameter."""
     st = spec.study
-    jobs = [Job(f"bulk_d{label_number(d)}", job_spec(spec, ['pores.arrangement="none"', f"packing.diameter_nm={d!r}"]))
-            for d in st.diameters_nm]
+    jobs = bulk_jobs(spec)
     res = sweep(spec, out, jobs, say)
     ref = paper()["bulk"]
     rows, table = [], {}
@@ -185,16 +207,15 @@ def bulk(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
 
 
 # ----------------------------------------------------------------------------- coating
-def coating(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
-    """Coatings of each thickness at E_exp - std, E_exp, E_exp + std (E_b = E_exp / K_E, K_E = 3.35)."""
-    st = spec.study
+def coating_jobs(spec: StudyWorkflow) -> list[Job]:
+    """The uncoated sample (thickness 0) and each coating at E_exp - std, E_exp, E_exp + std (``at``: thickness,
+    case, E_exp)."""
     ref = paper()
     k_e = ref["bulk"]["K_E"]
-    jobs, cases = [], []
-    for t in st.thicknesses_nm:
+    jobs = []
+    for t in spec.study.thicknesses_nm:
         if t == 0:
-            jobs.append(Job("coat0", job_spec(spec, ["coating.thickness_nm=0.0"])))
-            cases.append((t, "uncoated", None))
+            jobs.append(Job("coat0", job_spec(spec, ["coating.thickness_nm=0.0"]), at=(t, "uncoated", None)))
             continue
         key = label_number(t)
         if key not in ref["coating"]["E_exp_GPa"]:
@@ -203,11 +224,21 @@ def coating(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
         mean, std = ref["coating"]["E_exp_GPa"][key]
         for case, e_exp in (("low", mean - std), ("mean", mean), ("high", mean + std)):
             jobs.append(Job(f"coat{key}_{case}", job_spec(spec, [
-                f"coating.thickness_nm={float(t)!r}", f"materials.titania.bond_youngs_modulus_GPa={e_exp / k_e!r}"])))
-            cases.append((t, case, e_exp))
+                f"coating.thickness_nm={float(t)!r}", f"materials.titania.bond_youngs_modulus_GPa={e_exp / k_e!r}"]),
+                at=(t, case, e_exp)))
+    return jobs
+
+
+def coating(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
+    """Coatings of each thickness at E_exp - std, E_exp, E_exp + std (E_b = E_exp / K_E, K_E = 3.35)."""
+    st = spec.study
+    ref = paper()
+    k_e = ref["bulk"]["K_E"]
+    jobs = coating_jobs(spec)
     res = sweep(spec, out, jobs, say)
     table = []
-    for (t, case, e_exp), job in zip(cases, jobs):
+    for job in jobs:
+        t, case, e_exp = job.at
         if job.label not in res:
             continue
         s = res[job.label]
@@ -268,18 +299,21 @@ def _plot_coating(table, path: Path) -> None:
 
 
 # ----------------------------------------------------------------------------- porosity
+def porosity_jobs(spec: StudyWorkflow) -> list[Job]:
+    """Random pores at each porosity x seed (``at``: porosity, seed)."""
+    return [Job(f"p{label_number(p)}_s{s}", job_spec(spec, ['pores.arrangement="random"', f"pores.porosity={p!r}",
+                                                          f"pores.seed={s}", f"packing.seed={s}"]), at=(p, s))
+            for p in spec.study.porosities for s in spec.study.seeds]
+
+
 def porosity(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
     """Random pores at each porosity x seed -> fits of eqs. 22, 23, 26 with 95 % intervals."""
     st = spec.study
-    jobs, keys = [], []
-    for p in st.porosities:
-        for s in st.seeds:
-            jobs.append(Job(f"p{label_number(p)}_s{s}", job_spec(spec, ['pores.arrangement="random"', f"pores.porosity={p!r}",
-                                                              f"pores.seed={s}", f"packing.seed={s}"])))
-            keys.append((p, s))
+    jobs = porosity_jobs(spec)
     res = sweep(spec, out, jobs, say)
     runs = []
-    for (p, s), job in zip(keys, jobs):
+    for job in jobs:
+        p, s = job.at
         if job.label not in res:
             continue
         r = res[job.label]
@@ -356,27 +390,34 @@ def _plot_porosity(runs, fits, path: Path) -> None:
 
 
 # ----------------------------------------------------------------------------- convergence
-def convergence(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
-    """Cross-section (cells) x seeds at the base diameter, and diameters x seeds at the base cell count."""
+def convergence_jobs(spec: StudyWorkflow) -> list[Job]:
+    """Cross-sections (cells) x seeds at the base diameter, diameters x seeds at the base cell count (``at``:
+    cells, diameter, seed)."""
     st = spec.study
     base = job_spec(spec, [])
     d0 = base.packing.diameter_nm
     c0 = [base.pores.cells_x, base.pores.cells_y]
     settings = [("cells", tuple(c), d0) for c in st.cells] + [("diameter", tuple(c0), d) for d in st.diameters_nm]
-    jobs, keys = [], []
-    seen = set()
+    jobs = {}
     for axis, cells, d in settings:
         for s in st.seeds:
             label = f"c{cells[0]}x{cells[1]}_d{label_number(d)}_s{s}"
-            if label in seen:
-                continue
-            seen.add(label)
-            jobs.append(Job(label, job_spec(spec, [f"pores.cells_x={cells[0]}", f"pores.cells_y={cells[1]}",
-                                                  f"packing.diameter_nm={d!r}", f"packing.seed={s}"])))
-            keys.append((cells, d, s))
+            jobs.setdefault(label, Job(label, job_spec(spec, [
+                f"pores.cells_x={cells[0]}", f"pores.cells_y={cells[1]}", f"packing.diameter_nm={d!r}",
+                f"packing.seed={s}"]), at=(cells, d, s)))
+    return list(jobs.values())
+
+
+def convergence(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
+    """Cross-section (cells) x seeds at the base diameter, and diameters x seeds at the base cell count."""
+    st = spec.study
+    base = job_spec(spec, [])
+    d0, c0 = base.packing.diameter_nm, [base.pores.cells_x, base.pores.cells_y]
+    jobs = convergence_jobs(spec)
     res = sweep(spec, out, jobs, say)
     by_setting: dict[tuple, list] = {}
-    for (cells, d, s), job in zip(keys, jobs):
+    for job in jobs:
+        cells, d, s = job.at
         if job.label not in res:
             continue
         r = res[job.label]
@@ -465,10 +506,15 @@ def _plot_convergence(rows, path: Path) -> None:
 
 
 # ----------------------------------------------------------------------------- side boundaries
+def sides_jobs(spec: StudyWorkflow) -> list[Job]:
+    """The base with periodic and with open sides."""
+    return [Job(f"sides_{how}", job_spec(spec, [f'boundary.sides="{how}"']), at=(how,)) for how in ("periodic", "open")]
+
+
 def sides(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
     """The base with periodic and with open side boundaries (Dosta et al. section 3.1.3, fracture patterns):
     E, strength and broken bonds of each, and where the bonds break (sides.png)."""
-    jobs = [Job(f"sides_{how}", job_spec(spec, [f'boundary.sides="{how}"'])) for how in ("periodic", "open")]
+    jobs = sides_jobs(spec)
     res = sweep(spec, out, jobs, say)
     rows, table, runs = [], {}, {}
     for job in jobs:
@@ -510,8 +556,9 @@ def st_ok(table: dict) -> bool:
     return all(v.get("strength_MPa") and v.get("youngs_modulus_GPa") for v in table.values())
 
 
-RUNNERS = {"calibration": calibration, "bulk": bulk, "coating": coating, "porosity": porosity,
-           "convergence": convergence, "sides": sides, "aerogel_models": aerogel_models, "aerogel_density": aerogel_density}
+def jobs(spec: StudyWorkflow) -> list[Job]:
+    """The jobs the study runs (its type's ``jobs`` hook: :data:`opalflow.studies.spec.STUDY_TYPES`)."""
+    return resolve(STUDY_TYPES[spec.study.type].jobs)(spec)
 
 
 def run(spec: StudyWorkflow, out: Path, say=print, executor=None) -> dict:
@@ -522,7 +569,7 @@ def run(spec: StudyWorkflow, out: Path, say=print, executor=None) -> dict:
     t0, started = time.perf_counter(), time.time()
     out.mkdir(parents=True, exist_ok=True)
     try:
-        summary, body = RUNNERS[spec.study.type](spec, out, say)
+        summary, body = resolve(STUDY_TYPES[spec.study.type].run)(spec, out, say)
     except (ValueError, IndexError, KeyError, ZeroDivisionError, np.linalg.LinAlgError) as exc:
         if not failed_jobs(out, started):
             raise

@@ -1,14 +1,52 @@
 """Spec of the studies (kind = "study"): the ``[study]`` section."""
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import MISSING, dataclass, field, fields
 
 from opalflow.aerogel.spec import LOOP_MODELS
 from opalflow.bpm.spec import METHODS
 from opalflow.runs.spec import ExecutorSpec
 from opalflow.spec import WorkflowSpec, check, check_name
 
-STUDIES = ("calibration", "bulk", "coating", "porosity", "convergence", "sides", "aerogel_models", "aerogel_density")
+
+@dataclass(frozen=True)
+class StudyType:
+    """A study type: its runner, its jobs and the ``[study]`` fields it reads beside :data:`COMMON`.
+
+    ``run``: ``"module:function"`` called as ``run(spec, out, say)`` -> (summary, report lines); ``jobs``:
+    ``"module:function"`` called as ``jobs(spec)`` -> the :class:`opalflow.runs.jobs.Job` list it runs (what
+    ``python -m opalflow plan`` prices; an iteration's first round where later ones depend on the results).
+    """
+
+    name: str
+    run: str
+    jobs: str
+    fields: tuple[str, ...] = ()
+    summary: str = ""
+
+
+#: the fields every study reads
+COMMON = ("type", "base", "paper_base", "paper_scale", "set", "np", "method")
+_RUN, _AEROGEL = "opalflow.studies.run", "opalflow.studies.aerogel"
+STUDY_TYPES = {t.name: t for t in (
+    StudyType("calibration", f"{_RUN}:calibration", f"{_RUN}:calibration_jobs",
+              ("target_E_GPa", "target_strength_MPa", "tolerance", "max_runs", "jacobian", "fd_step", "start_E_GPa",
+               "start_strength_MPa"), "Newton iteration on bond E_b and strength to E* and sigma* (eqs. 18-19)"),
+    StudyType("bulk", f"{_RUN}:bulk", f"{_RUN}:bulk_jobs", ("diameters_nm",),
+              "K_E = E_macro / E_b (eq. 20) of pore-free samples at each diameter"),
+    StudyType("coating", f"{_RUN}:coating", f"{_RUN}:coating_jobs", ("thicknesses_nm",),
+              "titania coatings at E_exp -+ std (Fig. 9)"),
+    StudyType("porosity", f"{_RUN}:porosity", f"{_RUN}:porosity_jobs", ("porosities", "seeds"),
+              "random pores: fits of eqs. 22, 23, 26 with 95 % intervals"),
+    StudyType("convergence", f"{_RUN}:convergence", f"{_RUN}:convergence_jobs", ("cells", "diameters_nm", "seeds"),
+              "cross-section and diameter x seeds: the resolution's effect"),
+    StudyType("sides", f"{_RUN}:sides", f"{_RUN}:sides_jobs", (), "periodic against open sides (section 3.1.3)"),
+    StudyType("aerogel_models", f"{_AEROGEL}:aerogel_models", f"{_AEROGEL}:aerogel_models_jobs", ("seeds",),
+              "bond model x contact law of the aerogel, with a static solve and a rate check"),
+    StudyType("aerogel_density", f"{_AEROGEL}:aerogel_density", f"{_AEROGEL}:aerogel_density_jobs",
+              ("solid_fractions", "loop_models", "seeds"), "E and strength against density: the scaling exponents"),
+)}
+STUDIES = tuple(STUDY_TYPES)
 
 
 @dataclass
@@ -55,6 +93,12 @@ class StudyWorkflow(WorkflowSpec):
         super().validate()
         st = self.study
         check(st.type in STUDIES, "study.type", st.type, f"must be one of {', '.join(STUDIES)}")
+        reads = COMMON + STUDY_TYPES[st.type].fields
+        for f in fields(StudySpec):
+            default = f.default if f.default is not MISSING else f.default_factory()
+            check(f.name in reads or getattr(st, f.name) == default, f"study.{f.name}", getattr(st, f.name),
+                  f"is not read by a '{st.type}' study (it reads {', '.join(STUDY_TYPES[st.type].fields) or 'none'} "
+                  f"besides {', '.join(COMMON[1:])})")
         for where, name in (("study.base", st.base), ("study.paper_base", st.paper_base)):
             check_name(where, name)
         check(st.np >= 1, "study.np", st.np, "must be >= 1 (MPI processes per job)")
