@@ -263,7 +263,7 @@ def analyze(out: Path, started: float | None = None, lammps_s: float | None = No
         timestep_s=info["timestep_s"], steps=int(curve["step"][-1]),
         # the last averaged row lies within one output interval of the last step of a whole run
         complete=bool(curve["step"][-1] > info["steps"] - info["output_every_steps"]),
-        steps_planned=info["steps"], lammps_s=lammps_s,
+        steps_planned=info["steps"], lammps_s=lammps_s, wall_s=wall_s,
         broken_bonds=int(broken[-1]), n_particles=info["n_particles"], n_bonds=n_bonds0,
         stress_by_material={f"{v['strain']:.4f}": v["by_material"] for v in snapshots.values()},
         solid_fraction=info["solid_fraction"], bond_stiffness_error_max=info["bond_stiffness_error_max"],
