@@ -195,3 +195,32 @@ def test_every_dump_and_data_file_of_each_method_opens_in_ovito_and_ase(api_run,
             assert len(atoms) == built.n_particles and np.allclose(atoms.cell.lengths(), built.box_lengths), dump
             opened.append(f"{method}:{dump.name}")
     assert {"quasistatic:fracture.peak.dump", "resumed quasistatic:fracture.end.dump"} <= set(opened)
+
+
+def test_one_result_class_gives_each_method_its_keys(api_run, tmp_path):
+    """summary.json of a dynamic, a static and a quasi-static run: the keys :class:`CompressionResult` lists for
+    the method (no other method's), the same summary in results.h5's attributes, the Results table its rows."""
+    import dataclasses
+
+    import h5py
+
+    from opalflow.bpm.result import CompressionResult
+
+    fields = {f.name: f.metadata for f in dataclasses.fields(CompressionResult) if "methods" in f.metadata}
+    folders = {"dynamic": api_run[0]}
+    for method in ("static", "quasistatic"):
+        opalflow.run("lattice_sc", tmp_path / method, quiet=True, set={
+            **SMALL, "compression.method": method, "bonds.breakable": method == "quasistatic"})
+        folders[method] = tmp_path / method
+    for method, folder in folders.items():
+        summary = json.loads((folder / "summary.json").read_text())
+        mine = {k for k, m in fields.items() if method in m["methods"]}
+        assert {k for k in mine if not fields[k]["optional"]} <= set(summary), method
+        assert not set(summary) & (set(fields) - mine), method          # no other method's key
+        assert summary["method"] == method and summary["loading"] == "plate"
+        with h5py.File(folder / "results.h5", "r") as h:
+            assert h.attrs["method"] == method and h.attrs["youngs_modulus_GPa"] == summary["youngs_modulus_GPa"]
+            assert set(json.loads(h.attrs["summary"])) <= set(summary) and "provenance" in h
+        report = (folder / "report.md").read_text()
+        assert f"| Young's modulus{', plate strain' if method == 'dynamic' else ''} (GPa) | " in report, method
+        assert ("| compressive strength (MPa) | " in report) == (method != "static"), method

@@ -144,6 +144,32 @@ def test_bad_study_field_is_one_line(tmp_path, capsys):
                    "study.porosities", out)
 
 
+def test_every_study_type_gives_its_jobs_and_reads_only_its_fields(tmp_path, capsys):
+    """Each study type's jobs hook (what plan prices) on the shipped study workflows: jobs with distinct labels,
+    placed in their sweep (``at``); a [study] field the type does not read is refused in one line."""
+    from conftest import assert_refused
+
+    from opalflow.runs.plan import jobs_of
+    from opalflow.studies.spec import STUDY_TYPES
+
+    seen = set()
+    for path in sorted(WORKFLOWS.glob("*.toml")):
+        spec = load_spec(path)
+        if spec.kind == "study":
+            got = jobs_of(spec)
+            assert got and len({j.label for j in got}) == len(got), path.name
+            seen.add(spec.study.type)
+    assert seen == set(STUDY_TYPES)
+    porosity = load_spec(WORKFLOWS / "porosity.toml")
+    st = porosity.study
+    assert [j.at for j in jobs_of(porosity)] == [(p, s) for p in st.porosities for s in st.seeds]
+    calibration = jobs_of(load_spec(WORKFLOWS / "calibrate_silica.toml", ['study.jacobian="full"']))
+    assert len(calibration) == 3                      # the start and one finite-difference point per parameter
+    out = tmp_path / "run"
+    assert_refused(capsys, ["run", "porosity", "--out", str(out)], ["study.target_E_GPa=2.0"], "study.target_E_GPa",
+                   out)
+
+
 def test_summary_json_of_a_study_is_written_last(tmp_path):
     """Jobs are marked by their record (run.json, state pending) before they run; a folder without
     summary.json is not finished, nor one whose record is another spec's."""

@@ -178,7 +178,7 @@ def compression_report(info: dict, summary: dict, result, fit, fracture: bool) -
               "sigma_yz in MPa, broken_bonds) that OVITO opens as they are; `snapshots/bonds.STEP.txt`: bond lengths.",
               ""]
     sessions = summary.get("sessions", [])
-    if summary["wall_s"] is None:
+    if summary.get("wall_s") is None:
         cost = "run outside opalflow (analyze only)"
     else:
         done = summary["steps"] - (sessions[-1]["first_step"] if sessions else 0)

@@ -55,7 +55,7 @@ class CompressionResult:
     steps: int = key(DYNAMIC)
     steps_planned: int = key(DYNAMIC)
     lammps_s: float | None = key(DYNAMIC)
-    wall_s: float | None = key(DYNAMIC)           # None: run outside opalflow (analyze only); finish() sets it
+    wall_s: float | None = key(*LOADED, TENSOR, optional=True)   # finish() sets it (None: analyze only)
     bond_stiffness_error_max: float = key(DYNAMIC)
     timestep_estimate_s: dict = key(DYNAMIC)
     rate_check: dict | None = key(DYNAMIC, optional=True)
