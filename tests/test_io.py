@@ -206,7 +206,7 @@ def test_one_result_class_gives_each_method_its_keys(api_run, tmp_path):
 
     from opalflow.bpm.result import CompressionResult
 
-    fields = {f.name: f.metadata for f in dataclasses.fields(CompressionResult) if "methods" in f.metadata}
+    fields = {f.name: f.metadata for f in dataclasses.fields(CompressionResult) if "cases" in f.metadata}
     folders = {"dynamic": api_run[0]}
     for method in ("static", "quasistatic"):
         opalflow.run("lattice_sc", tmp_path / method, quiet=True, set={
@@ -214,7 +214,7 @@ def test_one_result_class_gives_each_method_its_keys(api_run, tmp_path):
         folders[method] = tmp_path / method
     for method, folder in folders.items():
         summary = json.loads((folder / "summary.json").read_text())
-        mine = {k for k, m in fields.items() if method in m["methods"]}
+        mine = {k for k, m in fields.items() if method in m["cases"]}
         assert {k for k in mine if not fields[k]["optional"]} <= set(summary), method
         assert not set(summary) & (set(fields) - mine), method          # no other method's key
         assert summary["method"] == method and summary["loading"] == "plate"

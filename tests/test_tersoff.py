@@ -182,6 +182,7 @@ def test_properties_workflow_with_set_potential(tmp_path, capsys):
     for key in ("a0_A", "Ec_eV", "B_GPa", "Cprime_GPa", "C11_GPa", "C12_GPa", "C44_GPa", "C44_0_GPa",
                 "loss", "reference_loss", "fit_s", "stability"):
         assert key in s
+    assert s["mode"] == "properties" and "parameters" not in s        # TersoffResult: no key of the fit's
     # a stronger repulsion A: less binding and a longer bond than Table 2's set
     assert s["Ec_eV"] > REF["calculated"]["Ec_eV"] + 0.01 and s["a0_A"] > 5.44
     assert s["reference_loss"] == pytest.approx(0.031146, abs=2e-6)

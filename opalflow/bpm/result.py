@@ -1,11 +1,11 @@
 """The result of a bonded-particle run, every method's: one class renders summary.json, results.h5's attributes
 and report.md's Results table.
 
-A key is a field of :class:`CompressionResult`; its metadata says which methods give it (``methods``: the
-dynamic LAMMPS run, the static solve, the quasi-static fracture, the periodic stiffness tensor) and, where the
-report shows it, its label and format.  Adding a result key to every method is one field here and the line
-that computes it.  Fields with ``optional`` appear where the run has them (a rate check, the sessions of a run
-opalflow drove).  The scene's statistics (porosity, density, ...: ``scene``) are added as they are.
+A key is a field of :class:`CompressionResult` (:func:`opalflow.runs.result.key`); its cases are the methods
+that give it (the dynamic LAMMPS run, the static solve, the quasi-static fracture, the periodic stiffness
+tensor) and, where the report shows it, its label and format.  Adding a result key to every method is one field
+here and the line that computes it.  Optional fields appear where the run has them (a rate check, the sessions
+of a run opalflow drove).  The scene's statistics (porosity, density, ...) are added as they are.
 """
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ import json
 from dataclasses import dataclass, field
 
 from opalflow.bpm.report import provenance_group, reference_errors, why
+from opalflow.runs.result import Result, key
 from opalflow.version import __version__
 
 DYNAMIC, STATIC, QUASISTATIC, TENSOR = "dynamic", "static", "quasistatic", "tensor"
@@ -24,14 +25,8 @@ SOLVED = (STATIC, TENSOR)                         # one linear solve
 STRENGTH = {"plate": "compressive", "glued": "compressive", "tension": "tensile", "bending": "flexural"}
 
 
-def key(*methods: str, label: str = "", fmt: str = "{:.4g}", optional: bool = False, default=None):
-    """A result key: the methods that give it, its row in the report (``label``, ``fmt``; none without a label),
-    ``optional``: left out where the run has none (None)."""
-    return field(default=default, metadata={"methods": methods, "label": label, "fmt": fmt, "optional": optional})
-
-
 @dataclass
-class CompressionResult:
+class CompressionResult(Result):
     """What a bonded-particle run found (compression, tension or bending; the periodic tensor), by method."""
 
     workflow: str = key(*LOADED, TENSOR)
@@ -103,15 +98,9 @@ class CompressionResult:
         """The method, or ``tensor`` for the static solve of a sample periodic in x, y and z."""
         return TENSOR if self.loading == "periodic" else self.method
 
-    def keys(self) -> list[str]:
-        """The keys this run's method gives."""
-        return [f.name for f in dataclasses.fields(self) if self.case in f.metadata.get("methods", ())
-                and not (f.metadata["optional"] and getattr(self, f.name) is None)]
-
     def summary(self) -> dict:
-        """summary.json (before :func:`opalflow.runs.record.finish` adds the wall time and the state); the values
-        are this object's own (a dict filled later, such as ``timings_s``, is filled in both)."""
-        out = {**{k: getattr(self, k) for k in self.keys()}, **self.structure}
+        """summary.json: the method's keys, the scene's run keys over them and its other statistics beside."""
+        out = {**super().summary(), **self.structure}
         return {**out, **{k: v for k, v in self.statistics.items() if k not in out}}
 
     def refer(self, references: dict) -> CompressionResult:

@@ -1,7 +1,7 @@
 """The atomistic workflows: ``tersoff_properties``, ``tersoff_fit``, ``tersoff_stability``.
 
-Each writes into its run folder: ``summary.json`` (keys a0_A, Ec_eV, B_GPa, Cprime_GPa,
-C11_GPa, C12_GPa, C44_GPa, C44_0_GPa, loss, reference_loss, fit_s, stability, ...),
+Each writes into its run folder: ``summary.json`` (the keys of :class:`opalflow.tersoff.result.TersoffResult`:
+a0_A, Ec_eV, B_GPa, Cprime_GPa, C11_GPa, C12_GPa, C44_GPa, C44_0_GPa, loss, reference_loss, fit_s, stability, ...),
 ``report.md`` with every property's error against Table 1 of seed 003, the plots, and
 the LAMMPS logs.  The potential is parsed and rewritten into the folder, so no user path
 reaches a LAMMPS script.
@@ -21,6 +21,7 @@ from opalflow.tersoff.model import DiamondModel, neighbor_radius
 from opalflow.tersoff.parameters import (COLUMNS, REFERENCE_POTENTIAL, TersoffParameters, load_parameters,
                                          read_tersoff, write_tersoff)
 from opalflow.tersoff.properties import PROPERTY_KEYS as MODULI, evaluate
+from opalflow.tersoff.result import TersoffResult
 from opalflow.tersoff.spec import TersoffWorkflow
 from opalflow.version import __version__
 
@@ -130,18 +131,17 @@ def _stability_kwargs(spec: TersoffWorkflow) -> dict:
             "criteria": stab.Criteria(s.max_drift_eV, s.min_fourfold, s.max_rms_A)}
 
 
-def _finish(out: Path, spec: TersoffWorkflow, summary: dict, report: list[str], t0: float) -> dict:
-    summary["wall_s"] = time.perf_counter() - t0
-    summary["opalflow_version"] = __version__
-    summary["spec"] = spec.to_dict()
+def _finish(out: Path, spec: TersoffWorkflow, result: TersoffResult, report: list[str], t0: float) -> dict:
+    result.wall_s = time.perf_counter() - t0
+    result.spec = spec.to_dict()
     report.append("")
-    report.append(f"Wall time {summary['wall_s']:.1f} s on this machine. opalflow {__version__}.")
-    return finish(out, summary, "\n".join(report))
+    report.append(f"Wall time {result.wall_s:.1f} s on this machine. opalflow {__version__}.")
+    return finish(out, result.summary(), "\n".join(report))
 
 
-def _base_summary(values: dict, loss: float, reference_loss: float) -> dict:
-    return {**{k: values[k] for k in ("a0_A", *LABELS)}, "loss": loss, "reference_loss": reference_loss,
-            "fit_s": None, "stability": None}
+def _measured(values: dict) -> dict:
+    """The LAMMPS properties as :class:`TersoffResult` keywords."""
+    return {k: values[k] for k in ("a0_A", *LABELS)}
 
 
 def run_properties(spec: TersoffWorkflow, out: Path, say=print) -> dict:
@@ -155,14 +155,15 @@ def run_properties(spec: TersoffWorkflow, out: Path, say=print) -> dict:
     loss = fitting.Loss(**loss_settings(spec, params))
     rows = _scan_table(ev, exact)
     _plot_scan(rows, out / "strain_scan.png")
-    summary = _base_summary(values, loss(params), loss(read_tersoff(REFERENCE_POTENTIAL)))
-    summary.update({"strain": ev.strain, "spread_GPa": ev.spread, "model": exact,
-                    "lammps_minus_model": {k: values[k] - exact[k] for k in LABELS},
-                    "reference": _errors(values, ref), "strain_scan": rows, "lammps_s": ev.seconds,
-                    "headline": (f"a0 = {values['a0_A']:.5f} A, Ec = {values['Ec_eV']:.4f} eV, "
-                                 f"B = {values['B_GPa']:.2f}, C' = {values['Cprime_GPa']:.2f}, "
-                                 f"C11 = {values['C11_GPa']:.2f}, C12 = {values['C12_GPa']:.2f}, "
-                                 f"C44^0 = {values['C44_0_GPa']:.2f}, C44 = {values['C44_GPa']:.2f} GPa")})
+    result = TersoffResult(
+        mode="properties", **_measured(values), loss=loss(params), reference_loss=loss(read_tersoff(REFERENCE_POTENTIAL)),
+        strain=ev.strain, spread_GPa=ev.spread, model=exact,
+        lammps_minus_model={k: values[k] - exact[k] for k in LABELS},
+        reference=_errors(values, ref), strain_scan=rows, lammps_s=ev.seconds,
+        headline=(f"a0 = {values['a0_A']:.5f} A, Ec = {values['Ec_eV']:.4f} eV, "
+                  f"B = {values['B_GPa']:.2f}, C' = {values['Cprime_GPa']:.2f}, "
+                  f"C11 = {values['C11_GPa']:.2f}, C12 = {values['C12_GPa']:.2f}, "
+                  f"C44^0 = {values['C44_0_GPa']:.2f}, C44 = {values['C44_GPa']:.2f} GPa"))
     report = [f"# Tersoff properties: {spec.tersoff.potential}", "",
               f"LAMMPS `pair_style tersoff`, `units metal`, {spec.tersoff.cells}^3 conventional cells "
               f"({8 * spec.tersoff.cells ** 3} atoms); lattice constant by `fix box/relax iso 0` "
@@ -172,8 +173,8 @@ def run_properties(spec: TersoffWorkflow, out: Path, say=print) -> dict:
               *_property_rows(values, ref, exact), "",
               "Fit model = the exact (automatic-differentiation) second derivatives of the same energy at a0; "
               "the LAMMPS - model column is the finite-difference error.", "",
-              f"Loss eq. 13 of this set (fit model at a*, Table 1 targets): {summary['loss']:.5f}; "
-              f"Table 2's set: {summary['reference_loss']:.5f}.", "",
+              f"Loss eq. 13 of this set (fit model at a*, Table 1 targets): {result.loss:.5f}; "
+              f"Table 2's set: {result.reference_loss:.5f}.", "",
               "## Error against run time: strain size of the central difference", "",
               "| strain | max abs error (GPa) | " + " | ".join(LABELS[k][0] for k in MODULI) + " | time (s) |",
               "|---|---|" + "---|" * len(MODULI) + "---|"]
@@ -187,7 +188,7 @@ def run_properties(spec: TersoffWorkflow, out: Path, say=print) -> dict:
                + ", ".join(f"{LABELS[k][0]} {v:.2g}" for k, v in ev.spread.items()) + " GPa. "
                "Round-off (1e-16 x E / e^2) dominates below the plateau, the quartic term of E above it.",
                "", "![strain scan](strain_scan.png)"]
-    return _finish(out, spec, summary, report, t0)
+    return _finish(out, spec, result, report, t0)
 
 
 def run_stability(spec: TersoffWorkflow, out: Path, say=print) -> dict:
@@ -198,21 +199,20 @@ def run_stability(spec: TersoffWorkflow, out: Path, say=print) -> dict:
     say(f"stability of {spec.tersoff.potential}: {', '.join(s.boundaries)} at "
         f"{', '.join(f'{t:g}' for t in s.temperatures_K)} K, {s.time_ps:g} ps each")
     results = stab.check(params, out, temperatures_K=tuple(s.temperatures_K), say=say, **_stability_kwargs(spec))
-    first = s.temperatures_K[0]
-    summary = {"stability": _stability_summary(results, first)}
+    result = TersoffResult(mode="stability", stability=_stability_summary(results, s.temperatures_K[0]))
     verdicts = []
     for temp in s.temperatures_K:
         at = [r for r in results if r.temperature_K == temp]
         failed = [r.boundary for r in at if not r.passed]
         verdicts.append(f"{temp:g} K: " + ("all pass" if not failed else f"fails {', '.join(failed)}"))
-    summary["headline"] = f"stability of {spec.tersoff.potential}: " + "; ".join(verdicts)
+    result.headline = f"stability of {spec.tersoff.potential}: " + "; ".join(verdicts)
     report = [f"# Tersoff stability: {spec.tersoff.potential}", "",
               f"{s.cells}x{s.cells}x{s.cells} conventional cells ({8 * s.cells ** 3} atoms), {s.time_ps:g} ps of NVE "
               f"at {s.timestep_fs:g} fs after relaxing the surfaces; velocities for twice the set temperature. "
               f"Pass: drift <= {s.max_drift_eV:g} eV/atom, 4-fold interior >= {s.min_fourfold:g}, "
               f"interior RMS <= {s.max_rms_A:g} A, no atom lost (opalflow/tersoff/stability.py).", "",
-              *_stability_rows(results), "", summary["headline"] + "."]
-    return _finish(out, spec, summary, report, t0)
+              *_stability_rows(results), "", result.headline + "."]
+    return _finish(out, spec, result, report, t0)
 
 
 def run_fit(spec: TersoffWorkflow, out: Path, say=print) -> dict:
@@ -248,23 +248,23 @@ def run_fit(spec: TersoffWorkflow, out: Path, say=print) -> dict:
     at_target = loss.model.evaluate(best)
     chosen_checks = next((res for r, res in checks if r is chosen), [])
     _plot_history(results, reference_loss, out / "loss_history.png")
-    summary = _base_summary(values, chosen.loss, reference_loss)
-    summary.update({
-        "fit_s": fit_s, "parameters": best.as_dict(),
-        "at_bounds": [k for k in COLUMNS if "bound)" in _bound_note(k, getattr(best, k), settings)],
-        "stability": _stability_summary(chosen_checks, stab_t) if chosen_checks else None,
-        "candidates_checked": [{"start": r.start, "loss": r.loss, "stable": all(x.passed for x in res)}
-                               for r, res in checks],
-        "model_at_a0": exact, "model_at_target": at_target,
-        "lammps_minus_model": {k: values[k] - exact[k] for k in LABELS},
-        "reference": _errors(values, ref),
-        "starts": [{"start": r.start, "loss": r.loss, "iterations": r.iterations, "evaluations": r.evaluations,
-                    "seconds": r.seconds, "message": r.message, "history": r.history} for r in results],
-        "headline": (f"fit loss {chosen.loss:.5f} (Table 2: {reference_loss:.5f}), {t.starts} starts in "
-                     f"{fit_s:.1f} s; LAMMPS: Ec = {values['Ec_eV']:.3f} eV, B = {values['B_GPa']:.1f}, "
-                     f"C11 = {values['C11_GPa']:.1f}, C12 = {values['C12_GPa']:.1f}, "
-                     f"C44^0 = {values['C44_0_GPa']:.1f}, C44 = {values['C44_GPa']:.1f} GPa; "
-                     + ("stable" if summary_stable(chosen_checks) else "NOT stable") + f" at {stab_t:g} K")})
+    result = TersoffResult(
+        mode="fit", **_measured(values), loss=chosen.loss, reference_loss=reference_loss,
+        fit_s=fit_s, parameters=best.as_dict(),
+        at_bounds=[k for k in COLUMNS if "bound)" in _bound_note(k, getattr(best, k), settings)],
+        stability=_stability_summary(chosen_checks, stab_t) if chosen_checks else None,
+        candidates_checked=[{"start": r.start, "loss": r.loss, "stable": all(x.passed for x in res)}
+                            for r, res in checks],
+        model_at_a0=exact, model_at_target=at_target,
+        lammps_minus_model={k: values[k] - exact[k] for k in LABELS},
+        reference=_errors(values, ref),
+        starts=[{"start": r.start, "loss": r.loss, "iterations": r.iterations, "evaluations": r.evaluations,
+                 "seconds": r.seconds, "message": r.message, "history": r.history} for r in results],
+        headline=(f"fit loss {chosen.loss:.5f} (Table 2: {reference_loss:.5f}), {t.starts} starts in "
+                  f"{fit_s:.1f} s; LAMMPS: Ec = {values['Ec_eV']:.3f} eV, B = {values['B_GPa']:.1f}, "
+                  f"C11 = {values['C11_GPa']:.1f}, C12 = {values['C12_GPa']:.1f}, "
+                  f"C44^0 = {values['C44_0_GPa']:.1f}, C44 = {values['C44_GPa']:.1f} GPa; "
+                  + ("stable" if summary_stable(chosen_checks) else "NOT stable") + f" at {stab_t:g} K"))
     report = [f"# Tersoff fit ({spec.name})", "",
               f"Loss eq. 13 (seed 003) at a* = {t.lattice_target_A} A, weights "
               + ", ".join(f"{k} {v:g}" for k, v in settings["weights"].items())
@@ -292,7 +292,7 @@ def run_fit(spec: TersoffWorkflow, out: Path, say=print) -> dict:
     report += [f"| {r.start + 1} | {r.loss:.5f} | {r.iterations} | {r.evaluations} | {r.seconds:.2f} | {r.message} |"
                for r in sorted(results, key=lambda r: r.start)]
     report += ["", "![loss history](loss_history.png)"]
-    return _finish(out, spec, summary, report, t0)
+    return _finish(out, spec, result, report, t0)
 
 
 def _bound_note(name: str, value: float, settings: dict) -> str:

@@ -1,0 +1,37 @@
+"""A run's result as a class: every summary.json key is a field, and the field says which cases give it.
+
+A track whose runs come in several cases (the bonded-particle methods: :class:`opalflow.bpm.result.
+CompressionResult`; the Tersoff workflows: :class:`opalflow.tersoff.result.TersoffResult`) subclasses
+:class:`Result` and names the case of each run (:attr:`Result.case`); :func:`key` declares a field with the
+cases that give it, the label and format of its report row, and whether it is left out where a run has none.
+Adding a key that every case gives is one field and the line that computes it.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+
+def key(*cases: str, label: str = "", fmt: str = "{:.4g}", optional: bool = False, default=None):
+    """A result key: the cases that give it, its report row (``label``, ``fmt``; none without a label),
+    ``optional``: left out where the run has none (None)."""
+    return field(default=default, metadata={"cases": cases, "label": label, "fmt": fmt, "optional": optional})
+
+
+@dataclass
+class Result:
+    """A run's result; subclasses declare the keys (:func:`key`) and say the run's :attr:`case`."""
+
+    @property
+    def case(self) -> str:
+        raise NotImplementedError
+
+    def keys(self) -> list[str]:
+        """The keys this run's case gives, in the order declared."""
+        return [f.name for f in dataclasses.fields(self) if self.case in f.metadata.get("cases", ())
+                and not (f.metadata["optional"] and getattr(self, f.name) is None)]
+
+    def summary(self) -> dict:
+        """summary.json (before :func:`opalflow.runs.record.finish` adds the state); the values are this object's
+        own (a dict filled later, such as a timings dict, is filled in both)."""
+        return {k: getattr(self, k) for k in self.keys()}

@@ -1,0 +1,59 @@
+"""The result of a Tersoff workflow, every mode's (``properties``, ``stability``, ``fit``): one class for the keys
+of summary.json (:class:`opalflow.runs.result.Result`).
+
+The properties are those of Zhuravlev et al. Table 1 (seed 003): the lattice constant a0, the cohesive energy
+E_c and the moduli B, C' = (C11 - C12) / 2, C11, C12, C44^0 (unrelaxed) and C44 (atoms relaxed), by central
+second differences of the LAMMPS energy (eq. 16).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from opalflow.runs.result import Result, key
+from opalflow.version import __version__
+
+PROPERTIES, STABILITY, FIT = "properties", "stability", "fit"
+MEASURED = (PROPERTIES, FIT)                      # the properties measured by LAMMPS
+ALL = (PROPERTIES, STABILITY, FIT)
+
+
+@dataclass
+class TersoffResult(Result):
+    """What a Tersoff workflow found: the properties against Table 1, the MD stability, the fit."""
+
+    mode: str = key(*ALL)
+    a0_A: float = key(*MEASURED)
+    Ec_eV: float = key(*MEASURED)
+    B_GPa: float = key(*MEASURED)
+    Cprime_GPa: float = key(*MEASURED)
+    C11_GPa: float = key(*MEASURED)
+    C12_GPa: float = key(*MEASURED)
+    C44_0_GPa: float = key(*MEASURED)
+    C44_GPa: float = key(*MEASURED)
+    loss: float = key(*MEASURED)                  # eq. 13 of this set (fit model at a*, Table 1 targets)
+    reference_loss: float = key(*MEASURED)        # eq. 13 of Table 2's set
+    fit_s: float | None = key(*MEASURED)          # None: no fit
+    stability: dict | None = key(*ALL)            # the check at the first temperature (None: none run)
+    # properties: the finite-difference strain and its scan against the exact derivatives
+    strain: float = key(PROPERTIES)
+    spread_GPa: dict = key(PROPERTIES)
+    model: dict = key(PROPERTIES)
+    strain_scan: list = key(PROPERTIES)
+    lammps_s: float = key(PROPERTIES)
+    # fit: the parameters, the candidates checked for stability, each start of the multistart L-BFGS
+    parameters: dict = key(FIT)
+    at_bounds: list = key(FIT)
+    candidates_checked: list = key(FIT)
+    model_at_a0: dict = key(FIT)
+    model_at_target: dict = key(FIT)
+    starts: list = key(FIT)
+    lammps_minus_model: dict = key(*MEASURED)
+    reference: dict = key(*MEASURED)              # each property against Table 1's target and calculated column
+    headline: str = key(*ALL, default="")
+    wall_s: float | None = key(*ALL)
+    opalflow_version: str = key(*ALL, default=__version__)
+    spec: dict | None = key(*ALL)
+
+    @property
+    def case(self) -> str:
+        return self.mode
