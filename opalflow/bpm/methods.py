@@ -31,6 +31,8 @@ class Method:
     resumable = ""
     #: a sample periodic in x, y and z gets its stiffness tensor (no substrate to load)
     tensor = False
+    #: bonds break: a strength (and its strain) in the result
+    strength = True
 
     #: the paper's breaking rules (``bonds.breaking`` other than "lammps") and contact springs in the solve
     paper_rules = False
@@ -84,7 +86,7 @@ class Dynamic(Method):
 class Static(Method):
     """One linear solve of the bond network (:func:`opalflow.bpm.static_run.run_static`)."""
 
-    name, runner, tensor = "static", "opalflow.bpm.static_run:run_static", True
+    name, runner, tensor, strength = "static", "opalflow.bpm.static_run:run_static", True, False
     refusal = "a static solve has no --resume, --np or --suffix"
 
     def price(self, spec, s):

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from opalflow.analysis.fits import fit_power_law
+from opalflow.bpm.methods import METHODS
 from opalflow.resources import DATA, resource
 from opalflow.store import new_figure, save_figure
 from opalflow.studies.spec import StudyWorkflow
@@ -165,7 +166,7 @@ def aerogel_density_jobs(spec: StudyWorkflow) -> list[Job]:
                 name = f"{prefix}phi{label_number(f)}_s{s}"
                 at = (model, f, s, name)
                 jobs.append(Job(f"{name}_static", job_spec(spec, [*common, "compression.method=static"]), at=at))
-                if st.method == "dynamic":            # study.method = "static": E only, no strength
+                if not METHODS[st.method].linear:     # study.method = "static": E only, no strength
                     jobs.append(Job(name, job_spec(spec, common), at=at))
     return jobs
 

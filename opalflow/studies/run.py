@@ -18,6 +18,7 @@ import numpy as np
 
 from opalflow.analysis import fracture
 from opalflow.analysis.fits import fit_exponential, fit_power, fit_power_law
+from opalflow.bpm.methods import METHODS
 from opalflow.materials import material
 from opalflow.resources import DATA, resource
 from opalflow.spec import SpecError
@@ -186,7 +187,7 @@ def bulk(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
                "headline": "K_E = " + ", ".join(f"{v['K_E']:.3f} (d = {k} nm)" for k, v in table.items())
                            + f"; paper {ref['K_E']}"}
     how = ("By the static solver (compression.method = static): E_macro is the top layer's modulus at zero "
-           "loading rate, the same in both columns (no plate); no strength." if st.method == "static" else
+           "loading rate, the same in both columns (no plate); no strength." if not METHODS[st.method].strength else
            "The plate-strain modulus beside it also holds the Hertz settling of the plate on the rough top, "
            "which dominates in a short stiff block.")
     report = ["Pore-free silica (`pores.arrangement = none`), compressed like the opal; K_E = E_macro / E_b "
@@ -251,7 +252,7 @@ def coating(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
         r["strength_vs_uncoated"] = r["strength_MPa"] / uncoated if uncoated and r["strength_MPa"] else None
     means = [r for r in table if r["case"] in ("uncoated", "mean")]
     paper20 = ref["coating"]["coated20"]
-    if st.method == "static":
+    if not METHODS[st.method].strength:
         summary = {"table": table, "headline": "E at E_exp (static): " + ", ".join(
             f"{r['thickness_nm']:g} nm {r['youngs_modulus_GPa']:.3g} GPa" for r in means)}
     else:
@@ -323,7 +324,7 @@ def porosity(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
     eps = np.array([r["porosity"] for r in runs])
     e = np.array([r["youngs_modulus_GPa"] for r in runs])
     fits = {"E_exponential": fit_exponential(eps, e), "E_power": fit_power(eps, e)}
-    if st.method != "static":              # dynamic or quasi-static: a strength per job
+    if METHODS[st.method].strength:        # dynamic or quasi-static: a strength per job
         fits["strength_exponential"] = fit_exponential(eps, np.array([r["strength_MPa"] for r in runs]))
     ref = paper()["porosity"]
     better = "power" if fits["E_power"].r2 > fits["E_exponential"].r2 else "exponential"

@@ -104,8 +104,9 @@ class StudyWorkflow(WorkflowSpec):
         check(st.np >= 1, "study.np", st.np, "must be >= 1 (MPI processes per job)")
         self.executor.validate()
         check(st.method in METHODS, "study.method", st.method, f"must be one of {', '.join(METHODS)}")
-        check(not (st.method == "static" and st.type == "calibration"), "study.method", st.method,
-              "must be 'dynamic' for a calibration (it fits the strength, which a static solve has not)")
+        check(METHODS[st.method].strength or st.type != "calibration", "study.method", st.method,
+              "must give a strength for a calibration ('dynamic' or 'quasistatic': it fits the strength, which a "
+              "static solve has not)")
         check(st.target_E_GPa > 0, "study.target_E_GPa", st.target_E_GPa, "must be > 0")
         check(st.target_strength_MPa > 0, "study.target_strength_MPa", st.target_strength_MPa, "must be > 0")
         check(0 < st.tolerance < 0.5, "study.tolerance", st.tolerance, "must be in (0, 0.5) (relative)")

@@ -8,6 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from opalflow import registry
+from opalflow.bpm.methods import METHODS
 from opalflow.resources import WORKFLOWS
 from opalflow.runs.executors import run_jobs
 from opalflow.runs.jobs import Job, job_record
@@ -26,7 +27,7 @@ def job_spec(spec, overrides: list[str]) -> WorkflowSpec:
     if not path.exists():
         raise SpecError("study.paper_base" if st.paper_scale else "study.base", base,
                         f"no workflow {path.name} in {WORKFLOWS}")
-    linear = [f"compression.method={st.method}", "compression.drop_loose=true"] if st.method != "dynamic" else []
+    linear = [f"compression.method={st.method}", "compression.drop_loose=true"] if METHODS[st.method].linear else []
     return registry.load_spec(path, [*linear, *st.set, *overrides])
 
 
