@@ -347,3 +347,28 @@ def test_status_of_a_damaged_record_says_damaged(tmp_path, capsys):
     said = capsys.readouterr().out
     assert "1 damaged" in said and "DAMAGED" in said and "run.json is damaged" in said, said
     assert main(["run", "--out", str(out), "--resume"]) == 2
+
+
+def test_lammps_sessions_of_two_threads_each_write_into_their_own_folder(tmp_path):
+    """A session works in its folder (LAMMPS has no working directory of its own): sessions of two threads of
+    one process queue, and each LAMMPS's relative file lands in its own folder, the caller's directory kept."""
+    import os
+    from concurrent.futures import ThreadPoolExecutor
+
+    from opalflow.lammps.engine import session
+
+    here = os.getcwd()
+
+    def work(name):
+        folder = tmp_path / name
+        folder.mkdir()
+        with session(folder) as lmp:
+            for k in range(200):
+                lmp.command(f'print "{name}" append mine.txt screen no')
+        return folder
+
+    with ThreadPoolExecutor(2) as pool:
+        folders = list(pool.map(work, ["a", "b"]))
+    for folder in folders:
+        assert (folder / "mine.txt").read_text().split() == [folder.name] * 200
+    assert os.getcwd() == here

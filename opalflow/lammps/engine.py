@@ -11,6 +11,7 @@ import ctypes
 import os
 import shutil
 import sys
+import threading
 import time
 from contextlib import contextmanager
 from functools import lru_cache
@@ -190,24 +191,34 @@ def stop_requested() -> bool:
     return False
 
 
+#: one in-process LAMMPS session at a time in this process: a session works in its folder (the working directory
+#: is the process's), so two threads of one process (a user's threaded Dask worker) queue instead of racing
+_SESSION = threading.RLock()
+
+
 @contextmanager
 def session(folder: Path, *, log: str = "log.lammps", suffix: str | None = None):
     """An in-process LAMMPS instance working in ``folder`` (log there); errors become EngineError.
 
-    Scripts name files relative to the folder, so no user path ever enters a LAMMPS command.
+    Scripts name files relative to the folder, so no user path ever enters a LAMMPS command (a path with a
+    space, a quote or a ``$`` would be parsed by LAMMPS; decks stay runnable by ``bash run.sh`` in the folder).
+    LAMMPS has no working directory of its own (its ``shell cd`` is ``chdir`` too), so the session changes the
+    process's for its duration, under :data:`_SESSION`, and restores it; opalflow names every other file by an
+    absolute path or relative to the folder it was given before the session.
     """
-    folder = Path(folder)
-    cwd = os.getcwd()
-    lmp = new_lammps(log=folder / log, suffix=suffix)
-    try:
-        os.chdir(folder)
-        yield lmp
-    except Exception as exc:  # LAMMPS raises plain Exception with its ERROR line
-        raise EngineError(f"LAMMPS failed in {folder}: {str(exc).splitlines()[0]}\n"
-                          f"--- log tail ({folder / log}) ---\n{log_tail(folder / log)}") from None
-    finally:
-        os.chdir(cwd)
-        lmp.close()
+    folder = Path(folder).resolve()
+    with _SESSION:
+        cwd = os.getcwd()
+        lmp = new_lammps(log=folder / log, suffix=suffix)
+        try:
+            os.chdir(folder)
+            yield lmp
+        except Exception as exc:  # LAMMPS raises plain Exception with its ERROR line
+            raise EngineError(f"LAMMPS failed in {folder}: {str(exc).splitlines()[0]}\n"
+                              f"--- log tail ({folder / log}) ---\n{log_tail(folder / log)}") from None
+        finally:
+            os.chdir(cwd)
+            lmp.close()
 
 
 def run_in_process(folder: Path, script: str, *, every: int, strain_per_step: float,
