@@ -52,6 +52,35 @@ def test_damped_relaxation_in_lammps_reaches_the_static_modulus(tmp_path, workfl
     assert np.all(np.abs(E[E[:, 0] >= steps, 1] / static.modulus_MPa - 1) < 1e-3)
 
 
+def test_the_tuned_peer_starts_affine_and_computes_each_bond_once(tmp_path):
+    """What a skilled LAMMPS user tunes (bench/bench_peer.py): the affine start (``displace_atoms ramp`` from the
+    substrate's highest centre to the top layer) is the simple-cubic lattice's exact uniaxial response, so its
+    first sample is the static E (the top layer alone starts 10x off), and ``newton on on`` gives the same E
+    sample for sample as ``on off``."""
+    spec = load_spec(WORKFLOWS / "lattice_sc.toml", [])
+    deck = compression_deck(spec, scene_of(spec).structure(spec))
+    s = deck.structure
+    E = solve_compression(stiffness_network(s, deck.coefficients), s.positions,
+                          LOADINGS[deck.loading].supports(deck), say=lambda m: None).modulus_MPa
+    samples, steps = {}, {}
+    for name, options in (("top", {}), ("affine", {"start": "affine"}),
+                          ("affine_newton", {"start": "affine", "newton_bond": True})):
+        folder = tmp_path / name
+        folder.mkdir()
+        write_data(folder / "data.lmp", s)
+        script = relaxation_deck(deck, steps=100_000, damping=1.0, every=20, target_MPa=E, tolerance=1e-3, **options)
+        assert ("ramp z" in script) == (name != "top") and ("newton          on on" in script) == name.endswith("newton")
+        with session(folder) as lmp:
+            for cmd in script_commands(script):
+                lmp.command(cmd)
+            steps[name] = lmp.get_thermo("step")
+        samples[name] = np.loadtxt(folder / "relax.txt", ndmin=2)
+    assert abs(samples["affine"][0, 1] / E - 1) < 1e-4 and samples["top"][0, 1] / E > 2
+    assert steps["affine"] <= steps["top"] < 100_000
+    assert steps["affine_newton"] == steps["affine"]
+    assert np.allclose(samples["affine_newton"][:, 1], samples["affine"][:, 1], rtol=1e-9)
+
+
 def test_structure_cache_reuses_a_build_and_only_for_the_same_inputs(tmp_path, monkeypatch):
     """The second build of a spec comes from the cache (the same arrays, a line saying so); a new compression
     setting reuses it, a new packing seed does not; a damaged cache file is rebuilt; OPALFLOW_CACHE=off
