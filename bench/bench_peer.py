@@ -139,16 +139,19 @@ def fewest(runs: list[dict], target: str) -> dict | None:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--diameters", type=float, nargs="+", default=[60.0, 30.0, 25.0])
-    ap.add_argument("--damping", type=float, nargs="+", default=[0.1, 0.2, 0.3, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0],
+    ap.add_argument("--damping", type=float, nargs="+",
+                    default=[0.1, 0.15, 0.2, 0.25, 0.3, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0],
                     help="the drag grid, x the critical drag of the lowest axial mode")
     ap.add_argument("--coarse", type=float, nargs="+", default=[0.1, 0.3, 1.0, 3.0],
                     help="the grid's first pass (then the neighbours of its best)")
     ap.add_argument("--timestep-factors", type=float, nargs="+", default=[1.0, 1.1, 1.2, 1.3, 1.4],
-                    help="x the run's time step (0.8 of the undamped limit)")
+                    help="x the run's time step (0.8 of the undamped limit); after the first size only the "
+                         "one found there and its neighbours")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--np", type=int, default=1)
     ap.add_argument("--jobs", type=int, default=2, help="scan runs at a time")
-    ap.add_argument("--budget-steps", type=int, default=4000, help="steps of a scan run")
+    ap.add_argument("--budget-steps", type=int, default=4000,
+                    help="steps of a scan run at d = 60 nm; max(1500, this x (d / 60)^2) at d")
     ap.add_argument("--tag", default="", help="suffix of the result files")
     a = ap.parse_args()
     from opalflow.bpm.deck import compression_deck
@@ -157,9 +160,10 @@ def main() -> int:
     from opalflow.registry import load_spec
     from opalflow.resources import WORKFLOWS
 
-    rows = []
+    rows, factors = [], sorted(a.timestep_factors)
     with tempfile.TemporaryDirectory() as tmp:
         for d in a.diameters:
+            budget = max(1500, int(a.budget_steps * (d / 60.0) ** 2))
             work = Path(tmp) / f"d{d:g}"
             cold = opalflow_static(d, work / "static_cold")
             E = cold["E_MPa"]
@@ -178,8 +182,8 @@ def main() -> int:
                 return f
 
             # the time step, at the critical drag: the fastest to 0.1 % of those that stay stable
-            dts = scan_runs([{"damping": 1.0, "timestep_factor": f} for f in a.timestep_factors], relax_folder,
-                            a.budget_steps, a.np, a.jobs, E)
+            dts = scan_runs([{"damping": 1.0, "timestep_factor": f} for f in factors], relax_folder,
+                            budget, a.np, a.jobs, E)
             for r in dts:
                 print(f"  time step {r['timestep_factor']:g} x {deck.dt_ns:.4g} ns: {'stable' if r['stable'] else 'UNSTABLE'}, "
                       f"within 1 % from step {r['steps_to_1%']}, 0.1 % from {r['steps_to_0.1%']}", flush=True)
@@ -189,12 +193,14 @@ def main() -> int:
                 rows.append({"diameter_nm": d, "static": cold, "timestep_scan": dts})
                 continue
             factor = best_dt["timestep_factor"]
+            k = factors.index(factor)                  # the next size: this factor and its neighbours
+            factors = factors[max(0, k - 1):k + 2]
             # the drag: a coarse pass, then the grid's neighbours of the best (for either target)
             runs = {1.0: best_dt}
             todo = [g for g in a.coarse if g not in runs]
             while todo:
                 for r in scan_runs([{"damping": g, "timestep_factor": factor} for g in todo], relax_folder,
-                                   a.budget_steps, a.np, a.jobs, E):
+                                   budget, a.np, a.jobs, E):
                     runs[r["damping"]] = r
                     print(f"  drag {r['damping']:g} x critical: within 1 % from step {r['steps_to_1%']}, 0.1 % from "
                           f"{r['steps_to_0.1%']}", flush=True)
@@ -208,7 +214,7 @@ def main() -> int:
                 todo = sorted(g for g in near if g not in runs)
             kept = {t: fewest(list(runs.values()), t) for t in ("1%", "0.1%")}
             if kept["0.1%"] is None:
-                print(f"  no drag stayed within 0.1 % in {a.budget_steps} steps", flush=True)
+                print(f"  no drag stayed within 0.1 % in {budget} steps", flush=True)
                 rows.append({"diameter_nm": d, "static": cold, "timestep_scan": dts, "scan": list(runs.values())})
                 continue
             folders = {t: relax_folder(kept[t]["damping"], factor, kept[t][f"steps_to_{t}"]) for t in kept}
@@ -245,25 +251,33 @@ def main() -> int:
                 row[f"ratio_loop_to_{t}_over_setup_solve"] = row[f"lammps_loop_to_{t}_s"] / row["opalflow_setup_solve_s"]
                 row[f"ratio_command_to_{t}"] = row[f"lammps_command_to_{t}_s"] / row["opalflow_command_s"]
             rows.append(row)
+            write(rows, a)
             print(f"  d = {d:g} nm: LAMMPS loop / opalflow set-up + solve = {row['ratio_loop_to_0.1%_over_setup_solve']:.1f}x "
                   f"(0.1 %), {row['ratio_loop_to_1%_over_setup_solve']:.2f}x (1 %); whole commands "
                   f"{row['ratio_command_to_0.1%']:.2f}x (0.1 %), {row['ratio_command_to_1%']:.2f}x (1 %)", flush=True)
+    write(rows, a)
+    return 0
+
+
+def write(rows: list[dict], a) -> None:
+    """bench/results/peer_static{tag}.json and .md with the rows measured so far (written after each size);
+    rows of other diameters measured before with the same tuning are kept."""
     machine = {"host": platform.node(), "cpus": os.cpu_count(), "python": platform.python_version(),
-               "load_1min_end": os.getloadavg()[0], "date": datetime.datetime.now().strftime("%Y-%m-%d %H:%M")}
+               "load_1min": os.getloadavg()[0], "date": datetime.datetime.now().strftime("%Y-%m-%d %H:%M")}
     name = f"peer_static{a.tag}"
     path = OUT / f"{name}.json"
-    if path.exists():       # rows of other diameters measured before are kept, if tuned the same way
-        kept_rows = [r for r in json.loads(path.read_text())["rows"]
-                     if r["diameter_nm"] not in a.diameters and r.get("start") == "affine"]
-        rows = sorted(kept_rows + rows, key=lambda r: -r["diameter_nm"])
-    for r in rows:
+    mine = [r for r in rows if "ratio_command_to_1%" in r]
+    if path.exists():
+        kept = [r for r in json.loads(path.read_text())["rows"]
+                if r["diameter_nm"] not in a.diameters and r.get("start") == "affine"]
+        mine = sorted(kept + mine, key=lambda r: -r["diameter_nm"])
+    for r in mine:
         r.setdefault("machine", machine)
-    result = {"what": __doc__.splitlines()[0], "rows": rows,
-              "paper_scale": {t: paper_law(rows, t) for t in ("1%", "0.1%")}}
+    result = {"what": __doc__.splitlines()[0], "rows": mine,
+              "paper_scale": {t: paper_law(mine, t) for t in ("1%", "0.1%")}}
     path.write_text(json.dumps(result, indent=1) + "\n")
     (OUT / f"{name}.md").write_text(markdown(result))
-    print(f"wrote {OUT / name}.json and .md")
-    return 0
+    print(f"wrote {OUT / name}.json and .md", flush=True)
 
 
 def markdown(result: dict) -> str:

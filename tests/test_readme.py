@@ -209,3 +209,23 @@ def test_readme_command_times_come_from_bench_results():
             slack = 0.5 if quoted["approximate"] else 0.25
             assert abs(quoted["seconds"] / row["seconds"] - 1) <= slack, (key, round(row["seconds"], 1), row["how"])
 
+
+
+def test_readme_peer_table_is_the_benchs_json():
+    """The README's comparison with the tuned LAMMPS peer quotes bench/results/peer_static.json (bench/bench_peer.py):
+    each measured row's steps and loop and whole-command ratios to 1 % and 0.1 %, as the .json has them."""
+    import json
+
+    bench = json.loads((ROOT / "bench" / "results" / "peer_static.json").read_text())
+    text = README.read_text()
+    section = text[text.index("**Against what a LAMMPS user does instead**"):]
+    section = section[:section.index("\n\n", section.index("|---|"))]
+    rows = {line.split("|")[1].strip(): line for line in section.splitlines() if re.match(r"^\| \d", line)}
+    measured = [r for r in bench["rows"] if "ratio_command_to_1%" in r]
+    assert measured and all(r["start"] == "affine" for r in measured)
+    for r in measured:
+        line = rows[f"{r['diameter_nm']:g}"]
+        for cell in (f"{r['steps_to_1%']} / {r['steps_to_0.1%']}",
+                     f"{r['ratio_loop_to_1%_over_setup_solve']:.2f}x / {r['ratio_loop_to_0.1%_over_setup_solve']:.1f}x",
+                     f"{r['ratio_command_to_1%']:.2f}x / {r['ratio_command_to_0.1%']:.2f}x"):
+            assert cell in line, (cell, line)
