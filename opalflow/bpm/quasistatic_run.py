@@ -152,7 +152,7 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
             for tag, (_, snap) in zip(("peak", "end"), frames):
                 _write_dump(stage(f"fracture.{tag}.dump"), data, snap)
 
-    summary = finish(out, summary, lambda: _report(spec, info, summary, result, res, loading, sample), files=files,
+    summary = finish(out, summary, lambda: _report(spec, info, summary, result, loading, sample), files=files,
                      record=record, started=t0)
     (out / STATE).unlink(missing_ok=True)
     (out / PEAK).unlink(missing_ok=True)
@@ -322,7 +322,7 @@ def _check_table(summary) -> list[str]:
     return lines
 
 
-def _report(spec, info, summary, result, res, loading, sample) -> str:
+def _report(spec, info, summary, result, loading, sample) -> str:
     q = summary["quasistatic"]
     lines = [f"# {spec.name}: quasi-static {loading.title}", "",
              f"{info['n_particles']} particles, {info['n_bonds']} bonds; the bond network linearised from LAMMPS's "
