@@ -20,7 +20,8 @@ For each particle diameter of the quickstart sample:
    (structure from the cache, as LAMMPS reads its data file); LAMMPS's loop time (its log) and the whole
    command's wall against opalflow's set-up + solve (summary.json) and its whole command.
 
-The scan's runs go ``--jobs`` at a time (their step counts do not depend on the load); the timed triples run
+``--retime`` keeps each size's tuning from the .json and redoes only the triples (after a change to opalflow's
+command).  The scan's runs go ``--jobs`` at a time (their step counts do not depend on the load); the timed triples run
 alone.  Medians and ratios with the machine and its load -> bench/results/peer_static.json and .md; the
 steps of an independent tuned route (kept by a reviewer, the issue that asked for this tuning) beside ours.
 """
@@ -46,10 +47,10 @@ OUT = ROOT / "bench" / "results"
 PY = sys.executable
 
 
-def opalflow_static(diameter: float, out: Path) -> dict:
-    """The whole static command; its summary and wall time as the user waits for it."""
+def opalflow_static(diameter: float, out: Path, *sets: str) -> dict:
+    """The whole static command (with ``--set`` ``sets``); its summary and wall time as the user waits for it."""
     cmd = [PY, "-m", "opalflow", "run", "quickstart", "--out", str(out), "--set", f"packing.diameter_nm={diameter:g}",
-           "--set", "compression.method=static"]
+           "--set", "compression.method=static", *(x for v in sets for x in ("--set", v))]
     t = time.perf_counter()
     subprocess.run(cmd, check=True, capture_output=True)
     wall = time.perf_counter() - t
@@ -155,6 +156,9 @@ def main() -> int:
                     help="steps of a scan run at d = 60 nm; max(1500, this x (d / 60)^2) at d")
     ap.add_argument("--tag", default="", help="suffix of the result files")
     ap.add_argument("--rewrite", action="store_true", help="only redo the paper-scale law and the .md from the .json")
+    ap.add_argument("--retime", action="store_true",
+                    help="keep each size's tuning from the .json (time step, drags, steps: the scans are not rerun) "
+                         "and redo only its timed triples (after a change to opalflow's command)")
     a = ap.parse_args()
     if a.rewrite:
         a.diameters = []
@@ -167,6 +171,8 @@ def main() -> int:
     from opalflow.resources import WORKFLOWS
 
     rows, factors = [], sorted(a.timestep_factors)
+    stored = {r["diameter_nm"]: r for r in json.loads((OUT / f"peer_static{a.tag}.json").read_text())["rows"]
+              } if a.retime else {}
     with tempfile.TemporaryDirectory() as tmp:
         for d in a.diameters:
             budget = max(1500, int(a.budget_steps * (d / 60.0) ** 2))
@@ -187,6 +193,15 @@ def main() -> int:
                     newton_bond=True))
                 return f
 
+            if a.retime:
+                old = stored[d]
+                kept = {t: {"damping": old[f"damping_to_{t}"], f"steps_to_{t}": old[f"steps_to_{t}"]}
+                        for t in ("1%", "0.1%")}
+                rows.append(timed_row(d, cold, deck, old["timestep_factor"], kept, relax_folder, work, a,
+                                      {"timestep_scan": old["timestep_scan"], "scan": old["scan"],
+                                       "tuned": old.get("tuned", old.get("machine", {}).get("date"))}))
+                write(rows, a)
+                continue
             # the time step, at the critical drag: the fastest to 0.1 % of those that stay stable
             dts = scan_runs([{"damping": 1.0, "timestep_factor": f} for f in factors], relax_folder,
                             budget, a.np, a.jobs, E)
@@ -223,46 +238,57 @@ def main() -> int:
                 print(f"  no drag stayed within 0.1 % in {budget} steps", flush=True)
                 rows.append({"diameter_nm": d, "static": cold, "timestep_scan": dts, "scan": list(runs.values())})
                 continue
-            folders = {t: relax_folder(kept[t]["damping"], factor, kept[t][f"steps_to_{t}"]) for t in kept}
-            triples = []
-            for k in range(a.repeats):
-                lam = {t: lammps_relax(folders[t], a.np) for t in ("1%", "0.1%")}
-                ours = opalflow_static(d, work / f"static_{k}")
-                for x in lam.values():
-                    x.pop("samples")
-                triples.append({"lammps_to_1%": lam["1%"], "lammps_to_0.1%": lam["0.1%"], "opalflow": ours})
-                print(f"  triple {k + 1}: LAMMPS to 1 % loop {lam['1%']['loop_s']:.2f} s (command "
-                      f"{lam['1%']['command_s']:.2f} s), to 0.1 % loop {lam['0.1%']['loop_s']:.2f} s (command "
-                      f"{lam['0.1%']['command_s']:.2f} s); opalflow set-up + solve {ours['setup_solve_s']:.3f} s "
-                      f"(command {ours['command_s']:.2f} s)", flush=True)
-            med = lambda xs: float(np.median(xs))  # noqa: E731
-            row = {"diameter_nm": d, "n_particles": cold["n_particles"], "n_bonds": cold["n_bonds"],
-                   "dofs": 6 * cold["n_particles"], "static_E_MPa": E, "solver": triples[-1]["opalflow"]["solver"],
-                   "lammps_np": a.np, "start": "affine", "newton": "on on",
-                   "timestep_ns": deck.dt_ns * factor, "timestep_factor": factor,
-                   "timestep_limit_ns": deck.timestep.limit_ns,
-                   "damping_to_1%": kept["1%"]["damping"], "damping_to_0.1%": kept["0.1%"]["damping"],
-                   "steps_to_1%": kept["1%"]["steps_to_1%"], "steps_to_0.1%": kept["0.1%"]["steps_to_0.1%"],
-                   "independent_tuned_steps": INDEPENDENT.get(d),
-                   "lammps_loop_to_1%_s": med([t["lammps_to_1%"]["loop_s"] for t in triples]),
-                   "lammps_loop_to_0.1%_s": med([t["lammps_to_0.1%"]["loop_s"] for t in triples]),
-                   "lammps_command_to_1%_s": med([t["lammps_to_1%"]["command_s"] for t in triples]),
-                   "lammps_command_to_0.1%_s": med([t["lammps_to_0.1%"]["command_s"] for t in triples]),
-                   "opalflow_setup_solve_s": med([t["opalflow"]["setup_solve_s"] for t in triples]),
-                   "opalflow_command_s": med([t["opalflow"]["command_s"] for t in triples]),
-                   "opalflow_command_cold_s": cold["command_s"], "build_s": cold["build_s"],
-                   "timestep_scan": dts, "scan": sorted(runs.values(), key=lambda r: r["damping"]), "triples": triples}
-            row["lammps_s_per_bond_step"] = row["lammps_loop_to_0.1%_s"] / (row["steps_to_0.1%"] * row["n_bonds"])
-            for t in ("1%", "0.1%"):
-                row[f"ratio_loop_to_{t}_over_setup_solve"] = row[f"lammps_loop_to_{t}_s"] / row["opalflow_setup_solve_s"]
-                row[f"ratio_command_to_{t}"] = row[f"lammps_command_to_{t}_s"] / row["opalflow_command_s"]
-            rows.append(row)
+            rows.append(timed_row(d, cold, deck, factor, kept, relax_folder, work, a,
+                                  {"timestep_scan": dts, "scan": sorted(runs.values(), key=lambda r: r["damping"])}))
             write(rows, a)
-            print(f"  d = {d:g} nm: LAMMPS loop / opalflow set-up + solve = {row['ratio_loop_to_0.1%_over_setup_solve']:.1f}x "
-                  f"(0.1 %), {row['ratio_loop_to_1%_over_setup_solve']:.2f}x (1 %); whole commands "
-                  f"{row['ratio_command_to_0.1%']:.2f}x (0.1 %), {row['ratio_command_to_1%']:.2f}x (1 %)", flush=True)
     write(rows, a)
     return 0
+
+
+def timed_row(d: float, cold: dict, deck, factor: float, kept: dict, relax_folder, work: Path, a, scans: dict) -> dict:
+    """The alternating triples at the tuning found (``kept``: each target's drag and steps; ``factor``: the time
+    step) and the row of medians and ratios.  opalflow's command is the one a user runs (the static method
+    draws no plots unless asked); the same command with ``compression.plots=all`` is timed beside it."""
+    folders = {t: relax_folder(kept[t]["damping"], factor, kept[t][f"steps_to_{t}"]) for t in kept}
+    triples = []
+    for k in range(a.repeats):
+        lam = {t: lammps_relax(folders[t], a.np) for t in ("1%", "0.1%")}
+        ours = opalflow_static(d, work / f"static_{k}")
+        plotted = opalflow_static(d, work / f"static_plots_{k}", "compression.plots=all")
+        for x in lam.values():
+            x.pop("samples")
+        triples.append({"lammps_to_1%": lam["1%"], "lammps_to_0.1%": lam["0.1%"], "opalflow": ours,
+                        "opalflow_with_plots": plotted})
+        print(f"  triple {k + 1}: LAMMPS to 1 % loop {lam['1%']['loop_s']:.2f} s (command "
+              f"{lam['1%']['command_s']:.2f} s), to 0.1 % loop {lam['0.1%']['loop_s']:.2f} s (command "
+              f"{lam['0.1%']['command_s']:.2f} s); opalflow set-up + solve {ours['setup_solve_s']:.3f} s "
+              f"(command {ours['command_s']:.2f} s, with its plots {plotted['command_s']:.2f} s)", flush=True)
+    med = lambda xs: float(np.median(xs))  # noqa: E731
+    row = {"diameter_nm": d, "n_particles": cold["n_particles"], "n_bonds": cold["n_bonds"],
+           "dofs": 6 * cold["n_particles"], "static_E_MPa": cold["E_MPa"], "solver": triples[-1]["opalflow"]["solver"],
+           "lammps_np": a.np, "start": "affine", "newton": "on on",
+           "timestep_ns": deck.dt_ns * factor, "timestep_factor": factor,
+           "timestep_limit_ns": deck.timestep.limit_ns,
+           "damping_to_1%": kept["1%"]["damping"], "damping_to_0.1%": kept["0.1%"]["damping"],
+           "steps_to_1%": kept["1%"]["steps_to_1%"], "steps_to_0.1%": kept["0.1%"]["steps_to_0.1%"],
+           "independent_tuned_steps": INDEPENDENT.get(d),
+           "lammps_loop_to_1%_s": med([t["lammps_to_1%"]["loop_s"] for t in triples]),
+           "lammps_loop_to_0.1%_s": med([t["lammps_to_0.1%"]["loop_s"] for t in triples]),
+           "lammps_command_to_1%_s": med([t["lammps_to_1%"]["command_s"] for t in triples]),
+           "lammps_command_to_0.1%_s": med([t["lammps_to_0.1%"]["command_s"] for t in triples]),
+           "opalflow_setup_solve_s": med([t["opalflow"]["setup_solve_s"] for t in triples]),
+           "opalflow_command_s": med([t["opalflow"]["command_s"] for t in triples]),
+           "opalflow_command_with_plots_s": med([t["opalflow_with_plots"]["command_s"] for t in triples]),
+           "opalflow_command_cold_s": cold["command_s"], "build_s": cold["build_s"], **scans, "triples": triples,
+           "timed": datetime.datetime.now().strftime("%Y-%m-%d %H:%M")}
+    row["lammps_s_per_bond_step"] = row["lammps_loop_to_0.1%_s"] / (row["steps_to_0.1%"] * row["n_bonds"])
+    for t in ("1%", "0.1%"):
+        row[f"ratio_loop_to_{t}_over_setup_solve"] = row[f"lammps_loop_to_{t}_s"] / row["opalflow_setup_solve_s"]
+        row[f"ratio_command_to_{t}"] = row[f"lammps_command_to_{t}_s"] / row["opalflow_command_s"]
+    print(f"  d = {d:g} nm: LAMMPS loop / opalflow set-up + solve = {row['ratio_loop_to_0.1%_over_setup_solve']:.1f}x "
+          f"(0.1 %), {row['ratio_loop_to_1%_over_setup_solve']:.2f}x (1 %); whole commands "
+          f"{row['ratio_command_to_0.1%']:.2f}x (0.1 %), {row['ratio_command_to_1%']:.2f}x (1 %)", flush=True)
+    return row
 
 
 def write(rows: list[dict], a) -> None:
@@ -293,7 +319,7 @@ def markdown(result: dict) -> str:
              "machine, load and date are in the .json. Ratios > 1: opalflow faster.", "",
              "| d (nm) | particles | solver | LAMMPS steps to 1 % / 0.1 % (independent route) | dt x run's | drag "
              "1 % / 0.1 % | LAMMPS loop 1 % / 0.1 % (s) | opalflow set-up + solve (s) | loop ratio 1 % / 0.1 % | "
-             "LAMMPS command 1 % / 0.1 % (s) | opalflow command (s) | command ratio 1 % / 0.1 % |",
+             "LAMMPS command 1 % / 0.1 % (s) | opalflow command (s) (with its plots) | command ratio 1 % / 0.1 % |",
              "|" + "---|" * 12]
     for r in result["rows"]:
         if "ratio_command_to_1%" not in r:
@@ -305,8 +331,9 @@ def markdown(result: dict) -> str:
             + f" | {r['timestep_factor']:g} | {r['damping_to_1%']:g} / {r['damping_to_0.1%']:g} | "
             f"{r['lammps_loop_to_1%_s']:.2f} / {r['lammps_loop_to_0.1%_s']:.2f} | {r['opalflow_setup_solve_s']:.3f} | "
             f"{r['ratio_loop_to_1%_over_setup_solve']:.2f}x / {r['ratio_loop_to_0.1%_over_setup_solve']:.1f}x | "
-            f"{r['lammps_command_to_1%_s']:.2f} / {r['lammps_command_to_0.1%_s']:.2f} | {r['opalflow_command_s']:.2f} | "
-            f"{r['ratio_command_to_1%']:.2f}x / {r['ratio_command_to_0.1%']:.2f}x |")
+            f"{r['lammps_command_to_1%_s']:.2f} / {r['lammps_command_to_0.1%_s']:.2f} | {r['opalflow_command_s']:.2f}"
+            + (f" ({r['opalflow_command_with_plots_s']:.2f})" if "opalflow_command_with_plots_s" in r else "")
+            + f" | {r['ratio_command_to_1%']:.2f}x / {r['ratio_command_to_0.1%']:.2f}x |")
     for t, law in result["paper_scale"].items():
         if law:
             lines += ["", f"The paper's sample (d = {law['diameter_nm']:g} nm, {law['n_bonds']} bonds), extrapolated "

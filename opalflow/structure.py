@@ -154,7 +154,8 @@ class Structure:
             box_lo=self.box_lo.copy(), box_hi=self.box_hi.copy(), periodic=self.periodic.copy(),
             bonds=bonds, bond_types=bond_types, molecules=self.molecules[keep],
             type_names=list(self.type_names), bond_type_names=list(self.bond_type_names),
-            groups={k: v[keep] for k, v in self.groups.items()}, meta=dict(self.meta),
+            groups={k: v[keep] for k, v in self.groups.items()},
+            meta={k: v for k, v in self.meta.items() if k != "statistics"},    # (the whole's: not this part's)
         )
 
 

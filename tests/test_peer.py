@@ -94,6 +94,10 @@ def test_structure_cache_reuses_a_build_and_only_for_the_same_inputs(tmp_path, m
     again = scene.structure(spec, said.append)
     assert "from the cache" in said[-1]
     assert np.array_equal(first.positions, again.positions) and np.array_equal(first.bonds, again.bonds)
+    # the structure's statistics come with it (a neighbour search a rerun does not repeat), the same numbers;
+    # a part of it (select) does not carry the whole's
+    assert again.meta["statistics"] == scene.statistics(again) == scene.statistics_of(again)
+    assert "statistics" not in again.select(np.arange(again.n_particles) % 2 == 0).meta
     other_run = load_spec(WORKFLOWS / "opal_quick.toml", SMALL_OPAL + ["compression.method=static",
                                                                        "compression.plate_speed_m_s=0.5"])
     assert build_key(other_run) == build_key(spec)

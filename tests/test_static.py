@@ -36,14 +36,31 @@ def test_lattice_modulus_is_the_analytic_one(tmp_path, capsys):
     assert ref["value"] == pytest.approx(np.pi / 4 * 6.53, rel=1e-9)
     assert abs(ref["error"]) < 1e-3
     assert summary["method"] == "static" and summary["relative_residual"] < 1.1e-6
-    assert {"results.h5", "report.md", "stress_hist.png", "bond_strain.png", "data.lmp"} <= {
-        p.name for p in out.iterdir()}
+    # the static method draws its plots where asked (compression.plots = "all"), not by default
+    files = {p.name for p in out.iterdir()}
+    assert {"results.h5", "report.md", "data.lmp"} <= files and not any(f.endswith(".png") for f in files)
+    assert 'Plots: none drawn (compression.plots = "auto"' in (out / "report.md").read_text()
     # uniaxial strain of a lattice: every vertical bond strained by -strain, horizontal ones not at all
     import h5py
     with h5py.File(out / "results.h5") as h:
         eps = h["static/bond_strain_per_strain"][:]
     vertical, horizontal = np.isclose(eps, -1.0, atol=1e-6), np.isclose(eps, 0.0, atol=1e-6)
     assert np.all(vertical | horizontal) and 0.25 < vertical.mean() < 0.4
+
+
+def test_plots_are_drawn_where_asked(tmp_path, capsys):
+    """``compression.plots = "all"``: the static run draws its three plots and its report names them; a value
+    not in auto/all/none is refused in one line before anything is written."""
+    out = tmp_path / "plotted"
+    assert main(["run", "lattice_sc", "--out", str(out), "--set", "compression.method=static",
+                 "--set", "compression.plots=all"]) == 0
+    assert {"displacement.png", "stress_hist.png", "bond_strain.png"} <= {p.name for p in out.iterdir()}
+    assert "Plots: displacement.png, stress_hist.png, bond_strain.png." in (out / "report.md").read_text()
+    capsys.readouterr()
+    assert main(["run", "lattice_sc", "--out", str(tmp_path / "bad"), "--set", "compression.plots=some"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["error: compression.plots = 'some': must be one of auto, all, none (auto: all but for the static "
+                   "method, whose solve the plots would outlast)"] and not (tmp_path / "bad").exists()
 
 
 @pytest.mark.parametrize("workflow, sets", [("lattice_sc", ()), ("opal_quick", SMALL_OPAL)])

@@ -33,6 +33,8 @@ class Method:
     tensor = False
     #: bonds break: a strength (and its strain) in the result
     strength = True
+    #: the report's plots drawn where ``compression.plots = "auto"``: yes where they cost little beside the run
+    plots = True
 
     #: the paper's breaking rules (``bonds.breaking`` other than "lammps") and contact springs in the solve
     paper_rules = False
@@ -52,6 +54,10 @@ class Method:
               "contacts.quasistatic", spec.contacts.quasistatic,
               "needs compression.method = \"quasistatic\" and contacts.enabled = true (the dynamic method's "
               "contacts are LAMMPS's pair style; the static one has none)")
+
+    def draws_plots(self, setting: str) -> bool:
+        """Whether a run of this method draws its report's plots (``compression.plots``: auto, all or none)."""
+        return {"all": True, "none": False}.get(setting, self.plots)
 
     def price(self, spec, s) -> dict:
         """What :mod:`opalflow.runs.plan` prices a run of structure ``s`` by, besides its size."""
@@ -87,6 +93,8 @@ class Static(Method):
     """One linear solve of the bond network (:func:`opalflow.bpm.static_run.run_static`)."""
 
     name, runner, tensor, strength = "static", "opalflow.bpm.static_run:run_static", True, False
+    #: a solve of about a second (d = 60 nm) that three plots would make three times longer: asked, not default
+    plots = False
     refusal = "a static solve has no --resume, --np or --suffix"
 
     def price(self, spec, s):

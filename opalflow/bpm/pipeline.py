@@ -65,7 +65,7 @@ def prepare(spec: BpmWorkflow, out: Path, progress=None) -> tuple[CompressionDec
                           for n in dict.fromkeys(particle_material(t, spec.material) for t in s.type_names)},
             **deck.info()}
     if scene.statistics:        # what build's summary.json says of the structure, for the run's summary too
-        stats = scene.statistics(deck.source)
+        stats = scene.statistics_of(deck.source)
         info["statistics"] = stats
         info["structure"] = {k: stats[k] for k in scene.run_keys}
     info["build_timings_s"] = dict(deck.structure.meta.get("timings_s", {}))
@@ -125,7 +125,7 @@ def build(spec: BpmWorkflow, out: Path, say=print) -> dict:
     scene = scene_of(spec)
     summary = {"workflow": spec.name, "opalflow_version": __version__}
     if scene.statistics:
-        summary.update(scene.statistics(deck.source))
+        summary.update(scene.statistics_of(deck.source))
     else:
         summary.update({"n_particles": deck.structure.n_particles, "n_bonds": deck.structure.n_bonds})
     if scene.describe:
@@ -281,10 +281,13 @@ def analyze(out: Path, started: float | None = None, lammps_s: float | None = No
         result.sessions = [dataclasses.asdict(x) for x in record.sessions]
         result.requeues = record.requeues
     summary = result.summary()
+    plots = METHODS["dynamic"].draws_plots(info["spec"]["compression"].get("plots", "auto"))
 
     def files(stage):
         stage("results.h5").write_bytes(h5_bytes(lambda h: _fill_h5(
             h, info, curve, strain, stress, stress_plate, stress_substrate, broken, snapshots, histograms, result)))
+        if not plots:
+            return
         _plots(stage, strain, stress, stress_plate, stress_substrate, fit, snapshots, histograms,
                info["type_names"])
         if frames:
@@ -293,8 +296,8 @@ def analyze(out: Path, started: float | None = None, lammps_s: float | None = No
                                          "sides)")
 
     # all results or none (a full disk leaves the earlier set whole); summary.json is renamed last
-    return finish(out, summary, lambda: report.compression_report(info, summary, result, fit, bool(frames)), files=files,
-                  record=record, started=started)
+    return finish(out, summary, lambda: report.compression_report(info, summary, result, fit, bool(frames), plots),
+                  files=files, record=record, started=started)
 
 
 def read_snapshots(out: Path, info: dict, curve: dict, strain: np.ndarray) -> tuple[dict, dict]:

@@ -25,7 +25,8 @@ from opalflow.materials import contact_properties
 from opalflow.bpm.quasistatic import CHECKS, Event, Stopped, Strengths, solve_fracture, summary_of
 from opalflow.bpm.scene import scene_of
 from opalflow.bpm.spec import BREAKING_RULES, BpmWorkflow
-from opalflow.bpm.report import network_inputs, sample_lines, structure_cost
+from opalflow.bpm.methods import METHODS
+from opalflow.bpm.report import network_inputs, plots_line, sample_lines, structure_cost
 from opalflow.bpm.result import CompressionResult
 from opalflow.bpm.static_run import network_run, particle_stress
 from opalflow.bpm.stiffness import per_bond
@@ -141,18 +142,20 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
     ).refer(info["references"])
     summary = result.summary()
     record.sessions[-1].last_step = got["events"]
+    plots = METHODS["quasistatic"].draws_plots(c.plots)
 
     def files(stage):
         stage("results.h5").write_bytes(h5_bytes(lambda h: _fill_h5(h, res, data, result, sample, info)))
-        _plot_curve(stage("stress_strain.png"), res, summary)
+        if plots:
+            _plot_curve(stage("stress_strain.png"), res, summary)
         frames = _frames(net, data, res)
-        if frames:
+        if frames and plots:
             fracture.plot_fracture(stage("fracture.png"), frames, data.box_lengths, float(np.mean(data.diameters)),
                                    title=f"{spec.name} (quasi-static, {loading.name})")
-            for tag, (_, snap) in zip(("peak", "end"), frames):
-                _write_dump(stage(f"fracture.{tag}.dump"), data, snap)
+        for tag, (_, snap) in zip(("peak", "end"), frames):
+            _write_dump(stage(f"fracture.{tag}.dump"), data, snap)
 
-    summary = finish(out, summary, lambda: _report(spec, info, summary, result, loading, sample), files=files,
+    summary = finish(out, summary, lambda: _report(spec, info, summary, result, loading, sample, plots), files=files,
                      record=record, started=t0)
     (out / STATE).unlink(missing_ok=True)
     (out / PEAK).unlink(missing_ok=True)
@@ -322,7 +325,7 @@ def _check_table(summary) -> list[str]:
     return lines
 
 
-def _report(spec, info, summary, result, loading, sample) -> str:
+def _report(spec, info, summary, result, loading, sample, plots: bool) -> str:
     q = summary["quasistatic"]
     lines = [f"# {spec.name}: quasi-static {loading.title}", "",
              f"{info['n_particles']} particles, {info['n_bonds']} bonds; the bond network linearised from LAMMPS's "
@@ -346,6 +349,6 @@ def _report(spec, info, summary, result, loading, sample) -> str:
               + (f"; {q['settled_locally']} events settled by the local step alone (local_rtol {q['local_rtol']:g})"
                  if q["local_rtol"] else "")
               + f"; {structure_cost(info)}; wall {summary['wall_s']:.1f} s.", "",
-              "Plots: stress_strain.png, fracture.png. Data: results.h5 (group `quasistatic`), fracture.peak.dump and "
-              "fracture.end.dump (OVITO), summary.json."]
+              plots_line(plots, "stress_strain.png, fracture.png", spec.compression.plots) + " Data: results.h5 "
+              "(group `quasistatic`), fracture.peak.dump and fracture.end.dump (OVITO), summary.json."]
     return "\n".join(lines) + "\n"

@@ -138,9 +138,10 @@ def _session_row(k: int, x: dict) -> str:
             f"{wall} | {x['ended'] or 'running'} |")
 
 
-def compression_report(info: dict, summary: dict, result, fit, fracture: bool) -> str:
+def compression_report(info: dict, summary: dict, result, fit, fracture: bool, plots: bool = True) -> str:
     """The text of report.md (sections :data:`SECTIONS`) of a dynamic run: ``summary`` as written (with its wall
-    time), ``result`` its :class:`opalflow.bpm.result.CompressionResult` (the Results table)."""
+    time), ``result`` its :class:`opalflow.bpm.result.CompressionResult` (the Results table); ``plots``: the
+    figures were drawn (``compression.plots``)."""
     spec = info["spec"]
     lines = [f"# {info['workflow']}: {LOADINGS[result.loading].title}", ""]
     if not summary["complete"]:
@@ -160,16 +161,21 @@ def compression_report(info: dict, summary: dict, result, fit, fracture: bool) -
                     else f", strength by {100 * rc['strength_change']:+.2f} %")
         lines += ["", f"Rate check (half plate speed): E changes by {100 * rc['youngs_modulus_change']:+.2f} %"
                   f"{strength} (limits 2 % and 5 %)."]
-    lines += ["", "![stress-strain](stress_strain.png)", ""]
+    lines += ["", *figure(plots, "stress-strain", "stress_strain.png")]
+    if not plots:
+        lines += [plots_line(False, "stress_strain.png, stress_hist.png, bond_strain.png, fracture.png",
+                             spec["compression"]["plots"]), ""]
     lines += ["## Particle stresses", ""]
     table = mech.stress_table(summary["stress_by_material"])
-    lines += (table + ["", "Histograms at every snapshot (rows), mean +- std per material in the legends:", "",
-                       "![particle stresses](stress_hist.png)", "", "Bond strains (Fig. 7 format; bins from the data):",
-                       "", "![bond strains](bond_strain.png)", ""]) if table else ["No snapshots were asked for.", ""]
-    if fracture:
+    lines += (table + [""] + (["Histograms at every snapshot (rows), mean +- std per material in the legends:", "",
+                               *figure(True, "particle stresses", "stress_hist.png"),
+                               "Bond strains (Fig. 7 format; bins from the data):", "",
+                               *figure(True, "bond strains", "bond_strain.png")] if plots else [])
+              ) if table else ["No snapshots were asked for.", ""]
+    if fracture and plots:
         lines += ["Fracture: a slab a third of the box thick (normal y) through where the bonds broke, particles "
                   "coloured by their broken bonds (top) and sigma_zz (bottom), near the peak and after it:", "",
-                  "![fracture](fracture.png)", ""]
+                  *figure(True, "fracture", "fracture.png")]
     lines += ["## Files", "",
               "- `summary.json`: the numbers above (keys with units); `results.h5`: curves, snapshots and histograms, "
               "every dataset with `units` (tables with `columns`); `opalflow.load_results(folder)` reads both.",
@@ -215,6 +221,18 @@ def provenance_group(h, info: dict) -> None:
     p.attrs["seeds"] = json.dumps({name: section["seed"] for name, section in info["spec"].items()
                                    if isinstance(section, dict) and "seed" in section})
     p.attrs["run"] = json.dumps({k: v for k, v in info.items() if k != "spec"}, default=float)
+
+
+def plots_line(drawn: bool, names: str, setting: str) -> str:
+    """The report's line naming its plots, or saying why there are none (``compression.plots``)."""
+    if drawn:
+        return f"Plots: {names}."
+    return f"Plots: none drawn (compression.plots = \"{setting}\"; \"all\" draws {names})."
+
+
+def figure(drawn: bool, alt: str, name: str) -> list[str]:
+    """A figure of report.md: its image line, or nothing where the plots were not drawn."""
+    return [f"![{alt}]({name})", ""] if drawn else []
 
 
 def structure_cost(info: dict) -> str:

@@ -19,6 +19,7 @@ from opalflow.materials import OVERRIDABLE, material_names
 from opalflow.spec import WorkflowSpec, check, check_name, is_number
 
 SIDES = ("periodic", "open")
+PLOTS = ("auto", "all", "none")
 #: allowed range of each material property a workflow may override (far around any ceramic's)
 PROPERTY_RANGES = {"density_kg_m3": (1.0, 1e5), "bond_youngs_modulus_GPa": (1e-6, 1e4),
                    "bond_poisson_ratio": (-0.99, 0.499), "bond_strength_MPa": (1e-6, 1e6)}
@@ -103,6 +104,7 @@ class CompressionSpec:
     events_max: int = 100_000        # quasistatic: at most this many events
     resolve_rtol: float = 1e-6       # quasistatic, amg and block-amg: each re-solve to this residual (of |b|)
     local_rtol: float = 0.0          # quasistatic: events settle by a local solve while the residual stays below this
+    plots: str = "auto"              # the report's plots: all, none, or auto (all but for the static method)
 
 
 @dataclass
@@ -215,6 +217,8 @@ class BpmWorkflow(WorkflowSpec):
                   f"must be in (0, strain_max = {c.strain_max:g}]")
         check(c.loading in LOADINGS, "compression.loading", c.loading, f"must be one of {', '.join(LOADINGS)}")
         check(c.method in METHODS, "compression.method", c.method, f"must be one of {', '.join(METHODS)}")
+        check(c.plots in PLOTS, "compression.plots", c.plots, f"must be one of {', '.join(PLOTS)} (auto: all but "
+              "for the static method, whose solve the plots would outlast)")
         check(c.solver in STATIC_SOLVERS, "compression.solver", c.solver,
               f"must be one of {', '.join(STATIC_SOLVERS)} (static method)")
         check(b.breaking in BREAKING_RULES, "bonds.breaking", b.breaking,

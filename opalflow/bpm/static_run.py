@@ -24,7 +24,8 @@ from opalflow.analysis import compression as mech
 from opalflow.analysis.elasticity import isotropic_average
 from opalflow.bpm.deck import bond_model, loaded_sample
 from opalflow.bpm.loading import LOADINGS
-from opalflow.bpm.report import network_inputs, sample_lines, structure_cost
+from opalflow.bpm.methods import METHODS
+from opalflow.bpm.report import network_inputs, plots_line, sample_lines, structure_cost
 from opalflow.bpm.result import CompressionResult
 from opalflow.bpm.scene import scene_of, solid_fraction
 from opalflow.bpm.spec import BpmWorkflow
@@ -90,7 +91,7 @@ def network_run(spec: BpmWorkflow, s, out: Path, t0: float, *, launcher: str, re
             "structure_first_build_s": s.meta.get("build_s", build_s)}
     scene = scene_of(spec)
     if scene.run_keys:
-        stats = scene.statistics(sample.source)
+        stats = scene.statistics_of(sample.source)
         info["structure"] = {k: stats[k] for k in scene.run_keys}
     record = RunRecord.read(out) if resume else _record(spec, info, out)
     record.begin(out, launcher=launcher, restart=resume or "")
@@ -159,15 +160,17 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
         headline=f"E = {E_GPa:.4g} GPa (static, {res.solver}: {res.iterations} iterations, residual "
                  f"{res.residual:.1e}, {res.seconds:.1f} s)").refer(info["references"])
     summary = result.summary()
+    plots = METHODS["static"].draws_plots(c.plots)
 
     def files(stage):
         t = time.perf_counter()
         _write_h5(stage("results.h5"), data, res, sigma_unit, strain_unit, snapshots, result, info)
-        _plots(stage, data, res, snapshots, strain_unit, c.snapshot_strains)
+        if plots:
+            _plots(stage, data, res, snapshots, strain_unit, c.snapshot_strains)
         result.timings_s["files"] = time.perf_counter() - t
 
     sides = "periodic" if s.periodic[0] else "open"       # the structure's, whatever section set it
-    return finish(out, summary, lambda: _report(spec, info, summary, result, res, sides, sample), files=files,
+    return finish(out, summary, lambda: _report(spec, info, summary, result, res, sides, sample, plots), files=files,
                   started=t0)
 
 
@@ -213,7 +216,8 @@ def _plots(stage, data, res: StaticResult, snapshots, strain_unit, strains) -> N
             f"strain {100 * e:.2f} %": mech.histogram_fraction(strain_unit * e, edges) for e in strains})
 
 
-def _report(spec: BpmWorkflow, info: dict, summary: dict, result, res: StaticResult, sides: str, sample) -> str:
+def _report(spec: BpmWorkflow, info: dict, summary: dict, result, res: StaticResult, sides: str, sample,
+            plots: bool) -> str:
     loading = LOADINGS[spec.compression.loading]
     lines = [f"# {spec.name}: static {loading.title}", "",
              f"{info['n_particles']} particles, {info['n_bonds']} bonds; the bond network linearised from LAMMPS's "
@@ -230,8 +234,8 @@ def _report(spec: BpmWorkflow, info: dict, summary: dict, result, res: StaticRes
               f"{res.peak_memory_MiB:.0f} MiB; "
               f"{structure_cost(info)}; wall {summary['wall_s']:.1f} s.", ""]
     lines += mech.stress_table(summary["stress_by_material"], digits=2)
-    lines += ["", "Plots: displacement.png, stress_hist.png, bond_strain.png. Data: results.h5 (group `static`), "
-              "summary.json."]
+    lines += ["", plots_line(plots, "displacement.png, stress_hist.png, bond_strain.png", spec.compression.plots)
+              + " Data: results.h5 (group `static`), summary.json."]
     return "\n".join(lines) + "\n"
 
 

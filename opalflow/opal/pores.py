@@ -26,8 +26,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.spatial import cKDTree
 
+from opalflow.neighbors import kdtree
 from opalflow.spec import InputError
 
 
@@ -95,7 +95,7 @@ def first_cutting_pore(positions: np.ndarray, radii: np.ndarray, centres: np.nda
     """Index of the first pore (in the order given) that cuts each particle (eq. 1), or len(centres)."""
     n = len(centres)
     first = np.full(len(positions), n, dtype=np.int64)
-    tree = cKDTree(positions)
+    tree = kdtree(positions)
     reach = pore_radius + float(radii.max())
     for i in range(n - 1, -1, -1):
         for c in periodic_images(centres[i:i + 1], box_xy):
@@ -117,7 +117,7 @@ def union_depth(points: np.ndarray, centres: np.ndarray, radius: float, reach: f
     overlap pairwise by at most 2 R_part).  Points outside every ball get
     ``-(distance to the nearest ball surface)``, or -inf beyond ``reach``.
     """
-    tree = cKDTree(centres)
+    tree = kdtree(centres)
     dist, idx = tree.query(points, k=6, distance_upper_bound=radius + reach)
     best = np.full(len(points), np.inf)
     inside = (dist < radius).any(axis=1)
@@ -170,7 +170,7 @@ def carve(positions: np.ndarray, radii: np.ndarray, centres: np.ndarray, pore_ra
     r_part = float(np.mean(radii))
     rc = pore_radius + r_part
     images = periodic_images(centres, box_xy)
-    tree = cKDTree(images)
+    tree = kdtree(images)
     dmin, _ = tree.query(positions, distance_upper_bound=rc + coat + 1.0)
     inside = (dmin <= pore_radius + radii) & ~protected
     coated = np.zeros(len(positions), bool)

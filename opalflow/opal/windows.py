@@ -2,8 +2,8 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
 
+from opalflow.neighbors import kdtree
 from opalflow.opal.pores import periodic_images, union_depth
 from opalflow.structure import Structure
 
@@ -25,7 +25,7 @@ def window_openings(s: Structure, pore_radius: float) -> np.ndarray:
     box = s.box_lengths[:2]
     shifts = [(i, j) for i in (-1, 0, 1) for j in (-1, 0, 1)]
     size = np.where(s.periodic, s.box_lengths, 3 * s.box_lengths + 1.0)
-    tree = cKDTree(s.positions - s.box_lo, boxsize=size)
+    tree = kdtree(s.positions - s.box_lo, boxsize=size)
     out = []
     for i in range(n):
         for sx, sy in shifts:
