@@ -1,5 +1,5 @@
-"""The README runs as tests: every fenced block carries a marker comment right above it that says how it is
-checked, and this file does it.
+"""The README and the documentation pages (docs/**/*.md, not the generated reference) run as tests: every fenced
+block carries a marker comment right above it that says how it is checked, and this file does it.
 
 Markers (``<!-- test: WHAT -- why -->``):
 
@@ -27,21 +27,31 @@ import pytest
 from opalflow.resources import ROOT
 
 README = ROOT / "README.md"
+#: the pages whose blocks run: the README and docs/ (its generated reference and build output left out)
+PAGES = [README, *sorted(p for p in (ROOT / "docs").rglob("*.md")
+                         if not {"reference", "_build"} & set(p.relative_to(ROOT / "docs").parts))]
 MARKER = re.compile(r"<!-- test: (?P<what>[a-z-]+)(?P<args>[^>]*?)(?: -- (?P<why>.*?))? -->")
 
 
-def blocks() -> list[tuple[int, str, dict]]:
-    """(line, text, marker) of every fenced block; marker {} where the line above has none."""
-    lines = README.read_text().splitlines()
-    out, i = [], 0
-    while i < len(lines):
-        if lines[i].startswith("```"):
-            j = next(k for k in range(i + 1, len(lines)) if lines[k].startswith("```"))
-            m = MARKER.fullmatch(lines[i - 1].strip()) if i else None
-            out.append((i + 1, "\n".join(lines[i + 1:j]), m.groupdict() if m else {}))
-            i = j + 1
-        else:
-            i += 1
+def page_text() -> str:
+    """All the pages, one after the other (a section may live on any of them)."""
+    return "\n\n".join(p.read_text() for p in PAGES)
+
+
+def blocks() -> list[tuple[str, str, dict]]:
+    """(page:line, text, marker) of every fenced block of every page; marker {} where the line above has none."""
+    out = []
+    for page in PAGES:
+        lines = page.read_text().splitlines()
+        i = 0
+        while i < len(lines):
+            if lines[i].startswith("```"):
+                j = next(k for k in range(i + 1, len(lines)) if lines[k].startswith("```"))
+                m = MARKER.fullmatch(lines[i - 1].strip()) if i else None
+                out.append((f"{page.relative_to(ROOT)}:{i + 1}", "\n".join(lines[i + 1:j]), m.groupdict() if m else {}))
+                i = j + 1
+            else:
+                i += 1
     return out
 
 
@@ -82,14 +92,15 @@ def quoted_times(text: str) -> list[tuple[dict, str]]:
 
 def test_every_block_says_how_it_is_tested():
     unmarked = [line for line, _, m in BLOCKS if not m]
-    assert not unmarked, f"README blocks without a <!-- test: ... --> marker at lines {unmarked}"
+    assert not unmarked, f"blocks without a <!-- test: ... --> marker at {unmarked}"
     for line, _, m in BLOCKS:
         if m["what"] in ("not-run", "output") or "skip" in m["args"] or "set" in m["args"]:
-            assert (m["why"] or "").strip(), f"README line {line}: '{m['what']}' needs its reason after --"
+            assert (m["why"] or "").strip(), f"{line}: '{m['what']}' needs its reason after --"
 
 
 def _ids(kind):
-    return [pytest.param(text, m, id=f"line{line}") for line, text, m in BLOCKS if m.get("what") == kind]
+    return [pytest.param(text, m, id=line.replace("README.md:", "line").replace("/", "_"))
+            for line, text, m in BLOCKS if m.get("what") == kind]
 
 
 @pytest.mark.parametrize("text,marker", _ids("run"))
@@ -186,7 +197,7 @@ def test_readme_layout_names_existing_paths():
 
 def test_readme_workflows_table_lists_every_workflow():
     """Was: the table left out the four aerogel_* workflows."""
-    text = README.read_text()
+    text = page_text()
     table = text[text.index("### Workflows"):]
     table = table[:table.index("\n\n", table.index("|---|"))]
     listed = set(re.findall(r"^\| `([a-z0-9_]+)` \|", table, re.MULTILINE))
@@ -217,7 +228,7 @@ def test_readme_peer_table_is_the_benchs_json():
     import json
 
     bench = json.loads((ROOT / "bench" / "results" / "peer_static.json").read_text())
-    text = README.read_text()
+    text = page_text()
     section = text[text.index("**Against what a LAMMPS user does instead**"):]
     section = section[:section.index("\n\n", section.index("|---|"))]
     rows = {line.split("|")[1].strip(): line for line in section.splitlines() if re.match(r"^\| \d", line)}
