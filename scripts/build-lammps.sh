@@ -66,12 +66,17 @@ build="$prefix/build"
 mkdir -p "$build"
 start=$(date +%s)
 cmake -S "$source_dir/cmake" -B "$build" -G Ninja -D CMAKE_INSTALL_PREFIX="$prefix" \
-      -D CMAKE_INSTALL_RPATH="$prefix/lib;$venv/lib" -D CMAKE_BUILD_RPATH="$venv/lib" "${options[@]}" >"$prefix/cmake.log"
-ninja -C "$build" -j "$jobs" install > "$prefix/ninja.log" || { tail -30 "$prefix/ninja.log" >&2; exit 1; }
-rm -rf "$prefix/python"
-mkdir -p "$prefix/python"
+      -D CMAKE_INSTALL_RPATH="$prefix/lib;$venv/lib" -D CMAKE_BUILD_WITH_INSTALL_RPATH=on "${options[@]}" \
+      >"$prefix/cmake.log"
+ninja -C "$build" -j "$jobs" lmp lammps > "$prefix/ninja.log" || { tail -30 "$prefix/ninja.log" >&2; exit 1; }
+# the library, lmp (its run path: $prefix/lib and the venv's MPI, set at the link) and the Python module with
+# the library beside it, where the module looks first; no "install" target (it wants the manual pages)
+rm -rf "$prefix/python" "$prefix/bin" "$prefix/lib"
+mkdir -p "$prefix/python" "$prefix/bin" "$prefix/lib"
+cp -P "$build"/liblammps.so* "$prefix/lib/"
+cp "$build/lmp" "$prefix/bin/"
 cp -r "$source_dir/python/lammps" "$prefix/python/"
-cp -P "$prefix"/lib*/liblammps.so* "$prefix/python/lammps/"          # the module loads the library beside it
+cp -P "$build"/liblammps.so* "$prefix/python/lammps/"
 seconds=$(( $(date +%s) - start ))
 size=$(du -sm "$prefix" | cut -f1)
 printf '{"key": "%s", "version": "%s", "commit": "%s", "packages": "%s", "cuda": "%s", "jobs": %s, "build_s": %s, "size_MiB": %s}\n' \
