@@ -44,9 +44,10 @@ def regress(names: list[str], env: dict, out: Path) -> dict:
         if m:
             current = refs.setdefault(m.group(1), {"seconds": float(m.group(2)), "keys": {}})
             continue
-        words = line.split()
-        if current is not None and len(words) >= 6 and words[-1] in ("ok", "FAILED", "failed", "skipped"):
-            current["keys"][words[0]] = {"reference": words[1], "now": words[2], "verdict": words[-1]}
+        v = re.search(r"\s(ok|FAIL|MISSING|NO REFERENCE|skipped \(.*\))$", line)
+        if current is not None and v and line.startswith("  ") and not line.strip().startswith("key "):
+            words = line.split()
+            current["keys"][words[0]] = {"reference": words[1], "now": words[2], "verdict": v.group(1)}
     for name in names:
         refs.setdefault(name, {"seconds": None, "keys": {}, "error": text[-2000:]})
     return {"exit": run.returncode, "references": refs, "tail": "\n".join(text.splitlines()[-5:])}
@@ -72,7 +73,8 @@ def main() -> int:
             rows[label] = regress(a.names, env, Path(tmp) / label.replace(" ", "_"))
             r = rows[label]
             print(f"{label}: exit {r['exit']}; " + ", ".join(
-                f"{n} {v['seconds']} s ({sum(k['verdict'] == 'ok' for k in v['keys'].values())}/{len(v['keys'])} ok)"
+                f"{n} {v['seconds']} s ({sum(k['verdict'] == 'ok' for k in v['keys'].values())}/{len(v['keys'])} ok"
+                + "".join(f"; {key} {k['verdict']}" for key, k in v["keys"].items() if k["verdict"] != "ok") + ")"
                 for n, v in r["references"].items()), flush=True)
     result = {"what": __doc__.splitlines()[0], "build": info, "threads": a.threads, "ranks": 1,
               "styles": STYLES, "configs": {k: {kk: vv for kk, vv in v.items()} for k, v in configs.items()},
@@ -99,7 +101,10 @@ def markdown(result: dict) -> str:
         for n in names:
             v = r["references"][n]
             ok = sum(k["verdict"] == "ok" for k in v["keys"].values())
-            cells.append(f"{v['seconds']} s, {ok}/{len(v['keys'])}" if v["seconds"] is not None else "failed")
+            checked = sum(not k["verdict"].startswith("skipped") for k in v["keys"].values())
+            failed = [key for key, k in v["keys"].items() if k["verdict"] not in ("ok",) and not k["verdict"].startswith("skipped")]
+            cells.append((f"{v['seconds']} s, {ok}/{checked}" + (f" (off: {', '.join(failed)})" if failed else ""))
+                         if v["seconds"] is not None else "failed: " + v.get("error", "").strip().splitlines()[-1][:80])
         lines.append(f"| {label} | " + " | ".join(cells) + " |")
     lines += ["", "Styles in each deck: " + "; ".join(f"{n}: {s}" for n, s in result["styles"].items() if n in names)
               + ". Under `-sf` a style with an accelerated variant takes it; the others run as they are."]

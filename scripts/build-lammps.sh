@@ -36,9 +36,9 @@ fi
 [[ "$cuda" =~ ^[A-Z0-9_]*$ ]] || { echo "error: --cuda = '$cuda': must be a Kokkos architecture name (e.g. HOPPER90)" >&2; exit 2; }
 
 # the packages: the accelerators, and every package a deck of opalflow's uses (BPM: bpm/sphere, bpm/rotational;
-# GRANULAR: granular pair styles and fix wall/gran; MANYBODY: tersoff; MOLECULE: bonds; EXTRA-FIX, EXTRA-COMPUTE,
-# MISC: the fixes and computes of the compression and stability decks)
-packages=(KOKKOS OPENMP PYTHON BPM GRANULAR MANYBODY MOLECULE EXTRA-FIX EXTRA-COMPUTE MISC)
+# GRANULAR: granular pair styles and fix wall/gran; MANYBODY: tersoff; MOLECULE: bonds; EXTRA-PAIR: the packing's
+# harmonic/cut; EXTRA-FIX, EXTRA-COMPUTE, MISC: the fixes and computes of the compression and stability decks)
+packages=(KOKKOS OPENMP PYTHON BPM GRANULAR MANYBODY MOLECULE EXTRA-PAIR EXTRA-FIX EXTRA-COMPUTE MISC)
 options=(-D BUILD_SHARED_LIBS=on -D LAMMPS_EXCEPTIONS=on -D BUILD_MPI=on -D BUILD_OMP=on
          -D CMAKE_BUILD_TYPE=Release "-D CMAKE_CXX_FLAGS_RELEASE=-O2 -DNDEBUG"
          -D MPI_C_COMPILER="$venv/bin/mpicc" -D MPI_CXX_COMPILER="$venv/bin/mpicxx"
