@@ -68,7 +68,7 @@ def why(key: str, error: float, diameter_nm: float) -> str:
                 "(data/reference/resolution.toml)")
     if key == "youngs_modulus_GPa":
         return ("the plate-strain modulus holds the Hertz settling of the plate on the rough top and the loading "
-                "rate (README, Static solver)")
+                "rate (docs/static.md)")
     return ""
 
 
