@@ -82,6 +82,14 @@ class Dynamic(Method):
     options = ("np_", "resume", "suffix")
     resumable = "opalflow.bpm.pipeline:has_restart"
 
+    def run(self, spec, out: Path, *, np_: int = 1, resume: bool = False, suffix: str | None = None,
+            say=print) -> dict:
+        if suffix == "kk":      # refused before anything is written, not by LAMMPS after the build
+            raise SpecError("--suffix", suffix, "a bonded-particle deck cannot run in KOKKOS mode: LAMMPS's "
+                            "bpm/sphere atom style has no Kokkos variant (\"KOKKOS package requires a Kokkos-enabled "
+                            "atom_style\"); --suffix omp accelerates its pair and fixes")
+        return super().run(spec, out, np_=np_, resume=resume, suffix=suffix, say=say)
+
     def price(self, spec, s):
         from opalflow.registry import resolve
 
