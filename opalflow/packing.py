@@ -104,7 +104,7 @@ def relax_tile(tile: np.ndarray, diameters: np.ndarray, rng, max_overlap: float,
     n = len(diameters)
     x = rng.random((n, 3)) * tile
     sizes, kind = np.unique(diameters, return_inverse=True)
-    lmp = new_lammps()
+    lmp = new_lammps(suffix="")      # never accelerated: the relaxation is chaotic, the packing must not depend on it
     try:
         lmp.commands_string(f"""
 units lj

@@ -91,3 +91,16 @@ def test_tersoff_properties_on_the_source_build(tmp_path, suffix):
     log = (tmp_path / "built" / "log.properties.lammps").read_text()
     if suffix:
         assert f"tersoff/{suffix}" in log
+
+
+@needs_kokkos
+def test_bonded_particle_runs_refuse_kk_before_anything_is_written(tmp_path):
+    """LAMMPS's bpm/sphere has no Kokkos variant (LAMMPS stops: "KOKKOS package requires a Kokkos-enabled
+    atom_style"): opalflow says so in one line, exit 2, before the structure is built."""
+    run = _opalflow("run", "quickstart", "--out", str(tmp_path / "qs"), "--suffix", "kk")
+    assert run.returncode == 2
+    assert run.stderr.strip().splitlines() == [
+        "error: --suffix = 'kk': a bonded-particle deck cannot run in KOKKOS mode: LAMMPS's bpm/sphere atom style "
+        "has no Kokkos variant (\"KOKKOS package requires a Kokkos-enabled atom_style\"); --suffix omp accelerates "
+        "its pair and fixes"]
+    assert not (tmp_path / "qs").exists()

@@ -61,12 +61,7 @@ def compare(a: np.ndarray, b: np.ndarray, tolerance: float = 1e-6) -> dict:
 
 
 def run_granular(spec: GranularWorkflow, out: Path, say=print, suffix: str | None = None) -> dict:
-    """The scene on LAMMPS (``suffix``: its accelerated styles), LIGGGHTS or both."""
-    with accelerated(suffix):
-        return _run_granular(spec, out, say)
-
-
-def _run_granular(spec: GranularWorkflow, out: Path, say=print) -> dict:
+    """The scene on LAMMPS (``suffix``: its accelerated styles; the packing never), LIGGGHTS or both."""
     t0 = time.perf_counter()
     engines = ["lammps", "liggghts"] if spec.engine == "both" else [spec.engine]
     if "liggghts" in engines:
@@ -77,7 +72,8 @@ def _run_granular(spec: GranularWorkflow, out: Path, say=print) -> dict:
     curves, walls = {}, {}
     for engine in engines:
         say(f"{spec.name}: {scene['n_particles']} spheres, {spec.plate.steps} steps on {engine}")
-        curves[engine], walls[engine] = run_engine(engine, out)
+        with accelerated(suffix if engine == "lammps" else None):
+            curves[engine], walls[engine] = run_engine(engine, out)
     strain = {e: c[:, 0] * spec.plate.timestep_s * spec.plate.speed_m_s / scene["height_m"] for e, c in curves.items()}
     summary = {"workflow": spec.name, "engines": engines, **scene,
                "plate_force_N": {e: float(c[-1, 1]) for e, c in curves.items()},

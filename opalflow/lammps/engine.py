@@ -158,15 +158,16 @@ def new_lammps(*, log: str | os.PathLike | None = None, screen: bool = False,
         LAMMPS log file; None writes no log.
     screen : bool
         Echo LAMMPS screen output to stdout.
-    suffix : {'omp', 'kk', 'gpu'} or None
-        Accelerator suffix passed as ``-sf``.
+    suffix : {'omp', 'kk', 'gpu'}, None or ""
+        Accelerator suffix (:func:`accelerator_args`); None: ``OPALFLOW_SUFFIX`` if set; "": none, whatever the
+        environment says (a build step whose result must not depend on the styles, the packing).
     """
     preload_mpi()
     lammps = _lammps_class()
     args = ["-nocite", "-log", str(log) if log else "none"]
     if not screen:
         args += ["-screen", "none"]
-    suffix = suffix or os.environ.get("OPALFLOW_SUFFIX") or None
+    suffix = os.environ.get("OPALFLOW_SUFFIX") or None if suffix is None else suffix or None
     if suffix:
         args += accelerator_args(suffix, gpu=suffix == "kk" and _kokkos_on_gpu())
     return lammps(cmdargs=args)
