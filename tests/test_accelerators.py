@@ -101,6 +101,6 @@ def test_bonded_particle_runs_refuse_kk_before_anything_is_written(tmp_path):
     assert run.returncode == 2
     assert run.stderr.strip().splitlines() == [
         "error: --suffix = 'kk': a bonded-particle deck cannot run in KOKKOS mode: LAMMPS's bpm/sphere atom style "
-        "has no Kokkos variant (\"KOKKOS package requires a Kokkos-enabled atom_style\"); --suffix omp accelerates "
-        "its pair and fixes"]
+        "has no Kokkos variant (\"KOKKOS package requires a Kokkos-enabled atom_style\"), and none of its styles has a "
+        "Kokkos or OpenMP variant in LAMMPS"]
     assert not (tmp_path / "qs").exists()

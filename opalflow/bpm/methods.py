@@ -87,7 +87,7 @@ class Dynamic(Method):
         if suffix == "kk":      # refused before anything is written, not by LAMMPS after the build
             raise SpecError("--suffix", suffix, "a bonded-particle deck cannot run in KOKKOS mode: LAMMPS's "
                             "bpm/sphere atom style has no Kokkos variant (\"KOKKOS package requires a Kokkos-enabled "
-                            "atom_style\"); --suffix omp accelerates its pair and fixes")
+                            "atom_style\"), and none of its styles has a Kokkos or OpenMP variant in LAMMPS")
         return super().run(spec, out, np_=np_, resume=resume, suffix=suffix, say=say)
 
     def price(self, spec, s):
