@@ -113,8 +113,9 @@ def accelerator_args(suffix: str | None, threads: int | str | None = None, gpu: 
     ``omp``: ``-sf omp -pk omp N``. ``kk``: ``-k on t N`` (``g 1`` with a GPU) ``-sf kk`` and ``-pk kokkos``
     with the settings the manual recommends for the backend: on host threads half neighbour lists with
     ``newton on``; on a GPU full lists, ``newton off``, and the exchange packed on the device.  ``gpu``:
-    ``-sf gpu -pk gpu 1``.  A style without an accelerated variant runs as it is (bpm/rotational, bpm/sphere:
-    on the host, with KOKKOS copying its data there and back)."""
+    ``-sf gpu -pk gpu 1``.  A style without an accelerated variant runs as it is (on the host, KOKKOS copying
+    its data there and back: ``pair granular`` in kk mode); KOKKOS mode needs a Kokkos atom style, which
+    LAMMPS's ``bpm/sphere`` is not (a bonded-particle deck cannot run with kk)."""
     if not suffix:
         return []
     n = str(threads or threads_per_rank())
