@@ -10,12 +10,14 @@ does not search.  :func:`preload_mpi` loads it once with ``RTLD_GLOBAL`` so that
 """
 from __future__ import annotations
 
+import atexit
 import ctypes
 import os
 import shutil
 import sys
 import threading
 import time
+import weakref
 from contextlib import contextmanager
 from functools import lru_cache
 from importlib import metadata
@@ -171,7 +173,26 @@ def new_lammps(*, log: str | os.PathLike | None = None, screen: bool = False,
     suffix = os.environ.get("OPALFLOW_SUFFIX") or None if suffix is None else suffix or None
     if suffix:
         args += accelerator_args(suffix, gpu=suffix == "kk" and _kokkos_on_gpu())
-    return lammps(cmdargs=args)
+    lmp = lammps(cmdargs=args)
+    if not _OPEN:
+        atexit.register(_finalize_at_exit, lmp.lib)
+    _OPEN.add(lmp)
+    return lmp
+
+
+#: In-process instances made by :func:`new_lammps` and not yet collected (closed at exit, before MPI ends).
+_OPEN: weakref.WeakSet = weakref.WeakSet()
+
+
+def _finalize_at_exit(lib) -> None:
+    """Close what is still open, then end Kokkos and MPI (``lammps_kokkos_finalize``, ``lammps_mpi_finalize``:
+    LAMMPS manual, "Library interface: creating and deleting instances").  Without ``MPI_Finalize`` MPICH's
+    singleton leaves its shared-memory segment ``/dev/shm/mpich_shm_<pid>_0`` behind; a later process of another
+    user whose pid maps to the same name cannot start MPI ("MPIDI_POSIX_comm_bootstrap: Out of memory")."""
+    for lmp in list(_OPEN):
+        lmp.close()
+    lib.lammps_kokkos_finalize()
+    lib.lammps_mpi_finalize()
 
 
 def _kokkos_on_gpu() -> bool:
