@@ -135,3 +135,16 @@ def toytrack(tmp_path, monkeypatch):
     return tmp_path
 
 
+
+
+def pytest_xdist_auto_num_workers(config):
+    """``-n auto`` (pyproject.toml): one worker per core this process may use, at most 4 (each worker runs LAMMPS
+    and the solvers on one core; more would need more memory than a laptop has for the paper-scale build)."""
+    return max(1, min(4, len(os.sched_getaffinity(0))))
+
+
+def pytest_collection_modifyitems(config, items):
+    """The SLURM tests share one controller (one of them restarts it): one worker runs them all, in order."""
+    for item in items:
+        if item.nodeid.startswith("tests/test_slurm.py"):
+            item.add_marker(pytest.mark.xdist_group("slurm"))
