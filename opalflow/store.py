@@ -176,29 +176,24 @@ def folder_lock(folder: str | os.PathLike):
             folder.rmdir()
 
 
-def new_figure(*args, **kwargs):
-    """A matplotlib figure and axes drawn off-screen (Agg backend)."""
-    import matplotlib
+def new_figure(*args, figsize=None, layout=None, **kwargs):
+    """A matplotlib figure and its axes (``Figure.subplots(*args, **kwargs)``) made without pyplot: nothing
+    shown, no backend chosen, so a Jupyter user's own figures keep theirs (matplotlib, "Embedding in a web
+    application server": ``Figure`` is saved by its own canvas)."""
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt.subplots(*args, **kwargs)
+    fig = Figure(figsize=figsize, layout=layout)
+    return fig, fig.subplots(*args, **kwargs)
 
 
 def save_figure(fig, path: str | os.PathLike, tight: bool = True) -> None:
-    """Write a figure under a temporary name, then rename it; the figure is closed.  ``tight``: lay it out
+    """Write a figure of :func:`new_figure` under a temporary name, then rename it.  ``tight``: lay it out
     with tight_layout first (figures with colour bars spanning several axes lay themselves out)."""
-    import matplotlib.pyplot as plt
-
     path = Path(path)
     if tight:
         fig.tight_layout()
-    try:
-        with atomic_path(path, path.stem + ".tmp.png") as tmp:
-            fig.savefig(tmp, dpi=120)
-    finally:
-        plt.close(fig)
+    with atomic_path(path, path.stem + ".tmp.png") as tmp:
+        fig.savefig(tmp, dpi=120)
 
 
 def put(h5, path: str, data, units: str, columns: list[str] | None = None, **attrs):

@@ -1,8 +1,18 @@
+import atexit
 import os
+import shutil
 import tempfile
 import textwrap
 
-import numpy as np
+# a worker of pytest-xdist (-n, pyproject.toml) shares the cores with the others: its BLAS, OpenMP and MKL
+# threads (the factor's PARDISO, numpy) get its share, set before numpy loads them; oversubscribed, OpenMP's
+# waiting threads spin, and a solve took 5-7x as long (measured in CI)
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    _share = max(1, len(os.sched_getaffinity(0)) // int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")))
+    for _var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+        os.environ.setdefault(_var, str(_share))
+
+import numpy as np  # noqa: E402
 import pytest
 
 from opalflow import registry
@@ -13,8 +23,9 @@ from opalflow.registry import load_spec
 
 
 # the structure cache of the whole session in a folder of its own (not the user's ~/.cache): tests that build
-# one scene twice reuse it, as a user's reruns do; subprocesses (the CLI, jobs) inherit it
+# one scene twice reuse it, as a user's reruns do; subprocesses (the CLI, jobs) inherit it; removed at exit
 os.environ["OPALFLOW_CACHE"] = tempfile.mkdtemp(prefix="opalflow-cache-")
+atexit.register(shutil.rmtree, os.environ["OPALFLOW_CACHE"], True)
 
 
 @pytest.fixture(scope="session")
@@ -144,7 +155,9 @@ def pytest_xdist_auto_num_workers(config):
 
 
 def pytest_collection_modifyitems(config, items):
-    """The SLURM tests share one controller (one of them restarts it): one worker runs them all, in order."""
+    """The SLURM tests share one controller (one of them restarts it): one worker runs them all, in order, and
+    first (they are the longest group: the other workers take the rest meanwhile)."""
     for item in items:
         if item.nodeid.startswith("tests/test_slurm.py"):
             item.add_marker(pytest.mark.xdist_group("slurm"))
+    items.sort(key=lambda item: not item.nodeid.startswith("tests/test_slurm.py"))

@@ -49,11 +49,22 @@ def test_lattice_modulus_is_the_analytic_one(tmp_path, capsys):
 
 
 def test_plots_are_drawn_where_asked(tmp_path, capsys):
-    """``compression.plots = "all"``: the static run draws its three plots and its report names them; a value
-    not in auto/all/none is refused in one line before anything is written."""
+    """``compression.plots = "all"``: the static run draws its three plots and its report names them, leaving the
+    caller's matplotlib as it was (a Jupyter user's backend and figures: the plots are drawn without pyplot); a
+    value not in auto/all/none is refused in one line before anything is written."""
+    import matplotlib
+    import matplotlib.pyplot as plt
+
+    before = matplotlib.get_backend()
+    matplotlib.use("svg")                     # (a backend of the caller's that is not the Agg of the plots)
+    figures = plt.get_fignums()
     out = tmp_path / "plotted"
-    assert main(["run", "lattice_sc", "--out", str(out), "--set", "compression.method=static",
-                 "--set", "compression.plots=all"]) == 0
+    try:
+        assert main(["run", "lattice_sc", "--out", str(out), "--set", "compression.method=static",
+                     "--set", "compression.plots=all"]) == 0
+        assert matplotlib.get_backend() == "svg" and plt.get_fignums() == figures
+    finally:
+        matplotlib.use(before)
     assert {"displacement.png", "stress_hist.png", "bond_strain.png"} <= {p.name for p in out.iterdir()}
     assert "Plots: displacement.png, stress_hist.png, bond_strain.png." in (out / "report.md").read_text()
     capsys.readouterr()
