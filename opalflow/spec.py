@@ -51,9 +51,9 @@ class SpecError(InputError):
 class WorkflowSpec:
     """What every workflow file has: its name, a one-line description and its kind."""
 
-    name: str = "opal"
-    description: str = ""
-    kind: str = "opal"
+    name: str = "opal"               # the run's name ([A-Za-z0-9_]+; a file's stem where not given)
+    description: str = ""            # one line, shown by `list` and in the report
+    kind: str = "opal"               # what is built and run: a kind of opalflow/registry.py (`python -m opalflow list`)
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)

@@ -2,6 +2,7 @@
 workflow reference pages are generated from the parser and the spec classes, so every option and every spec
 field is on them without editing a page."""
 import dataclasses
+import re
 import subprocess
 import sys
 import typing
@@ -50,3 +51,12 @@ def test_reference_pages_hold_every_option_and_every_spec_field():
             heading = f"### `[{section}]`" if section else "### top level"
             assert heading in page, key
             assert f"| `{name}` |" in page, key
+
+
+def test_every_spec_field_says_what_it_means():
+    """No key of the workflow reference has an empty meaning: each field carries its description in the source
+    (the comment beside it or ``#:`` lines above it), which the page shows."""
+    rows = [re.split(r"(?<!\\)\|", line.strip()[1:-1]) for line in reference.workflows_page().splitlines()
+            if line.startswith("| `")]
+    empty = sorted({cells[0].strip() for cells in rows if len(cells) != 4 or not cells[3].strip()})
+    assert rows and not empty, f"spec fields without a description: {empty}"

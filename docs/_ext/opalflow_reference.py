@@ -43,12 +43,24 @@ def cli_page() -> str:
 
 
 def _comments(cls) -> dict[str, str]:
-    """The comment after each field of a dataclass's source (``name: type = default  # comment``)."""
+    """Each field's description in a dataclass's source: the ``#:`` lines above it (Sphinx autodoc's attribute
+    comments) and the comment after it (``name: type = default  # comment``)."""
     try:
         source = inspect.getsource(cls)
     except (OSError, TypeError):
         return {}
-    return {m.group(1): m.group(2).strip() for m in re.finditer(r"^\s+(\w+)\s*:[^#\n]*#\s*(.*)$", source, re.M)}
+    found, above = {}, []
+    for line in source.splitlines():
+        if line.strip().startswith("#:"):
+            above.append(line.strip()[2:].strip())
+            continue
+        m = re.match(r"^\s+(\w+)\s*:[^#]*?(?:#\s*(.*))?$", line)
+        if m and not line.strip().startswith(("#", '"', "def ", "return")):
+            text = " ".join(above + ([m.group(2).strip()] if m.group(2) else []))
+            if text:
+                found[m.group(1)] = text
+        above = []
+    return found
 
 
 def _type_name(hint) -> str:
@@ -59,7 +71,8 @@ def _type_name(hint) -> str:
 def _section(cls, where: str) -> list[str]:
     """One table per dataclass: field, type, default, meaning; nested sections after it."""
     hints = typing.get_type_hints(cls)
-    comments = _comments(cls)
+    comments = {k: v for base in reversed(cls.__mro__) if dataclasses.is_dataclass(base)
+                for k, v in _comments(base).items()}            # (a field inherited: its description where declared)
     doc = (inspect.getdoc(cls) or "").split("\n\n")[0].replace("\n", " ")
     lines = [f"### `[{where}]`" if where else "### top level", "", doc, "",
              "| key | type | default | meaning |", "|---|---|---|---|"]

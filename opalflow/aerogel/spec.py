@@ -26,18 +26,18 @@ RANDOM_PLACEMENT_MAX = 0.3
 class AggregateSpec:
     """Cluster-cluster aggregation in a periodic cube (opalflow.aerogel.aggregation)."""
 
-    particles: int = 3000
-    solid_fraction: float = 0.05
-    diameter_nm: float = 10.0
-    diameter_std_nm: float = 1.0
+    particles: int = 3000            # spheres in the periodic aggregation box
+    solid_fraction: float = 0.05     # their volume fraction of the box (sets the box and the aerogel's density)
+    diameter_nm: float = 10.0        # mean sphere diameter
+    diameter_std_nm: float = 1.0     # standard deviation of the diameters
     algorithm: str = "dlca"                  # dlca: every contact sticks; rlca: with sticking_probability
-    sticking_probability: float = 1.0
+    sticking_probability: float = 1.0  # rlca: the chance that a contact sticks (1: DLCA)
     step_fraction: float = 0.5               # random-walk step of a single sphere, in mean diameters
     mobility_exponent: float = -0.5          # D ~ N^alpha (Meakin 1983)
     stepping: str = "fixed"                  # fixed: a step per move; jump: free-distance jumps (dilute: fast)
     loops: str = "none"                      # none (trees), deflection, restructuring, necks (opalflow/aerogel/loops.py)
     neck_gap: float = 0.1                    # necks: bond pairs whose gap is below this x (r_i + r_j)
-    seed: int = 1
+    seed: int = 1                            # random seed of the spheres' positions and walks
 
     def box_estimate(self) -> tuple[float, float]:
         """Edge of the cube (nm) from the mean sphere volume, and the largest diameter expected (mean + 4 std)."""
@@ -90,7 +90,7 @@ class AggregationWorkflow(WorkflowSpec):
 
     aggregate: AggregateSpec = field(default_factory=AggregateSpec)
     bonds: BondsSpec = field(default_factory=lambda: BondsSpec(cutoff_factor=1.001))
-    material: str = "silica"
+    material: str = "silica"         # the spheres' material (data/materials.toml), for the bonded data file
 
     def validate(self) -> None:
         super().validate()
@@ -107,7 +107,7 @@ class SampleSpec:
     """What the aerogel workflow loads: the slab cut from the aggregate (compressed on its bottom layer), or
     the periodic cube itself (``periodic_z``: no cut, no walls; the static 6 x 6 stiffness tensor)."""
 
-    periodic_z: bool = False
+    periodic_z: bool = False         # load the periodic cube itself (static method: the 6 x 6 tensor) instead of a slab
 
 
 @dataclass

@@ -34,15 +34,15 @@ class BondsSpec:
     contact point and no moment: bpm/spring; why, in :class:`opalflow.materials.BondCoefficients`).
     """
 
-    model: str = "parallel"
-    cutoff_factor: float = 1.75
+    model: str = "parallel"          # parallel: force and moments (bpm/rotational); contact: force only (bpm/spring)
+    cutoff_factor: float = 1.75      # pairs whose centres are within this x (d_i + d_j) / 2 are bonded (Dosta et al. 2.2)
     #: pairs closer than this x (d_i + d_j) / 2 get no bond (0: every pair within the cutoff; 1: MUSEN's default,
     #: overlapping pairs unbonded, touching by contacts only: opalflow.bpm.bonds)
     min_length_factor: float = 0.0
-    radius_factor: float = 1.0
-    length_bins: int = 8
-    breakable: bool = True
-    damping_ratio: float = 0.05
+    radius_factor: float = 1.0       # bond radius r_b = this x the mean particle radius of its material
+    length_bins: int = 8             # bond types per material by length (stiffness ~ 1/length; the report gives the error)
+    breakable: bool = True           # false: no bond breaks (E only; the report gives the peak stress, not a strength)
+    damping_ratio: float = 0.05      # each bond's damping, a fraction of critical for its spring (bpm/rotational gamma_*)
     #: LAMMPS's ``smooth``: a bond's force and torque scaled by 1 - B^4 (B its breaking index), so it fades out
     #: before it breaks; false breaks it at full load (the paper's bonds, the quasi-static method's rule)
     smooth: bool = True
@@ -64,10 +64,10 @@ class ContactsSpec:
     """Hertz-Mindlin contacts between unbonded particles (pair_style granular); friction and restitution
     replace every material's (data/materials.toml) when given."""
 
-    enabled: bool = True
+    enabled: bool = True             # contacts between unbonded particles in the dynamic method (pair_style granular)
     model: str = "hertz"             # hertz: hertz/material + mindlin; linear: hooke + linear_history
-    friction: float | None = None
-    restitution: float | None = None
+    friction: float | None = None    # Coulomb friction coefficient of every contact (None: each material's)
+    restitution: float | None = None  # coefficient of restitution of every contact (None: each material's)
     #: contacts in the quasi-static method (opalflow.bpm.contacts): "off", or linear Hertz-Mindlin springs between
     #: touching unbonded pairs, in compression only, "frictionless" (mu = 0) or "sticking" (no slip limit)
     quasistatic: str = "off"
@@ -85,15 +85,15 @@ RESOLVERS = ("auto", "direct", "amg", "block-amg")
 class CompressionSpec:
     """Uniaxial compression by a rigid plate moving down at constant speed."""
 
-    strain_max: float = 0.04
-    plate_speed_m_s: float = 2.0
-    timestep_s: float = 0.0
-    timestep_safety: float = 0.8
-    global_damping: float = 0.5
-    output_every_strain: float = 2.0e-4
-    snapshot_strains: list[float] = field(default_factory=lambda: [0.01, 0.02])
-    restart_every_strain: float = 0.005
-    check_rate: bool = False
+    strain_max: float = 0.04         # the plate stops at this strain (of the sample's height)
+    plate_speed_m_s: float = 2.0     # dynamic: the plate's speed (the paper's; slower changes E little: docs/opals.md)
+    timestep_s: float = 0.0          # dynamic: LAMMPS's time step (0: timestep_safety x the estimated stability limit)
+    timestep_safety: float = 0.8     # dynamic: the fraction of the estimated limit taken when timestep_s is 0
+    global_damping: float = 0.5      # dynamic: viscous damping of the moving particles, a fraction of critical for the fundamental mode
+    output_every_strain: float = 2.0e-4  # dynamic: a point of the stress-strain curve every this much strain
+    snapshot_strains: list[float] = field(default_factory=lambda: [0.01, 0.02])  # dynamic: particle dumps (stresses, broken bonds) at these strains
+    restart_every_strain: float = 0.005  # dynamic: a LAMMPS restart file every this much strain (--resume starts from the newest)
+    check_rate: bool = False         # dynamic: run again at half the plate speed and report how much E and strength move
     loading: str = "plate"           # plate: contact wall (fix wall/gran); glued: top layer moves with the wall
     method: str = "dynamic"          # dynamic: LAMMPS; static: one linear solve (E and stresses only)
     solver: str = "auto"             # static: auto, amg, block-amg, cg or cg-jax (opalflow/bpm/static.py)
@@ -113,8 +113,8 @@ class CalibrationSpec:
     assembly (Roy and Hossain, eqs. 10.3-10.4, PFC's cubic-array relations): k_n = 4 R E, s_n = 4 R^2
     sigma_t.  0 leaves the material's bond properties as they are (see :func:`first_estimate`)."""
 
-    target_E_GPa: float = 0.0
-    target_tensile_strength_MPa: float = 0.0
+    target_E_GPa: float = 0.0        # the assembly's Young's modulus to calibrate the bond E for (0: the material's)
+    target_tensile_strength_MPa: float = 0.0  # the assembly's tensile strength to calibrate the bond strength for (0: the material's)
     shear_ratio: float = 1.0         # k_s / k_n
 
 
@@ -142,7 +142,7 @@ def first_estimate(c: CalibrationSpec, radius_factor: float) -> dict:
 class BoundarySpec:
     """Side boundaries (x and y): periodic, or open (no bonds across)."""
 
-    sides: str = "periodic"
+    sides: str = "periodic"          # x and y sides: periodic, or open (a free surface, no bonds across)
 
     def validate(self) -> None:
         check(self.sides in SIDES, "boundary.sides", self.sides, f"must be one of {', '.join(SIDES)}")
@@ -152,8 +152,8 @@ class BoundarySpec:
 class BpmWorkflow(WorkflowSpec):
     """A bonded-particle scene compressed by a plate: what every scene's workflow has."""
 
-    material: str = "silica"
-    materials: dict = field(default_factory=dict)
+    material: str = "silica"         # the matrix's material, a table of data/materials.toml
+    materials: dict = field(default_factory=dict)  # [materials.NAME] overrides: density_kg_m3, bond_youngs_modulus_GPa, bond_poisson_ratio, bond_strength_MPa
     bonds: BondsSpec = field(default_factory=BondsSpec)
     contacts: ContactsSpec = field(default_factory=ContactsSpec)
     compression: CompressionSpec = field(default_factory=CompressionSpec)
@@ -274,8 +274,8 @@ class MatrixSpec:
     """Rows of the stability matrix: label -> {workflow = "NAME", set = ["section.key=value", ...], strain = S}
     (``strain``: run each check until the plate has compressed the sample by S instead of ``steps``)."""
 
-    steps: int = 1500
-    rows: dict = field(default_factory=dict)
+    steps: int = 1500                # LAMMPS time steps of each row's check (unless the row gives a strain)
+    rows: dict = field(default_factory=dict)  # label -> {workflow, set, strain}: the scenes checked
 
 
 @dataclass

@@ -29,14 +29,14 @@ class DatafileSpec:
     whose densities have no unit).
     """
 
-    path: str = ""
-    atom_style: str = "bpm/sphere"
-    units: str = "nano"
-    length_unit_nm: float = 0.0
-    materials: list[str] = field(default_factory=list)
-    substrate: str = ""
-    density: str = "auto"
-    periodic_sides: bool = True
+    path: str = ""                   # the LAMMPS data file
+    atom_style: str = "bpm/sphere"   # its atom style, as LAMMPS's atom_style before read_data
+    units: str = "nano"              # nano (lengths in nm) or lj (length_unit_nm says what one unit is)
+    length_unit_nm: float = 0.0      # lj: one length unit of the file in nm
+    materials: list[str] = field(default_factory=list)  # the material of each atom type, in type order (empty: the workflow's material)
+    substrate: str = ""              # the fixed particles: "type N", "z < Z", "none" or "" (the types materials names substrate)
+    density: str = "auto"            # file, material, or auto (file for nano, material for lj)
+    periodic_sides: bool = True      # x and y periodic (as the file's box), else open sides
 
     def density_source(self) -> str:
         return ("file" if self.units == "nano" else "material") if self.density == "auto" else self.density

@@ -13,36 +13,38 @@ class GranularPackingSpec:
     """Dense random packing (opalflow.packing) in a box periodic in x and y; the bottom layer is held."""
 
     box_diameters: float = 6.0          # box edge in mean diameters (x, y and the height)
-    diameter_m: float = 1e-3
+    diameter_m: float = 1e-3            # mean particle diameter
     diameter_std: float = 0.1           # relative
-    solid_fraction: float = 0.6
-    seed: int = 3
+    solid_fraction: float = 0.6         # volume fraction of the packing
+    seed: int = 3                       # random seed of the packing
 
 
 @dataclass
 class GranularMaterialSpec:
     """Hertz-Mindlin contact properties of the particles (the plate has the same)."""
 
-    youngs_modulus_Pa: float = 5e7
-    poisson_ratio: float = 0.25
-    restitution: float = 0.5
-    friction: float = 0.5
-    density_kg_m3: float = 2500.0
+    youngs_modulus_Pa: float = 5e7      # Young's modulus of the particles (Hertz)
+    poisson_ratio: float = 0.25         # their Poisson's ratio (Hertz, Mindlin)
+    restitution: float = 0.5            # coefficient of restitution of a contact (its damping)
+    friction: float = 0.5               # Coulomb friction coefficient
+    density_kg_m3: float = 2500.0       # particle density
 
 
 @dataclass
 class GranularPlateSpec:
-    speed_m_s: float = 0.01
-    steps: int = 20000
-    timestep_s: float = 2e-6
-    output_every: int = 200
+    """The plate: a flat wall moving down onto the packing at constant speed."""
+
+    speed_m_s: float = 0.01             # its speed
+    steps: int = 20000                  # time steps run
+    timestep_s: float = 2e-6            # the time step (both engines)
+    output_every: int = 200             # a point of the force curve every this many steps
 
 
 @dataclass
 class GranularWorkflow(WorkflowSpec):
     """An unbonded packing compressed by a plate; ``engine``: lammps, liggghts or both (a cross-check)."""
 
-    engine: str = "lammps"
+    engine: str = "lammps"              # lammps, liggghts, or both (the same deck on each, compared)
     #: the spheres rotate (fix nve/sphere); false: translations only (fix nve), where the tangential
     #: contact model of LAMMPS and LIGGGHTS is the same (opalflow/granular/decks.py)
     rotation: bool = True
@@ -70,8 +72,8 @@ class GranularWorkflow(WorkflowSpec):
 class ImpactSpec:
     """One sphere thrown at a held sphere of the same size (Chung and Ooi's single-impact benchmarks)."""
 
-    diameter_m: float = 1e-3
-    speed_m_s: float = 0.1
+    diameter_m: float = 1e-3            # both spheres' diameter
+    speed_m_s: float = 0.1              # the thrown sphere's speed
     angle_deg: float = 30.0             # between the velocity and the line of centres at contact (oblique cases)
     steps_per_contact: int = 200        # time step = Hertz contact time / this
 

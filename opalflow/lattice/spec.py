@@ -16,11 +16,11 @@ LATTICES = ("sc", "fcc")
 class LatticeSpec:
     """Regular arrays of bonded spheres (kind = "lattice") for analytic checks."""
 
-    arrangement: str = "sc"
-    spacing_nm: float = 20.0
-    cells_x: int = 4
-    cells_y: int = 4
-    cells_z: int = 8
+    arrangement: str = "sc"          # sc: simple cubic (touching spheres of diameter a); fcc: face-centred cubic
+    spacing_nm: float = 20.0         # the cubic cell's edge a
+    cells_x: int = 4                 # cells along x
+    cells_y: int = 4                 # cells along y
+    cells_z: int = 8                 # cells along z (the loading axis)
     periodic_z: bool = False     # periodic in z too, no substrate: the static 6 x 6 stiffness tensor
 
 

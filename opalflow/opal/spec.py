@@ -22,13 +22,13 @@ EXPERIMENT_SILICA_OPAL = {"youngs_modulus_GPa": (1.7, "experiment, do Rosario et
 class PackingSpec:
     """Dense random packing of spheres (the solid skeleton before pores are cut)."""
 
-    diameter_nm: float = 15.0
-    solid_fraction: float = 0.62
-    diameter_std_nm: float = 0.0
-    size_bins: int = 8
-    seed: int = 1
-    tile_nm: float = 380.0
-    max_overlap: float = 0.005
+    diameter_nm: float = 15.0        # mean particle diameter (Dosta et al. 2.1: 15 nm silica)
+    solid_fraction: float = 0.62     # volume fraction of the packing before pores are cut (at most ~0.64, jamming)
+    diameter_std_nm: float = 0.0     # standard deviation of the diameters (0: monodisperse)
+    size_bins: int = 8               # polydisperse diameters snapped to this many equal-probability sizes (one LAMMPS type each)
+    seed: int = 1                    # random seed of the packing
+    tile_nm: float = 380.0           # edge of the periodic tile packed and repeated over the box (0: the whole box as one tile)
+    max_overlap: float = 0.005       # the packing is relaxed until the largest overlap is below this x d
     #: the tile's relaxation: "fire" (LAMMPS's FIRE) or "musen" (the paper's generator's rule: opalflow.packing)
     method: str = "fire"
 
@@ -37,30 +37,30 @@ class PackingSpec:
 class PoresSpec:
     """Macropores cut out of the packing (eq. 1 of Dosta et al.)."""
 
-    arrangement: str = "fcc"
-    diameter_nm: float = 762.0
-    spacing_nm: float = 762.0
-    layers: int = 3
-    cells_x: int = 4
-    cells_y: int = 2
-    porosity: float | None = None
-    porosity_tolerance: float = 0.01
-    seed: int = 1
+    arrangement: str = "fcc"         # fcc: the inverse opal's ordered pores; random: random pores (porosity); none: no pores
+    diameter_nm: float = 762.0       # pore diameter (the template's spheres)
+    spacing_nm: float = 762.0        # nearest-neighbour distance of the FCC pore lattice (= diameter: touching pores)
+    layers: int = 3                  # (111) pore layers stacked on the substrate (the sample's height)
+    cells_x: int = 4                 # the box in x: this many cells of spacing_nm
+    cells_y: int = 2                 # the box in y: this many cells of spacing_nm x sqrt(3) (two pores per layer each)
+    porosity: float | None = None    # random: the macro-porosity to reach (pores taken until closest to it)
+    porosity_tolerance: float = 0.01  # random: refused if the closest porosity the box allows is farther than this
+    seed: int = 1                    # random: seed of the pores' positions
 
 
 @dataclass
 class CoatingSpec:
     """Coating of the pore walls (eq. 2); thickness 0 means uncoated."""
 
-    thickness_nm: float = 0.0
-    material: str = "titania"
+    thickness_nm: float = 0.0        # coating thickness on the pore walls, eq. 2 (0: uncoated)
+    material: str = "titania"        # the coating's material (data/materials.toml)
 
 
 @dataclass
 class SubstrateSpec:
     """Fixed bottom particle layers."""
 
-    layers: int = 2
+    layers: int = 2                  # fixed particle layers at the bottom (in particle diameters): the support
 
 
 @dataclass

@@ -28,16 +28,16 @@ ADDRESS_RE = re.compile(r"(tcp|tls|inproc|ucx)://[A-Za-z0-9_.\-\[\]:]+")
 class ExecutorSpec:
     """Where the runs of a workflow go (see the module's table)."""
 
-    type: str = "local"
-    workers: int = 0
-    address: str = ""
-    cpus_per_rank: int = 1
-    mem_gb: float = 2.0
-    time_min: int = 60
-    partition: str = ""
-    account: str = ""
-    signal_s: int = 45
-    poll_s: float = 2.0
+    type: str = "local"          # local (a pool on this machine), dask or slurm
+    workers: int = 0             # jobs at once (local, dask: 0 = cores / ranks per job; slurm: 0 = no limit)
+    address: str = ""            # dask: the scheduler's address (tcp://host:8786); "": an embedded LocalCluster
+    cpus_per_rank: int = 1       # slurm: cores per MPI rank of a job (--cpus-per-task)
+    mem_gb: float = 2.0          # slurm: memory per job (--mem; `plan` says what a job needs)
+    time_min: int = 60           # slurm: time limit of each job (--time); a job reaching it is requeued from its restart
+    partition: str = ""          # slurm: --partition ("": the cluster's default)
+    account: str = ""            # slurm: --account ("": none)
+    signal_s: int = 45           # slurm: the job is signalled this long before its limit, to write a restart (--signal)
+    poll_s: float = 2.0          # slurm: seconds between looks at the queue (squeue)
 
     def validate(self) -> None:
         check(self.type in EXECUTORS, "executor.type", self.type, f"must be one of {', '.join(EXECUTORS)}")

@@ -10,36 +10,37 @@ from opalflow.spec import WorkflowSpec, check, check_name, is_number
 class TersoffSpec:
     """Tersoff potential: which file, how its properties are evaluated, and the fit (seed 003)."""
 
-    potential: str = "Si_zhuravlev2021.tersoff"
-    element: str = "Si"
-    cells: int = 2
-    strain: float = 1e-4
+    potential: str = "Si_zhuravlev2021.tersoff"  # a Tersoff file: a path, or a file in data/potentials/ (Table 2)
+    element: str = "Si"              # the file's entry "X X X" to use
+    cells: int = 2                   # properties: the diamond crystal of cells^3 conventional cells (8 atoms each)
+    strain: float = 1e-4             # properties: the finite-difference strain of the constants reported
+    #: properties: the same constants at these strains too (the plateau where round-off and anharmonicity are small)
     strain_scan: list[float] = field(default_factory=lambda: [1e-5, 3e-5, 1e-4, 3e-4, 1e-3, 3e-3, 1e-2, 3e-2, 1e-1])
-    lattice_target_A: float = 5.431
-    targets: dict = field(default_factory=dict)
-    weights: dict = field(default_factory=dict)
-    fixed: list[str] = field(default_factory=lambda: ["m", "R", "D"])
-    bounds: dict = field(default_factory=dict)
-    starts: int = 16
-    seed: int = 1
-    max_iter: int = 5000
-    rank_top: int = 3
+    lattice_target_A: float = 5.431  # the lattice constant a* the fit's loss aims at (eq. 13)
+    targets: dict = field(default_factory=dict)  # fit: property -> target, over Table 1's (data/reference/zhuravlev2021.toml)
+    weights: dict = field(default_factory=dict)  # fit: property -> weight in the loss (1 unless set)
+    fixed: list[str] = field(default_factory=lambda: ["m", "R", "D"])  # fit: parameters kept at the starting file's values
+    bounds: dict = field(default_factory=dict)  # fit: parameter -> [low, high] of the search box (over the defaults)
+    starts: int = 16                 # fit: L-BFGS-B runs from this many random points in the box
+    seed: int = 1                    # fit: seed of the random starts
+    max_iter: int = 5000             # fit: iterations of each L-BFGS-B run at most
+    rank_top: int = 3                # fit: the best this many are checked for MD stability; the first stable one is kept
 
 
 @dataclass
 class StabilitySpec:
     """MD stability check of a Tersoff set: 4x4x4 cells, 0.01 ns, four boundary conditions."""
 
-    boundaries: list[str] = field(default_factory=lambda: ["ppp", "ppf", "pff", "fff"])
-    temperatures_K: list[float] = field(default_factory=lambda: [300.0, 600.0])
-    time_ps: float = 10.0
-    timestep_fs: float = 1.0
-    cells: int = 4
-    seed: int = 12345
-    max_drift_eV: float = 1e-3
-    min_fourfold: float = 0.95
-    max_rms_A: float = 0.5
-    workers: int = 0
+    boundaries: list[str] = field(default_factory=lambda: ["ppp", "ppf", "pff", "fff"])  # x y z each p (periodic) or f (free surface)
+    temperatures_K: list[float] = field(default_factory=lambda: [300.0, 600.0])  # initial temperatures of the NVE runs
+    time_ps: float = 10.0            # length of each MD run
+    timestep_fs: float = 1.0         # its time step
+    cells: int = 4                   # the crystal of cells^3 conventional cells (512 atoms at 4)
+    seed: int = 12345                # seed of the initial velocities
+    max_drift_eV: float = 1e-3       # stable only if the NVE total energy stays within this per atom of its start
+    min_fourfold: float = 0.95       # ... and at least this fraction of interior atoms keeps 4 neighbours
+    max_rms_A: float = 0.5           # ... and the interior's RMS displacement from the lattice stays below this
+    workers: int = 0                 # runs at once, each in its own process (0: the cores)
 
 
 @dataclass

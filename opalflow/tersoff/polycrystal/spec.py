@@ -19,7 +19,7 @@ METHODS = ("dynamic", "static")
 class SamplesSpec:
     """The 64-atom samples: one uniformly random orientation per element from each seed."""
 
-    seeds: list[int] = field(default_factory=lambda: [1, 2, 3])
+    seeds: list[int] = field(default_factory=lambda: [1, 2, 3])  # each experiment once per seed of the elements' random orientations
     relaxation: str = "minimize"          # minimize: preconditioned Newton; md: damped MD (eq. 8)
     force_tol_eV_A: float = 1e-4          # steady state: largest atomic force below this
     lammps_check: int = 4                 # samples compared with LAMMPS pair_style tersoff (0: none)
@@ -30,29 +30,29 @@ class TensionSpec:
     """Uniaxial tension, periodic along x, free sides (seed 003, section 3, Figs. 3-4)."""
 
     cubes: list[int] = field(default_factory=lambda: [4, 4, 8])         # cubes per edge of each experiment
-    cube_nm: list[float] = field(default_factory=lambda: [5.0, 10.0, 10.0])
+    cube_nm: list[float] = field(default_factory=lambda: [5.0, 10.0, 10.0])  # cube edge of each experiment (six tetrahedra a cube)
     method: str = "dynamic"               # dynamic: deformation + damped relaxation steps; static: Newton
-    max_strain: float = 0.0015
+    max_strain: float = 0.0015            # the tension stops at this strain
     strain_step: float = 0.0005           # strain of each deformation phase (one curve point)
     strain_rate_per_ns: float = 0.05      # during the deformation steps
     residual_tol: float = 1e-4            # relaxation ends at |net vertex forces| / |element forces| below this
     damping: float = 1.0                  # viscous damping, in units of pi c_L / (longest edge)
     timestep_safety: float = 0.5          # dt = safety x 2 / omega_max
-    max_relax_steps: int = 5000
+    max_relax_steps: int = 5000           # a relaxation taking more steps than this stops the run with an error
 
 
 @dataclass
 class WavesSpec:
     """Waves from a piston on the end face z = 0 of a column (seed 003, Figs. 5-7)."""
 
-    experiments: list[str] = field(default_factory=lambda: ["plate", "rod", "shear"])
+    experiments: list[str] = field(default_factory=lambda: ["plate", "rod", "shear"])  # plate (periodic sides), rod (free sides), shear (transverse piston)
     cubes: list[int] = field(default_factory=lambda: [4, 4, 40])          # 3840 elements
-    cube_nm: float = 5.0
-    piston_m_s: float = 10.0
-    timestep_safety: float = 0.5
+    cube_nm: float = 5.0                  # cube edge (six tetrahedra a cube)
+    piston_m_s: float = 10.0              # the end face's prescribed velocity
+    timestep_safety: float = 0.5          # dt = safety x 2 / omega_max
     travel: float = 0.9                   # run until a wave at the Voigt speed has crossed this fraction
     fit_range: list[float] = field(default_factory=lambda: [0.2, 0.8])   # stations used in the speed fit
-    seed: int = 1
+    seed: int = 1                         # seed of the elements' random orientations
 
 
 @dataclass
