@@ -35,7 +35,8 @@ class AggregateSpec:
     step_fraction: float = 0.5               # random-walk step of a single sphere, in mean diameters
     mobility_exponent: float = -0.5          # D ~ N^alpha (Meakin 1983)
     stepping: str = "fixed"                  # fixed: a step per move; jump: free-distance jumps (dilute: fast)
-    loops: str = "none"                      # none (trees), deflection, restructuring, necks (opalflow/aerogel/loops.py)
+    #: none (trees), deflection, restructuring, necks (opalflow/aerogel/loops.py)
+    loops: str = "none"
     neck_gap: float = 0.1                    # necks: bond pairs whose gap is below this x (r_i + r_j)
     seed: int = 1                            # random seed of the spheres' positions and walks
 

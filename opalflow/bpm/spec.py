@@ -35,14 +35,17 @@ class BondsSpec:
     """
 
     model: str = "parallel"          # parallel: force and moments (bpm/rotational); contact: force only (bpm/spring)
-    cutoff_factor: float = 1.75      # pairs whose centres are within this x (d_i + d_j) / 2 are bonded (Dosta et al. 2.2)
+    #: pairs whose centres are within this x (d_i + d_j) / 2 are bonded (Dosta et al. 2.2)
+    cutoff_factor: float = 1.75
     #: pairs closer than this x (d_i + d_j) / 2 get no bond (0: every pair within the cutoff; 1: MUSEN's default,
     #: overlapping pairs unbonded, touching by contacts only: opalflow.bpm.bonds)
     min_length_factor: float = 0.0
     radius_factor: float = 1.0       # bond radius r_b = this x the mean particle radius of its material
-    length_bins: int = 8             # bond types per material by length (stiffness ~ 1/length; the report gives the error)
+    #: bond types per material by length (stiffness ~ 1/length; the report gives the error)
+    length_bins: int = 8
     breakable: bool = True           # false: no bond breaks (E only; the report gives the peak stress, not a strength)
-    damping_ratio: float = 0.05      # each bond's damping, a fraction of critical for its spring (bpm/rotational gamma_*)
+    #: each bond's damping, a fraction of critical for its spring (bpm/rotational gamma_*)
+    damping_ratio: float = 0.05
     #: LAMMPS's ``smooth``: a bond's force and torque scaled by 1 - B^4 (B its breaking index), so it fades out
     #: before it breaks; false breaks it at full load (the paper's bonds, the quasi-static method's rule)
     smooth: bool = True
@@ -89,11 +92,15 @@ class CompressionSpec:
     plate_speed_m_s: float = 2.0     # dynamic: the plate's speed (the paper's; slower changes E little: docs/opals.md)
     timestep_s: float = 0.0          # dynamic: LAMMPS's time step (0: timestep_safety x the estimated stability limit)
     timestep_safety: float = 0.8     # dynamic: the fraction of the estimated limit taken when timestep_s is 0
-    global_damping: float = 0.5      # dynamic: viscous damping of the moving particles, a fraction of critical for the fundamental mode
+    #: dynamic: viscous damping of the moving particles, a fraction of critical for the fundamental mode
+    global_damping: float = 0.5
     output_every_strain: float = 2.0e-4  # dynamic: a point of the stress-strain curve every this much strain
-    snapshot_strains: list[float] = field(default_factory=lambda: [0.01, 0.02])  # dynamic: particle dumps (stresses, broken bonds) at these strains
-    restart_every_strain: float = 0.005  # dynamic: a LAMMPS restart file every this much strain (--resume starts from the newest)
-    check_rate: bool = False         # dynamic: run again at half the plate speed and report how much E and strength move
+    #: dynamic: particle dumps (stresses, broken bonds) at these strains
+    snapshot_strains: list[float] = field(default_factory=lambda: [0.01, 0.02])
+    #: dynamic: a LAMMPS restart file every this much strain (--resume starts from the newest)
+    restart_every_strain: float = 0.005
+    #: dynamic: run again at half the plate speed and report how much E and strength move
+    check_rate: bool = False
     loading: str = "plate"           # plate: contact wall (fix wall/gran); glued: top layer moves with the wall
     method: str = "dynamic"          # dynamic: LAMMPS; static: one linear solve (E and stresses only)
     solver: str = "auto"             # static: auto, amg, block-amg, cg or cg-jax (opalflow/bpm/static.py)
@@ -114,7 +121,8 @@ class CalibrationSpec:
     sigma_t.  0 leaves the material's bond properties as they are (see :func:`first_estimate`)."""
 
     target_E_GPa: float = 0.0        # the assembly's Young's modulus to calibrate the bond E for (0: the material's)
-    target_tensile_strength_MPa: float = 0.0  # the assembly's tensile strength to calibrate the bond strength for (0: the material's)
+    #: the assembly's tensile strength to calibrate the bond strength for (0: the material's)
+    target_tensile_strength_MPa: float = 0.0
     shear_ratio: float = 1.0         # k_s / k_n
 
 
@@ -153,7 +161,8 @@ class BpmWorkflow(WorkflowSpec):
     """A bonded-particle scene compressed by a plate: what every scene's workflow has."""
 
     material: str = "silica"         # the matrix's material, a table of data/materials.toml
-    materials: dict = field(default_factory=dict)  # [materials.NAME] overrides: density_kg_m3, bond_youngs_modulus_GPa, bond_poisson_ratio, bond_strength_MPa
+    #: [materials.NAME] overrides: density_kg_m3, bond_youngs_modulus_GPa, bond_poisson_ratio, bond_strength_MPa
+    materials: dict = field(default_factory=dict)
     bonds: BondsSpec = field(default_factory=BondsSpec)
     contacts: ContactsSpec = field(default_factory=ContactsSpec)
     compression: CompressionSpec = field(default_factory=CompressionSpec)

@@ -33,8 +33,10 @@ class DatafileSpec:
     atom_style: str = "bpm/sphere"   # its atom style, as LAMMPS's atom_style before read_data
     units: str = "nano"              # nano (lengths in nm) or lj (length_unit_nm says what one unit is)
     length_unit_nm: float = 0.0      # lj: one length unit of the file in nm
-    materials: list[str] = field(default_factory=list)  # the material of each atom type, in type order (empty: the workflow's material)
-    substrate: str = ""              # the fixed particles: "type N", "z < Z", "none" or "" (the types materials names substrate)
+    #: the material of each atom type, in type order (empty: the workflow's material)
+    materials: list[str] = field(default_factory=list)
+    #: the fixed particles: "type N", "z < Z", "none" or "" (the types materials names substrate)
+    substrate: str = ""
     density: str = "auto"            # file, material, or auto (file for nano, material for lj)
     periodic_sides: bool = True      # x and y periodic (as the file's box), else open sides
 

@@ -25,9 +25,11 @@ class PackingSpec:
     diameter_nm: float = 15.0        # mean particle diameter (Dosta et al. 2.1: 15 nm silica)
     solid_fraction: float = 0.62     # volume fraction of the packing before pores are cut (at most ~0.64, jamming)
     diameter_std_nm: float = 0.0     # standard deviation of the diameters (0: monodisperse)
-    size_bins: int = 8               # polydisperse diameters snapped to this many equal-probability sizes (one LAMMPS type each)
+    #: polydisperse diameters snapped to this many equal-probability sizes (one LAMMPS type each)
+    size_bins: int = 8
     seed: int = 1                    # random seed of the packing
-    tile_nm: float = 380.0           # edge of the periodic tile packed and repeated over the box (0: the whole box as one tile)
+    #: edge of the periodic tile packed and repeated over the box (0: the whole box as one tile)
+    tile_nm: float = 380.0
     max_overlap: float = 0.005       # the packing is relaxed until the largest overlap is below this x d
     #: the tile's relaxation: "fire" (LAMMPS's FIRE) or "musen" (the paper's generator's rule: opalflow.packing)
     method: str = "fire"
@@ -37,7 +39,8 @@ class PackingSpec:
 class PoresSpec:
     """Macropores cut out of the packing (eq. 1 of Dosta et al.)."""
 
-    arrangement: str = "fcc"         # fcc: the inverse opal's ordered pores; random: random pores (porosity); none: no pores
+    #: fcc: the inverse opal's ordered pores; random: random pores (porosity); none: no pores
+    arrangement: str = "fcc"
     diameter_nm: float = 762.0       # pore diameter (the template's spheres)
     spacing_nm: float = 762.0        # nearest-neighbour distance of the FCC pore lattice (= diameter: touching pores)
     layers: int = 3                  # (111) pore layers stacked on the substrate (the sample's height)

@@ -33,7 +33,8 @@ class ExecutorSpec:
     address: str = ""            # dask: the scheduler's address (tcp://host:8786); "": an embedded LocalCluster
     cpus_per_rank: int = 1       # slurm: cores per MPI rank of a job (--cpus-per-task)
     mem_gb: float = 2.0          # slurm: memory per job (--mem; `plan` says what a job needs)
-    time_min: int = 60           # slurm: time limit of each job (--time); a job reaching it is requeued from its restart
+    #: slurm: time limit of each job (--time); a job reaching it is requeued from its restart
+    time_min: int = 60
     partition: str = ""          # slurm: --partition ("": the cluster's default)
     account: str = ""            # slurm: --account ("": none)
     signal_s: int = 45           # slurm: the job is signalled this long before its limit, to write a restart (--signal)

@@ -53,7 +53,8 @@ STUDIES = tuple(STUDY_TYPES)
 class StudySpec:
     """A study (kind = "study"): many compression jobs made from one base workflow (Dosta et al.)."""
 
-    type: str = "calibration"    # which study: calibration, bulk, coating, porosity, convergence, sides, aerogel_models, aerogel_density
+    #: which study: calibration, bulk, coating, porosity, convergence, sides, aerogel_models, aerogel_density
+    type: str = "calibration"
     base: str = "quickstart"     # the workflow every job is made from (a name in workflows/ or a path)
     paper_base: str = "opal_fcc"  # the base taken instead when paper_scale is true
     paper_scale: bool = False    # true: the jobs at the paper's resolution (paper_base), hours to days
@@ -67,18 +68,24 @@ class StudySpec:
     target_strength_MPa: float = 41.3  # calibration: the opal's strength sigma*
     tolerance: float = 0.005     # calibration: stop when E and strength are both within this fraction of the targets
     max_runs: int = 8            # calibration: at most this many rounds
-    jacobian: str = "decoupled"  # calibration: decoupled (the paper's: E from E_b, strength from sigma_b) or full (2 x 2)
+    #: calibration: decoupled (the paper's: E from E_b, strength from sigma_b) or full (2 x 2)
+    jacobian: str = "decoupled"
     fd_step: float = 0.1         # calibration: Delta E_b / E_b of the finite-difference Jacobian (eq. 19)
     start_E_GPa: float = 0.0     # calibration: the bond E_b to start from (0: the material's)
     start_strength_MPa: float = 0.0  # calibration: the bond strength to start from (0: the material's)
     # bulk (K_E), coating, porosity, convergence
     diameters_nm: list[float] = field(default_factory=lambda: [60.0, 45.0])  # bulk, convergence: the particle diameters
-    thicknesses_nm: list[float] = field(default_factory=lambda: [0.0, 10.0, 20.0, 34.0])  # coating: the titania thicknesses
-    porosities: list[float] = field(default_factory=lambda: [0.30, 0.36, 0.42, 0.49, 0.55, 0.62])  # porosity: the targets of random pores
-    seeds: list[int] = field(default_factory=lambda: [1, 2, 3])  # porosity, convergence, aerogel studies: one job per seed
-    cells: list[list[int]] = field(default_factory=lambda: [[1, 1], [2, 1], [2, 2]])  # convergence: pore cells [x, y] of each cross-section
+    #: coating: the titania thicknesses
+    thicknesses_nm: list[float] = field(default_factory=lambda: [0.0, 10.0, 20.0, 34.0])
+    #: porosity: the targets of random pores
+    porosities: list[float] = field(default_factory=lambda: [0.30, 0.36, 0.42, 0.49, 0.55, 0.62])
+    #: porosity, convergence, aerogel studies: one job per seed
+    seeds: list[int] = field(default_factory=lambda: [1, 2, 3])
+    #: convergence: pore cells [x, y] of each cross-section
+    cells: list[list[int]] = field(default_factory=lambda: [[1, 1], [2, 1], [2, 2]])
     # aerogel_density
-    solid_fractions: list[float] = field(default_factory=lambda: [0.04, 0.05, 0.06, 0.08, 0.10])  # aerogel_density: the aggregates' solid fractions
+    #: aerogel_density: the aggregates' solid fractions
+    solid_fractions: list[float] = field(default_factory=lambda: [0.04, 0.05, 0.06, 0.08, 0.10])
     loop_models: list[str] = field(default_factory=lambda: ["none"])     # aggregate.loops of each series
 
 

@@ -17,21 +17,25 @@ class TersoffSpec:
     #: properties: the same constants at these strains too (the plateau where round-off and anharmonicity are small)
     strain_scan: list[float] = field(default_factory=lambda: [1e-5, 3e-5, 1e-4, 3e-4, 1e-3, 3e-3, 1e-2, 3e-2, 1e-1])
     lattice_target_A: float = 5.431  # the lattice constant a* the fit's loss aims at (eq. 13)
-    targets: dict = field(default_factory=dict)  # fit: property -> target, over Table 1's (data/reference/zhuravlev2021.toml)
+    #: fit: property -> target, over Table 1's (data/reference/zhuravlev2021.toml)
+    targets: dict = field(default_factory=dict)
     weights: dict = field(default_factory=dict)  # fit: property -> weight in the loss (1 unless set)
-    fixed: list[str] = field(default_factory=lambda: ["m", "R", "D"])  # fit: parameters kept at the starting file's values
+    #: fit: parameters kept at the starting file's values
+    fixed: list[str] = field(default_factory=lambda: ["m", "R", "D"])
     bounds: dict = field(default_factory=dict)  # fit: parameter -> [low, high] of the search box (over the defaults)
     starts: int = 16                 # fit: L-BFGS-B runs from this many random points in the box
     seed: int = 1                    # fit: seed of the random starts
     max_iter: int = 5000             # fit: iterations of each L-BFGS-B run at most
-    rank_top: int = 3                # fit: the best this many are checked for MD stability; the first stable one is kept
+    #: fit: the best this many are checked for MD stability; the first stable one is kept
+    rank_top: int = 3
 
 
 @dataclass
 class StabilitySpec:
     """MD stability check of a Tersoff set: 4x4x4 cells, 0.01 ns, four boundary conditions."""
 
-    boundaries: list[str] = field(default_factory=lambda: ["ppp", "ppf", "pff", "fff"])  # x y z each p (periodic) or f (free surface)
+    #: x y z each p (periodic) or f (free surface)
+    boundaries: list[str] = field(default_factory=lambda: ["ppp", "ppf", "pff", "fff"])
     temperatures_K: list[float] = field(default_factory=lambda: [300.0, 600.0])  # initial temperatures of the NVE runs
     time_ps: float = 10.0            # length of each MD run
     timestep_fs: float = 1.0         # its time step

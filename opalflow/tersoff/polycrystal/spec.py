@@ -19,7 +19,8 @@ METHODS = ("dynamic", "static")
 class SamplesSpec:
     """The 64-atom samples: one uniformly random orientation per element from each seed."""
 
-    seeds: list[int] = field(default_factory=lambda: [1, 2, 3])  # each experiment once per seed of the elements' random orientations
+    #: each experiment once per seed of the elements' random orientations
+    seeds: list[int] = field(default_factory=lambda: [1, 2, 3])
     relaxation: str = "minimize"          # minimize: preconditioned Newton; md: damped MD (eq. 8)
     force_tol_eV_A: float = 1e-4          # steady state: largest atomic force below this
     lammps_check: int = 4                 # samples compared with LAMMPS pair_style tersoff (0: none)
@@ -30,7 +31,8 @@ class TensionSpec:
     """Uniaxial tension, periodic along x, free sides (seed 003, section 3, Figs. 3-4)."""
 
     cubes: list[int] = field(default_factory=lambda: [4, 4, 8])         # cubes per edge of each experiment
-    cube_nm: list[float] = field(default_factory=lambda: [5.0, 10.0, 10.0])  # cube edge of each experiment (six tetrahedra a cube)
+    #: cube edge of each experiment (six tetrahedra a cube)
+    cube_nm: list[float] = field(default_factory=lambda: [5.0, 10.0, 10.0])
     method: str = "dynamic"               # dynamic: deformation + damped relaxation steps; static: Newton
     max_strain: float = 0.0015            # the tension stops at this strain
     strain_step: float = 0.0005           # strain of each deformation phase (one curve point)
@@ -45,7 +47,8 @@ class TensionSpec:
 class WavesSpec:
     """Waves from a piston on the end face z = 0 of a column (seed 003, Figs. 5-7)."""
 
-    experiments: list[str] = field(default_factory=lambda: ["plate", "rod", "shear"])  # plate (periodic sides), rod (free sides), shear (transverse piston)
+    #: plate (periodic sides), rod (free sides), shear (transverse piston)
+    experiments: list[str] = field(default_factory=lambda: ["plate", "rod", "shear"])
     cubes: list[int] = field(default_factory=lambda: [4, 4, 40])          # 3840 elements
     cube_nm: float = 5.0                  # cube edge (six tetrahedra a cube)
     piston_m_s: float = 10.0              # the end face's prescribed velocity
