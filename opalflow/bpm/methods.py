@@ -10,6 +10,7 @@ so the spec stays light.  A new method is one class here and one line in :data:`
 """
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 from opalflow.bpm.bonds import BOND_MODELS
@@ -75,6 +76,32 @@ class Method:
         return resolve(self.runner)(spec, out, say=say, **{o: values[o] for o in self.options})
 
 
+#: the last LAMMPS release known to have lammps/lammps#4990 (patch 30 Mar 2026, as its report says; the
+#: 22 Jul 2025 stable release of the wheel has it too)
+OMP_HISTORY_BUG_UNTIL = 20260330
+OMP_HISTORY_REFUSAL = (
+    "none of a bonded-particle deck's styles has an OpenMP variant, and with contacts (pair granular, newton on) "
+    "-sf omp turns only LAMMPS's contact-history fix into NEIGH_HISTORY/omp, which in this LAMMPS drops the "
+    "tangential history of pairs whose half-list owner changes at a neighbour-list rebuild (lammps/lammps#4990): "
+    "different forces from the first step (the quickstart's E +0.15 %, strength -0.28 %); run without --suffix, "
+    "or with contacts.enabled = false")
+
+
+def omp_drops_contact_history(spec, suffix: str | None) -> bool:
+    """Whether ``suffix`` (or ``OPALFLOW_SUFFIX``) would run the dynamic deck of ``spec`` into LAMMPS's
+    lammps/lammps#4990: ``-sf omp`` makes pair granular's history fix ``NEIGH_HISTORY/omp``, whose
+    ``pre_exchange_newton`` fills the partner lists of owned atoms only, so the contact history of a pair whose
+    owner in the half list switches to the other atom across a rebuild is lost (measured: the quickstart's
+    plate force differs by 2e-5 and the substrate's by 3e-4 over the first 119 steps with one thread and no
+    threaded neighbour builds, ``-pk omp 1`` alone changes nothing; granular decks run ``newton off`` and are
+    not affected).  True for decks with contacts on LAMMPS up to :data:`OMP_HISTORY_BUG_UNTIL`."""
+    if (suffix or os.environ.get("OPALFLOW_SUFFIX")) != "omp" or not spec.contacts.enabled:
+        return False
+    from opalflow.lammps.engine import lammps_info
+
+    return int(lammps_info()["version"]) <= OMP_HISTORY_BUG_UNTIL
+
+
 class Dynamic(Method):
     """LAMMPS integrates the motion (:func:`opalflow.bpm.pipeline.run_dynamic`)."""
 
@@ -88,6 +115,8 @@ class Dynamic(Method):
             raise SpecError("--suffix", suffix, "a bonded-particle deck cannot run in KOKKOS mode: LAMMPS's "
                             "bpm/sphere atom style has no Kokkos variant (\"KOKKOS package requires a Kokkos-enabled "
                             "atom_style\"), and none of its styles has a Kokkos or OpenMP variant in LAMMPS")
+        if omp_drops_contact_history(spec, suffix):
+            raise SpecError("--suffix", suffix or os.environ.get("OPALFLOW_SUFFIX"), OMP_HISTORY_REFUSAL)
         return super().run(spec, out, np_=np_, resume=resume, suffix=suffix, say=say)
 
     def price(self, spec, s):
