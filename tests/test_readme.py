@@ -240,3 +240,14 @@ def test_readme_peer_table_is_the_benchs_json():
                      f"{r['ratio_loop_to_1%_over_setup_solve']:.2f}x / {r['ratio_loop_to_0.1%_over_setup_solve']:.1f}x",
                      f"{r['ratio_command_to_1%']:.2f}x / {r['ratio_command_to_0.1%']:.2f}x"):
             assert cell in line, (cell, line)
+
+
+def test_the_test_commands_time_is_the_test_suites_bench():
+    """The minutes the README quotes beside its test command are bench/results/test_suite.json's whole CI run
+    (bench/bench_test_suite.py: .ci/run in a fresh clone), within 25 %, and that run passed."""
+    import json
+
+    bench = json.loads((ROOT / "bench" / "results" / "test_suite.json").read_text())
+    line = next(ln for ln in README.read_text().splitlines() if "install and run the tests" in ln)
+    minutes = float(re.search(r"~(\d+) min", line).group(1))
+    assert bench["exit"] == 0 and not bench.get("failed") and abs(minutes * 60 / bench["whole_s"] - 1) <= 0.25
