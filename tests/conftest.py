@@ -146,8 +146,6 @@ def toytrack(tmp_path, monkeypatch):
     return tmp_path
 
 
-
-
 def pytest_xdist_auto_num_workers(config):
     """``-n auto`` (pyproject.toml): one worker per core this process may use, at most 4 (each worker runs LAMMPS
     and the solvers on one core; more would need more memory than a laptop has for the paper-scale build)."""
