@@ -241,3 +241,29 @@ def test_a_process_that_ran_lammps_leaves_no_mpi_shared_memory_behind():
     if existed != "True":
         pytest.skip(f"this MPI keeps no {segment} while it runs")
     assert not os.path.exists(segment)
+
+
+def test_a_stale_mpi_segment_under_this_pid_is_cleared_or_named(tmp_path):
+    """A segment a killed process left under the pid this one now has: this user's is removed before MPI starts
+    (left, MPICH's start hangs); another user's (made here where root can give it away) is one line naming the
+    file, not MPICH's "Out of memory" abort."""
+    code = ("import os, sys\n"
+            "from opalflow.lammps.engine import EngineError, mpich_segment, new_lammps\n"
+            "stale = mpich_segment()\n"
+            "stale.write_bytes(bytes(1061440))\n"
+            "if sys.argv[1] != 'mine':\n"
+            "    os.chown(stale, int(sys.argv[1]), -1)\n"
+            "try:\n"
+            "    new_lammps().command('units lj')\n"
+            "except EngineError as exc:\n"
+            "    stale.unlink()\n"
+            "    print('refused:', exc)\n"
+            "    sys.exit(0)\n"
+            "print('ran')\n")
+    mine = subprocess.run([sys.executable, "-c", code, "mine"], capture_output=True, text=True, timeout=60)
+    assert mine.returncode == 0 and mine.stdout.strip() == "ran", mine.stderr[-2000:]
+    if os.geteuid() != 0:
+        pytest.skip("another user's segment is made here only as root (chown)")
+    other = subprocess.run([sys.executable, "-c", code, "65534"], capture_output=True, text=True, timeout=60)
+    assert other.returncode == 0, other.stderr[-2000:]
+    assert other.stdout.startswith("refused: /dev/shm/mpich_shm_") and "of user id 65534" in other.stdout

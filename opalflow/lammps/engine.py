@@ -173,8 +173,12 @@ def new_lammps(*, log: str | os.PathLike | None = None, screen: bool = False,
     suffix = os.environ.get("OPALFLOW_SUFFIX") or None if suffix is None else suffix or None
     if suffix:
         args += accelerator_args(suffix, gpu=suffix == "kk" and _kokkos_on_gpu())
+    first = not _STARTED
+    if first:
+        clear_stale_segment()
     lmp = lammps(cmdargs=args)
-    if not _OPEN:
+    if first:
+        _STARTED.append(os.getpid())
         atexit.register(_finalize_at_exit, lmp.lib)
     _OPEN.add(lmp)
     return lmp
@@ -182,6 +186,32 @@ def new_lammps(*, log: str | os.PathLike | None = None, screen: bool = False,
 
 #: In-process instances made by :func:`new_lammps` and not yet collected (closed at exit, before MPI ends).
 _OPEN: weakref.WeakSet = weakref.WeakSet()
+#: the pid that started MPI in this process (empty before the first instance)
+_STARTED: list[int] = []
+
+
+def mpich_segment(pid: int | None = None) -> Path:
+    """The shared-memory file MPICH's singleton makes for process ``pid`` (this one by default)."""
+    return Path("/dev/shm") / f"mpich_shm_{os.getpid() if pid is None else pid:x}_0"
+
+
+def clear_stale_segment() -> None:
+    """Before this process starts MPI: a segment under its pid is a dead process's (killed before
+    ``MPI_Finalize``, the pid since reused).  Measured with the wheel's MPICH: MPI hangs in its start on one of
+    this user's, and stops with "MPIDI_POSIX_comm_bootstrap: Out of memory" on another user's.  This user's is
+    removed; another user's is an :class:`EngineError` naming the file and who can remove it."""
+    path = mpich_segment()
+    try:
+        owner = path.stat().st_uid
+    except OSError:
+        return
+    if owner == os.getuid():
+        path.unlink(missing_ok=True)
+        return
+    raise EngineError(f"{path} (a stale MPICH segment of user id {owner}, left by a process killed before MPI "
+                      f"ended) keeps MPI from starting in this process (pid {os.getpid()}): ask its owner or root to "
+                      "remove it, or run again (another pid)")
+
 
 
 def _finalize_at_exit(lib) -> None:
