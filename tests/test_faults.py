@@ -229,11 +229,10 @@ def test_a_process_that_ran_lammps_leaves_no_mpi_shared_memory_behind():
     """MPICH's singleton keeps ``/dev/shm/mpich_shm_<pid in hex>_0`` while LAMMPS runs; opalflow ends MPI at
     exit, so the segment goes with the process (left behind, it stops another user's process whose pid maps
     to the same name from starting MPI)."""
-    code = ("import os, sys\n"
-            "from opalflow.lammps.engine import new_lammps\n"
+    code = ("from opalflow.lammps.engine import mpich_segment, new_lammps\n"
             "lmp = new_lammps()\n"
             "lmp.command('units lj')\n"
-            "print(f'/dev/shm/mpich_shm_{os.getpid():x}_0', os.path.exists(f'/dev/shm/mpich_shm_{os.getpid():x}_0'))\n"
+            "print(mpich_segment(), mpich_segment().exists())\n"
             "open_at_exit = new_lammps()\n")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr[-2000:]

@@ -10,7 +10,6 @@ so the spec stays light.  A new method is one class here and one line in :data:`
 """
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 from opalflow.bpm.bonds import BOND_MODELS
@@ -95,9 +94,10 @@ def omp_drops_contact_history(spec, suffix: str | None) -> bool:
     plate force differs by 2e-5 and the substrate's by 3e-4 over the first 119 steps with one thread and no
     threaded neighbour builds, ``-pk omp 1`` alone changes nothing; granular decks run ``newton off`` and are
     not affected).  True for decks with contacts on LAMMPS up to :data:`OMP_HISTORY_BUG_UNTIL`."""
-    if (suffix or os.environ.get("OPALFLOW_SUFFIX")) != "omp" or not spec.contacts.enabled:
+    from opalflow.lammps.engine import effective_suffix, lammps_info
+
+    if effective_suffix(suffix) != "omp" or not spec.contacts.enabled:
         return False
-    from opalflow.lammps.engine import lammps_info
 
     return int(lammps_info()["version"]) <= OMP_HISTORY_BUG_UNTIL
 
@@ -116,7 +116,7 @@ class Dynamic(Method):
                             "bpm/sphere atom style has no Kokkos variant (\"KOKKOS package requires a Kokkos-enabled "
                             "atom_style\"), and none of its styles has a Kokkos or OpenMP variant in LAMMPS")
         if omp_drops_contact_history(spec, suffix):
-            raise SpecError("--suffix", suffix or os.environ.get("OPALFLOW_SUFFIX"), OMP_HISTORY_REFUSAL)
+            raise SpecError("--suffix", "omp", OMP_HISTORY_REFUSAL)
         return super().run(spec, out, np_=np_, resume=resume, suffix=suffix, say=say)
 
     def price(self, spec, s):

@@ -151,6 +151,11 @@ def accelerated(suffix: str | None):
             os.environ["OPALFLOW_SUFFIX"] = before
 
 
+def effective_suffix(suffix: str | None) -> str | None:
+    """The suffix an in-process LAMMPS takes: ``suffix``; None: ``OPALFLOW_SUFFIX`` if set; "": none."""
+    return os.environ.get("OPALFLOW_SUFFIX") or None if suffix is None else suffix or None
+
+
 def new_lammps(*, log: str | os.PathLike | None = None, screen: bool = False,
                suffix: str | None = None):
     """A fresh in-process LAMMPS instance (``lammps.lammps``).
@@ -170,7 +175,7 @@ def new_lammps(*, log: str | os.PathLike | None = None, screen: bool = False,
     args = ["-nocite", "-log", str(log) if log else "none"]
     if not screen:
         args += ["-screen", "none"]
-    suffix = os.environ.get("OPALFLOW_SUFFIX") or None if suffix is None else suffix or None
+    suffix = effective_suffix(suffix)
     if suffix:
         args += accelerator_args(suffix, gpu=suffix == "kk" and _kokkos_on_gpu())
     first = not _STARTED
