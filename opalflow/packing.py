@@ -43,7 +43,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+from opalflow.jit import njit
 
 from opalflow.lammps.engine import new_lammps
 from opalflow.lammps.syntax import num

@@ -99,6 +99,58 @@ def test_assembled_blocks_are_the_operators_matrix():
         assert np.abs(A - decoupled(K[np.ix_(dofs, dofs)], mask.ravel())).max() < 1e-12 * np.abs(K).max()
 
 
+def test_the_sorted_layout_and_the_kernels_are_the_same_arrays(monkeypatch):
+    """block_layout by numpy's stable sort (small networks) and by the numba kernel (large ones) give the same
+    (indptr, indices, pos), two bonds between one pair in bond order; and the direct factor of the whole K
+    on its free dofs solves what the decoupled K solves."""
+    from opalflow.bpm import static
+    from opalflow.bpm.stiffness import BondNetwork
+    from opalflow.linalg.direct import Factor
+
+    rng = np.random.default_rng(3)
+    n, m = 300, 1500
+    i = rng.integers(0, n - 1, m)
+    j = np.maximum(i + 1, rng.integers(0, n, m))
+    i, j = np.concatenate([i, i[:7]]), np.concatenate([j, j[:7]])          # seven pairs bonded twice
+    nv = rng.normal(size=(len(i), 3))
+    nv /= np.linalg.norm(nv, axis=1)[:, None]
+    ones = np.ones(len(i))
+    net = BondNetwork(n, i, j, nv, ones, ones, 0.3 * ones, 0.1 * ones, 0.1 * ones)
+    by_sort = static.block_layout(net)
+    monkeypatch.setattr(static, "LAYOUT_SORT_MAX_BONDS", 0)
+    by_kernel = static.block_layout(net)
+    assert [a.dtype for a in by_sort] == [a.dtype for a in by_kernel]
+    assert all(np.array_equal(a, b) for a, b in zip(by_sort, by_kernel))
+    free = np.ones(6 * n, bool)
+    free[:60] = False
+    b = np.where(free, rng.normal(size=6 * n), 0.0)
+    whole, decoupled = static.block_matrix(net)[0], static.block_matrix(net, free)[0]
+    x = Factor(whole, free).solve(b)
+    assert np.abs(x[~free]).max() == 0.0
+    assert np.allclose(x, Factor(decoupled).solve(b), rtol=0, atol=1e-9 * np.abs(x).max())
+
+
+def test_bond_forces_by_numpy_and_by_the_kernel_agree(monkeypatch):
+    """BondNetwork.bond_forces by numpy (small networks) and by the numba pass (large ones): the same F for
+    random displacements, rotations and a per-bond stretch, and F is what the operator's matrix applies."""
+    from opalflow.bpm import stiffness
+
+    s, coeffs = cluster()
+    net = stiffness_network(s, coeffs)
+    rng = np.random.default_rng(5)
+    u, theta, stretch = rng.normal(size=(6, 3)), rng.normal(size=(6, 3)), rng.normal(size=(len(net.L), 3))
+    by_numpy = [net.bond_forces(u, theta), net.bond_forces(u, theta, stretch)]
+    monkeypatch.setattr(stiffness, "NUMPY_MAX_BONDS", -1)
+    by_kernel = [net.bond_forces(u, theta), net.bond_forces(u, theta, stretch)]
+    for a, b in zip(by_numpy, by_kernel):
+        assert np.abs(a - b).max() < 1e-13 * np.abs(b).max()
+    f, _ = net.forces(u, theta)             # f_j += F, f_i -= F
+    tally = np.zeros((6, 3))
+    np.add.at(tally, net.j, by_numpy[0])
+    np.add.at(tally, net.i, -by_numpy[0])
+    assert np.abs(tally - f).max() < 1e-12 * np.abs(f).max()
+
+
 @pytest.mark.parametrize("mode", ["kr", "ks", "kt", "kb"])
 def test_each_bond_mode_alone_and_the_error_falls_with_the_amplitude(tmp_path, mode):
     """One bond mode at a time (the other three stiffnesses zero): LAMMPS's forces and torques against

@@ -71,7 +71,7 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
+from opalflow.jit import njit
 
 from opalflow.bpm.contacts import Contacts, joined
 from opalflow.bpm.loading import Supports

@@ -34,7 +34,7 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
+from opalflow.jit import njit
 
 from opalflow.bpm.loading import Supports
 from opalflow.bpm.spec import STATIC_SOLVERS as SOLVERS
@@ -50,6 +50,8 @@ from opalflow.spec import InputError
 #: bench/results/static_quickstart.json
 DIRECT_MAX_DOFS = 100_000
 AMG_MAX_BONDS = 200_000
+#: :func:`block_layout` by numpy's sort up to this many bonds (the direct solver's sizes), numba's kernel above
+LAYOUT_SORT_MAX_BONDS = 200_000
 #: CG's energy stop (:class:`opalflow.linalg.krylov.Stop`) in static solves: E to 1e-7 of the exact (quickstart at d = 30 nm,
 #: block-amg: 49 iterations and E within 3e-8 of the factor's, where the residual rule 1e-6 takes 70)
 ENERGY_TOL = 1e-7
@@ -158,7 +160,11 @@ def solve_compression(net: BondNetwork, positions: np.ndarray, supports: Support
     held = supports.without(loose)
     x_p = strain * held.drive
     free = ~held.held.ravel()
-    K_xp = net.matvec(x_p.ravel())
+    prepared = Prepared(solver, net, free, positions)
+    setup = prepared.setup_seconds
+    if solver == "direct":
+        say(f"static solve: factorised in {setup:.1f} s ({prepared.threads} threads)")
+    K_xp = prepared.matvec(x_p.ravel())
     rhs = np.where(free, -K_xp, 0.0)
     stop = Stop(rtol, maxiter, energy_tol, 0.5 * float(x_p.ravel() @ K_xp))
     history: list[float] = []
@@ -187,13 +193,9 @@ def solve_compression(net: BondNetwork, positions: np.ndarray, supports: Support
         say(f"static solve: iteration {k}, relative residual {r:.2e} (target {rtol:g}{energy}), {rate:.2f} it/s"
             f"{left}")
 
-    prepared = Prepared(solver, net, free, positions)
-    setup = prepared.setup_seconds
-    if solver == "direct":
-        say(f"static solve: factorised in {setup:.1f} s ({prepared.threads} threads)")
     x_f, iterations = prepared.solve(rhs, stop, progress)
     x = x_p.ravel() + np.where(free, x_f, 0.0)
-    reaction = net.matvec(x)                      # K x: the force the supports apply, zero elsewhere
+    reaction = prepared.matvec(x)                 # K x: the force the supports apply, zero elsewhere
     # 2 W / (A H e^2), W = 1/2 x^T K x
     modulus = float(x @ reaction) / (supports.area_nm2 * supports.gauge_nm * strain ** 2)
     x = x.reshape(n, 6)
@@ -280,7 +282,9 @@ class Prepared:
     """``solver`` set up once for the network with free dofs ``free`` (bool (6 N,)): the assembled matrix,
     the AMG hierarchy or the factor, reused by every loading of the sample (the stiffness tensor's six).
     ``solve(b, stop, progress)`` -> (x, iterations) for ``b`` full, zero on prescribed dofs; both run
-    under the threads that suit the solver (:func:`solver_threads`)."""
+    under the threads that suit the solver (:func:`solver_threads`).  ``matvec(x)``: K x on all dofs (the
+    load vector of prescribed displacements, the reaction), from the direct solver's assembled K, else the
+    bond operator (:meth:`BondNetwork.matvec`)."""
 
     def __init__(self, solver: str, net: BondNetwork, free: np.ndarray, positions: np.ndarray):
         from threadpoolctl import threadpool_limits
@@ -290,7 +294,7 @@ class Prepared:
         prepare = {"direct": _prepare_direct, "amg": _prepare_amg, "block-amg": _prepare_block_amg,
                    "cg": _prepare_cg, "cg-jax": _prepare_cg_jax}[solver]
         with threadpool_limits(limits=self.threads):
-            self._solve = prepare(net, free, positions)
+            self._solve, self.matvec = prepare(net, free, positions)
         self.setup_seconds = time.perf_counter() - t
 
     def solve(self, b: np.ndarray, stop: Stop, progress) -> tuple[np.ndarray, int]:
@@ -301,16 +305,19 @@ class Prepared:
 
 
 def _prepare_direct(net, free, positions):
-    """K (prescribed dofs decoupled) factorised (:class:`opalflow.linalg.direct.Factor`); each solve one pair of triangular solves:
-    no iterations, a residual at round-off (checked by the caller)."""
-    factor = Factor(block_matrix(net, free)[0])
-    return lambda b, stop, progress: (factor.solve(b), 1)
+    """K assembled and factorised on its free dofs (:class:`opalflow.linalg.direct.Factor`); each solve one pair
+    of triangular solves: no iterations, a residual at round-off (checked by the caller).  K's own products
+    serve for the load vector and the reaction: a small sample's static solve calls no numba kernel (numba's
+    import and first kernel load, 0.5 s, were a third of the whole command at d = 60 nm)."""
+    K = block_matrix(net)[0]
+    factor = Factor(K, free)
+    return (lambda b, stop, progress: (factor.solve(b), 1)), (lambda x: K @ x)
 
 
 def _prepare_amg(net, free, positions):
     """K assembled (:func:`particle_amg`'s), one V-cycle of its AMG per CG iteration."""
     K, vcycle = particle_amg(net, free, positions)
-    return lambda b, stop, progress: pcg(lambda v: K @ v, vcycle, b, stop, progress)
+    return (lambda b, stop, progress: pcg(lambda v: K @ v, vcycle, b, stop, progress)), net.matvec
 
 
 def particle_amg(net: BondNetwork, free: np.ndarray, positions: np.ndarray):
@@ -376,9 +383,22 @@ def block_layout(net: BondNetwork):
     """Where the blocks of K lie in a block sparse row (BSR) matrix of one block per particle pair:
     (indptr, indices, pos), ``pos`` the storage slot of each particle's diagonal block (first N), each bond's
     (i, j) block (next M) and its (j, i) block (last M), rows and columns in order (a canonical matrix; two
-    bonds between one pair in bond order).  :func:`_layout`: a counting sort by row and an insertion sort
-    of each row's few columns (0.1 s at 1.8 M bonds where numpy's lexsort of all entries took 0.8)."""
-    return _layout(net.n_particles, net.i, net.j)
+    bonds between one pair in bond order).  Up to LAYOUT_SORT_MAX_BONDS bonds numpy's stable sort of the
+    entries (0.01 s at d = 60 nm: a small sample's direct solve then calls no numba kernel, whose import and
+    first load cost 0.5 s, :func:`_prepare_direct`); above, :func:`_layout`'s counting sort by row and
+    insertion sort of each row's few columns (0.8 s at the paper's 17.5 M bonds where the sort took 11.7).
+    The two give the same arrays (tests/test_stiffness.py)."""
+    n = net.n_particles
+    if len(net.i) > LAYOUT_SORT_MAX_BONDS:
+        return _layout(n, net.i, net.j)
+    diag = np.arange(n, dtype=np.int64)
+    rows = np.concatenate([diag, net.i, net.j])
+    cols = np.concatenate([diag, net.j, net.i])
+    order = np.argsort(rows * n + cols, kind="stable")
+    pos = np.empty(len(order), np.int64)
+    pos[order] = np.arange(len(order))
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=n))])
+    return indptr, cols[order].astype(np.int32), pos
 
 
 @njit(cache=True, nogil=True)
@@ -556,7 +576,7 @@ def _prepare_cg(net, free, positions, use_jax=False):
     def solve(b, stop, progress):
         x, iterations = pcg(matvec, precondition, array(b), stop, progress, dot=dot)
         return np.asarray(x), iterations
-    return solve
+    return solve, net.matvec
 
 
 def _prepare_cg_jax(net, free, positions):
@@ -573,7 +593,7 @@ def _prepare_block_amg(net, free, positions):
 
     def solve(b, stop, progress):
         return pcg(matvec, precondition, np.asarray(b), stop, progress)
-    return solve
+    return solve, net.matvec
 
 
 def block_amg_preconditioner(net: BondNetwork, free: np.ndarray, positions: np.ndarray):

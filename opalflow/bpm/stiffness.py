@@ -37,12 +37,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+from opalflow.jit import njit
 
 from opalflow.materials import BondCoefficients
 from opalflow.structure import Structure
 
 
+#: :meth:`BondNetwork.bond_forces` by numpy up to this many bonds, by the numba kernel above
+NUMPY_MAX_BONDS = 200_000
 #: an empty (0, 3) array: no per-bond stretch, no per-bond forces kept (the kernel's "none")
 _NO_ROWS = np.zeros((0, 3))
 
@@ -64,9 +66,16 @@ class BondNetwork:
 
     def bond_forces(self, u: np.ndarray, theta: np.ndarray, stretch: np.ndarray | None = None) -> np.ndarray:
         """The force F of each bond (M, 3), LAMMPS's ``force1on2``: -F on particle i, +F on j.  ``stretch``
-        (M, 3) adds to each bond's u_i - u_j (a macroscopic strain through the periodic images).  From the
-        numba pass of :func:`_bond_loads` (0.05 s at 1.8 M bonds where numpy's gathers and cross product took
-        0.2)."""
+        (M, 3) adds to each bond's u_i - u_j (a macroscopic strain through the periodic images).  Up to
+        NUMPY_MAX_BONDS bonds numpy's gathers and cross product of the module docstring's F (a small sample's
+        static run then never imports numba: 0.5 s of its 1.2); above, the numba pass of :func:`_bond_loads`
+        (0.05 s at 1.8 M bonds where numpy's took 0.2).  The two agree (tests/test_stiffness.py)."""
+        if len(self.L) <= NUMPY_MAX_BONDS:
+            du = u[self.i] - u[self.j] + (0.0 if stretch is None else stretch)
+            n, a_s = self.n, self.a_s[:, None]
+            n_du = np.einsum("ij,ij->i", n, du)[:, None]
+            return (self.a_r[:, None] - a_s) * n_du * n + a_s * du + 0.5 * a_s * self.L[:, None] * np.cross(
+                n, theta[self.i] + theta[self.j])
         F = np.empty((len(self.L), 3))
         self._loads(np.hstack([u, theta]), _NO_ROWS if stretch is None else stretch, F)
         return F

@@ -31,9 +31,10 @@ class Factor:
     nested-dissection ordering, supernodes with BLAS 3, the threads of :func:`thread_budget`).  Measured on the
     quickstart's network at 140 k dofs: factor 4.1 s on 2 cores where CHOLMOD through cholespy (no METIS,
     simplicial) took 96 s (bench/results/static_quickstart.json).  ``solve`` takes one right-hand side (n,) or
-    several (n, k)."""
+    several (n, k).  ``free`` (bool, (n,)): the factor of K's free-dof block, each prescribed dof decoupled
+    with a unit diagonal (b zero there gives x zero there), so that K itself can stay whole for products."""
 
-    def __init__(self, K):
+    def __init__(self, K, free: np.ndarray | None = None):
         import scipy.sparse as sp
         from threadpoolctl import threadpool_limits
 
@@ -43,9 +44,14 @@ class Factor:
         rows = np.repeat(np.arange(K.shape[0], dtype=np.int32), np.diff(K.indptr))
         # the upper triangle without the zeros (decoupled prescribed dofs, the blocks' structural zeros: half
         # of the stored entries), straight from the sorted rows (scipy's triu goes through coordinates: 10x)
-        keep = (K.indices >= rows) & (K.data != 0)
+        data, keep = K.data, K.indices >= rows
+        if free is not None:
+            diagonal = K.indices == rows
+            data = np.where(diagonal & ~free[rows], 1.0, data)
+            keep &= (free[rows] & free[K.indices]) | diagonal
+        keep &= data != 0
         indptr = np.concatenate([[0], np.cumsum(np.bincount(rows[keep], minlength=K.shape[0]))])
-        self.U = sp.csr_matrix((K.data[keep], K.indices[keep], indptr), shape=K.shape)
+        self.U = sp.csr_matrix((data[keep], K.indices[keep], indptr), shape=K.shape)
         self.U.has_sorted_indices = True
         self.size = self.U.shape[0]
         self.pardiso = pypardiso.PyPardisoSolver(mtype=2)          # real symmetric positive definite

@@ -9,7 +9,7 @@ from __future__ import annotations
 import functools
 
 import numpy as np
-from numba import njit
+from opalflow.jit import njit
 
 
 def amg_preconditioner(K, B):
