@@ -136,6 +136,28 @@ def test_study_specs_validate_and_build_their_jobs():
     assert studies.job_spec(paper, []).packing.diameter_nm == 15.0
 
 
+@pytest.mark.parametrize("name", ["porosity", "porosity_strength", "coating_strength", "coating", "convergence",
+                                  "bulk_silica", "calibrate_silica", "fracture_sides"])
+def test_a_study_at_paper_scale_runs_the_papers_sample_not_the_coarse_one(name):
+    """study.paper_scale = true: the jobs are opal_fcc's sample (d = 15 nm, 4 x 2 cells, its tile) with
+    study.paper_set, not study.set (whose coarse d = 110 or 30 nm undid the paper's sample, and whose tile
+    of 380 nm at d = 110 nm was refused: `plan porosity --set study.paper_scale=true` failed)."""
+    from opalflow.runs.plan import jobs_of
+
+    spec = load_spec(WORKFLOWS / f"{name}.toml", ["study.paper_scale=true"])
+    paper = load_spec(WORKFLOWS / "opal_fcc.toml")
+    coarse = studies.job_spec(load_spec(WORKFLOWS / f"{name}.toml"), [])
+    jobs = jobs_of(spec)                        # every job's spec made and validated
+    job = studies.job_spec(spec, [])
+    assert (job.pores.cells_x, job.pores.cells_y) == (paper.pores.cells_x, paper.pores.cells_y)
+    assert job.packing.diameter_nm == 15.0 != coarse.packing.diameter_nm
+    if name not in ("bulk_silica", "convergence"):        # (these two set each job's diameter)
+        assert job.packing.tile_nm == paper.packing.tile_nm
+        assert all(j.spec.packing.diameter_nm == 15.0 for j in jobs)
+    if any(s.startswith("compression.strain_max") for s in spec.study.set):
+        assert job.compression.strain_max == coarse.compression.strain_max
+
+
 def test_bad_study_field_is_one_line(tmp_path, capsys):
     from conftest import assert_refused
 

@@ -26,7 +26,7 @@ from opalflow.runs.record import finish
 from opalflow.store import new_figure, save_figure
 from opalflow.registry import resolve
 from opalflow.studies.spec import STUDY_TYPES, StudyWorkflow
-from opalflow.studies.sweep import Job, failed_jobs, fmt_value, job_spec, label_number, sweep
+from opalflow.studies.sweep import Job, failed_jobs, fmt_value, job_spec, label_number, study_set, sweep
 from opalflow.version import __version__
 
 
@@ -588,7 +588,7 @@ def run(spec: StudyWorkflow, out: Path, say=print, executor=None) -> dict:
                     "executor": spec.executor.type, "spec": spec.to_dict()})
     report = [f"# Study: {spec.study.type} ({spec.name})", "",
               f"Base workflow `{spec.study.paper_base if spec.study.paper_scale else spec.study.base}`"
-              + (f" with {', '.join(spec.study.set)}" if spec.study.set else "") + "; jobs in `jobs/` (cached by "
+              + (f" with {', '.join(study_set(spec.study))}" if study_set(spec.study) else "") + "; jobs in `jobs/` (cached by "
               "spec hash: a rerun does only what is missing).", "", *body, "",
               f"Wall time of this command: {summary['wall_s']:.0f} s (jobs already finished cost nothing)."]
     return finish(out, summary, "\n".join(report))

@@ -26,7 +26,7 @@ class StudyType:
 
 
 #: the fields every study reads
-COMMON = ("type", "base", "paper_base", "paper_scale", "set", "np", "method")
+COMMON = ("type", "base", "paper_base", "paper_scale", "set", "paper_set", "np", "method")
 _RUN, _AEROGEL = "opalflow.studies.run", "opalflow.studies.aerogel"
 STUDY_TYPES = {t.name: t for t in (
     StudyType("calibration", f"{_RUN}:calibration", f"{_RUN}:calibration_jobs",
@@ -59,6 +59,9 @@ class StudySpec:
     paper_base: str = "opal_fcc"  # the base taken instead when paper_scale is true
     paper_scale: bool = False    # true: the jobs at the paper's resolution (paper_base), hours to days
     set: list[str] = field(default_factory=list)  # "section.key=value" overrides applied to every job's base
+    #: at paper scale, the overrides applied instead of ``set`` (whose coarse diameter, tile and cells would
+    #: undo the paper's sample): the run's settings alone, e.g. the strain to reach
+    paper_set: list[str] = field(default_factory=list)
     np: int = 1                  # MPI ranks per job (the [executor] section says where the jobs run)
     #: dynamic: LAMMPS; static: moduli by one linear solve per job (no strength; not calibration);
     #: quasistatic: E and strength at zero rate by the event-driven fracture method

@@ -14,13 +14,14 @@ from opalflow.runs.executors import run_jobs
 from opalflow.runs.jobs import Job, job_record
 from opalflow.spec import SpecError, WorkflowSpec
 
-__all__ = ["Job", "job_spec", "sweep", "failed_jobs", "fmt_value", "label_number"]
+__all__ = ["Job", "job_spec", "study_set", "sweep", "failed_jobs", "fmt_value", "label_number"]
 
 
 # ----------------------------------------------------------------------------- a study's jobs
 def job_spec(spec, overrides: list[str]) -> WorkflowSpec:
     """A study's (:class:`opalflow.studies.spec.StudyWorkflow`) base workflow with the study's and the
-    job's overrides."""
+    job's overrides: ``study.base`` and ``study.set``, or at paper scale ``study.paper_base`` and
+    ``study.paper_set``."""
     st = spec.study
     base = st.paper_base if st.paper_scale else st.base
     path = WORKFLOWS / f"{base}.toml"
@@ -28,7 +29,12 @@ def job_spec(spec, overrides: list[str]) -> WorkflowSpec:
         raise SpecError("study.paper_base" if st.paper_scale else "study.base", base,
                         f"no workflow {path.name} in {WORKFLOWS}")
     linear = [f"compression.method={st.method}", "compression.drop_loose=true"] if METHODS[st.method].linear else []
-    return registry.load_spec(path, [*linear, *st.set, *overrides])
+    return registry.load_spec(path, [*linear, *study_set(st), *overrides])
+
+
+def study_set(st) -> list[str]:
+    """The overrides every job of study section ``st`` gets: ``set``, or ``paper_set`` at paper scale."""
+    return st.paper_set if st.paper_scale else st.set
 
 
 def sweep(spec, out: Path, jobs: list[Job], say) -> dict[str, dict]:
