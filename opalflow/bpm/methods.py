@@ -160,7 +160,8 @@ class Quasistatic(Method):
               "is the static method's: the quasi-static re-solves are set by compression.resolver")
 
     def price(self, spec, s):
-        return {"solver": "amg"}            # priced as its first solve (the events are not known)
+        # by the measured runs with this breaking rule and event tolerance (or as its first solve)
+        return {"solver": "amg", "breaking": spec.bonds.breaking, "event_tolerance": spec.compression.event_tolerance}
 
 
 #: ``compression.method`` -> method

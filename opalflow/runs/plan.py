@@ -10,6 +10,10 @@ this kind of machine (``bench/bench_cost.py`` -> ``bench/results/cost_laws.json`
   ``bench/results/static_quickstart.json`` (d = 60-20 nm), plus the outputs (a + b * bonds);
 - dynamic run: steps * bonds * t_bond (bpm/rotational; bpm/spring ``spring_factor`` times cheaper per
   bond), divided by the MPI ranks at the measured efficiency, plus the analysis;
+- quasi-static run: the wall time and peak memory of the whole runs measured with the job's breaking rule
+  and event tolerance (``bench/results/quasistatic_scale.json``: the standard sample at d = 60-15 nm, the
+  fastest setting at each size), interpolated in bonds on log-log axes (extrapolated beyond by the end
+  segments), plus the build; where none was measured, its first solve (a lower bound);
 - peak memory: m0 + m1 * bonds per job (resident set of the job's process and its LAMMPS; for
   ``block-amg`` the solver's own law).
 
@@ -31,6 +35,7 @@ from opalflow.spec import SpecError
 
 LAWS = ROOT / "bench" / "results" / "cost_laws.json"
 SOLVERS = ROOT / "bench" / "results" / "static_quickstart.json"
+QUASISTATIC = ROOT / "bench" / "results" / "quasistatic_scale.json"
 #: SLURM asks for this much more than predicted (memory and time)
 MARGIN = 1.5
 
@@ -52,7 +57,41 @@ def laws() -> dict:
         p, logc = np.polyfit(np.log(b), np.log([r["total_s"] for r in mine]), 1)
         m1, m0 = np.polyfit(b, [1024 * r["peak_memory_GiB"] for r in mine], 1)
         law["solvers"][solver] = {"c": float(np.exp(logc)), "p": float(p), "m0_MiB": float(m0), "m1_MiB": float(m1)}
+    law["quasistatic"] = quasistatic_runs()
     return law
+
+
+def quasistatic_runs() -> dict[str, list[dict]]:
+    """"breaking rule, event tolerance" -> the fastest complete quasi-static run at each size (bonds, wall_s,
+    peak_MiB, events, diameter_nm), from bench/results/quasistatic_scale.json (none: {})."""
+    if not QUASISTATIC.exists():
+        return {}
+    best: dict[tuple, dict] = {}
+    for r in json.loads(QUASISTATIC.read_text())["rows"]:
+        if not r.get("complete") or not r.get("wall_s"):
+            continue
+        key = (f"{r.get('breaking', 'lammps')}, {r['tolerance']:g}", r["n_bonds"])
+        if key not in best or r["wall_s"] < best[key]["wall_s"]:
+            best[key] = {"bonds": r["n_bonds"], "wall_s": r["wall_s"], "events": r["events"],
+                         "diameter_nm": r["diameter_nm"],
+                         "peak_MiB": 1024 * r["peak_memory_GiB"] if r.get("peak_memory_GiB") else None}
+    runs: dict[str, list[dict]] = {}
+    for (setting, _), row in sorted(best.items(), key=lambda kv: kv[0][1]):
+        runs.setdefault(setting, []).append(row)
+    return runs
+
+
+def _loglog(x: float, xs: list[float], ys: list[float]) -> float:
+    """y at x by straight lines between the points (xs, ys) on log-log axes, the end segments beyond them
+    (one point: y itself)."""
+    import numpy as np
+
+    lx, ly = np.log(xs), np.log(ys)
+    if len(xs) == 1:
+        return float(ys[0])
+    k = int(np.clip(np.searchsorted(lx, np.log(x)) - 1, 0, len(xs) - 2))
+    slope = (ly[k + 1] - ly[k]) / (lx[k + 1] - lx[k])
+    return float(np.exp(ly[k] + slope * (np.log(x) - lx[k])))
 
 
 def jobs_of(spec) -> list[Job]:
@@ -66,7 +105,14 @@ def predict(facts: dict, law: dict, ranks: int = 1) -> dict:
     """Wall seconds, core-seconds and peak memory (MiB) of one job with these facts: the build as timed by
     the plan, plus the solve (static: the solver's law) or the time steps (dynamic), plus the outputs."""
     bonds = max(facts["n_bonds"], 1)
-    if facts["method"] in ("static", "quasistatic"):      # quasistatic: its first solve, a lower bound
+    runs = law.get("quasistatic", {}).get(f"{facts.get('breaking')}, {facts.get('event_tolerance', 0):g}")
+    if facts["method"] == "quasistatic" and runs:
+        with_memory = [r for r in runs if r["peak_MiB"]]
+        wall = facts["build_s"] + _loglog(bonds, [r["bonds"] for r in runs], [r["wall_s"] for r in runs])
+        mem = _loglog(bonds, [r["bonds"] for r in with_memory], [r["peak_MiB"] for r in with_memory])
+        return {"wall_s": wall, "core_s": wall * ranks, "peak_MiB": mem, "priced_by": "measured runs",
+                "events": round(_loglog(bonds, [r["bonds"] for r in runs], [r["events"] for r in runs]))}
+    if facts["method"] in ("static", "quasistatic"):      # quasistatic without measured runs: its first solve
         sv, st = law["solvers"][facts["solver"]], law["static"]
         wall = facts["build_s"] + sv["c"] * bonds ** sv["p"] + st["rest_s0"] + st["rest_s_per_bond"] * bonds
         mem = law["static_memory"]["m0_MiB"] + (law["static_memory"]["m1_MiB"] * bonds if facts["solver"] == "amg"
@@ -174,7 +220,12 @@ def plan_lines(p: dict) -> list[str]:
               "(~: job interpolated between built ones)",
               f"SLURM (x{MARGIN} margin): --array={s['array']} --ntasks={s['ntasks']} --mem={s['mem']} "
               f"--time={s['time_min']}  ([executor] type = \"slurm\", mem_gb, time_min)"]
-    if any(r["method"] == "quasistatic" for r in p["jobs"]):
+    if any(r["method"] == "quasistatic" and r.get("priced_by") for r in p["jobs"]):
+        lines.append(f"quasistatic jobs are priced by the whole runs measured with their breaking rule and event "
+                     f"tolerance ({QUASISTATIC.name}: the standard sample's events, ~"
+                     + ", ".join(f"{r['events']}" for r in p["jobs"] if r.get("events")) + " here; a study's "
+                     "pores or coatings change how many events a run takes)")
+    if any(r["method"] == "quasistatic" and not r.get("priced_by") for r in p["jobs"]):
         lines.append("quasistatic jobs are priced as their first solve, a lower bound: each broken bond costs a "
                      "re-solve and their number is not known before the run")
     return lines
