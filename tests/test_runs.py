@@ -312,19 +312,21 @@ def test_plan_prices_a_study_without_running_it(tmp_path, capsys, monkeypatch):
 
 def test_a_quasistatic_job_is_priced_by_the_runs_measured_with_its_rule():
     """At a measured size the plan gives the measured run (bench/results/quasistatic_scale.json: the paper's
-    sample, the paper's rule: 1315 s, 10.95 GiB, 143 events); between two sizes it lies between them."""
-    from opalflow.runs.plan import laws, predict
+    sample with the paper's rule, 143 events; with LAMMPS's, 667); between two sizes it lies between them."""
+    from opalflow.runs.plan import QUASISTATIC, laws, predict
 
+    rows = [r for r in json.loads(QUASISTATIC.read_text())["rows"] if r["diameter_nm"] == 15.0 and r.get("complete")
+            and r["tolerance"] == 0.05]
     law = laws()
-    facts = {"method": "quasistatic", "solver": "amg", "breaking": "musen", "event_tolerance": 0.05, "build_s": 0.0}
-    paper = predict({**facts, "n_bonds": 17480942}, law)
-    assert paper["wall_s"] == pytest.approx(1315.309, rel=1e-3) and paper["events"] == 143
-    assert paper["peak_MiB"] == pytest.approx(10.95 * 1024, rel=1e-3)
-    d30 = predict({**facts, "n_bonds": 1810179}, law)
-    d20 = predict({**facts, "n_bonds": 6_000_000}, law)
-    assert d30["wall_s"] < d20["wall_s"] < paper["wall_s"] and d30["events"] <= d20["events"] <= 143
-    lammps_rule = predict({**facts, "breaking": "lammps", "n_bonds": 17480942}, law)
-    assert lammps_rule["wall_s"] == pytest.approx(2624.864, rel=1e-3) and lammps_rule["events"] == 667
+    facts = {"method": "quasistatic", "solver": "amg", "event_tolerance": 0.05, "build_s": 0.0}
+    for rule, events in (("musen", 143), ("lammps", 667)):
+        (run,) = [r for r in rows if r.get("breaking", "lammps") == rule]
+        paper = predict({**facts, "breaking": rule, "n_bonds": run["n_bonds"]}, law)
+        assert paper["wall_s"] == pytest.approx(run["wall_s"], rel=1e-6) and paper["events"] == run["events"] == events
+        assert paper["peak_MiB"] == pytest.approx(1024 * run["peak_memory_GiB"], rel=1e-6)
+        d30 = predict({**facts, "breaking": rule, "n_bonds": 1810179}, law)
+        d20 = predict({**facts, "breaking": rule, "n_bonds": 6_000_000}, law)
+        assert d30["wall_s"] < d20["wall_s"] < paper["wall_s"] and d30["events"] <= d20["events"] <= events
 
 
 def test_a_relative_out_folder(tmp_path, monkeypatch, capsys):
