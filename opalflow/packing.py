@@ -43,8 +43,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from opalflow.jit import njit
 
+from opalflow.jit import njit
 from opalflow.lammps.engine import new_lammps
 from opalflow.lammps.syntax import num
 from opalflow.neighbors import pairs_within, separations

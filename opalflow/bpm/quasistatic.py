@@ -71,7 +71,6 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from opalflow.jit import njit
 
 from opalflow.bpm.contacts import Contacts, joined
 from opalflow.bpm.loading import Supports
@@ -79,6 +78,7 @@ from opalflow.bpm.spec import RESOLVERS
 from opalflow.bpm.static import (DIRECT_MAX_DOFS, block_amg_preconditioner, block_matrix, bond_blocks, loose_particles,
                                   particle_amg)
 from opalflow.bpm.stiffness import BondNetwork
+from opalflow.jit import njit
 from opalflow.linalg.direct import Factor
 from opalflow.linalg.krylov import Stop, pcg
 from opalflow.spec import InputError

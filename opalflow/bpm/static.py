@@ -34,11 +34,11 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from opalflow.jit import njit
 
 from opalflow.bpm.loading import Supports
 from opalflow.bpm.spec import STATIC_SOLVERS as SOLVERS
 from opalflow.bpm.stiffness import BondNetwork
+from opalflow.jit import njit
 from opalflow.linalg.direct import Factor, solver_threads
 from opalflow.linalg.krylov import Stop, pcg
 from opalflow.linalg.multigrid import amg_preconditioner

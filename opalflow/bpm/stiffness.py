@@ -37,8 +37,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from opalflow.jit import njit
 
+from opalflow.jit import njit
 from opalflow.materials import BondCoefficients
 from opalflow.structure import Structure
 

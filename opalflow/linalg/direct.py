@@ -26,6 +26,7 @@ def solver_threads(solver: str) -> int:
     from every thread it is given (x1.8 at 140 k dofs on 2 cores): the whole budget."""
     return thread_budget() if solver == "direct" else 1
 
+
 #: PARDISO's fill-reducing ordering: minimum degree up to this many dofs, METIS nested dissection above.
 #: Analysis + factor, quickstart networks on 2 cores: 15 k dofs 0.10 + 0.15 s against METIS's 0.18 + 0.16;
 #: 39 k dofs 0.39 + 1.73 s against 0.59 + 0.95; 141 k dofs 1.5 + 11.7 s against 2.5 + 8.5
@@ -35,8 +36,8 @@ AMD_MAX_DOFS = 20_000
 class Factor:
     """A sparse Cholesky (LL^T) factor of a symmetric positive definite K: MKL PARDISO (pypardiso; METIS
     nested-dissection ordering, minimum degree up to AMD_MAX_DOFS; supernodes with BLAS 3, the threads of
-    :func:`thread_budget`).  Measured on the quickstart's network at 140 k dofs: factor 4.1 s on 2 cores where CHOLMOD through cholespy (no METIS,
-    simplicial) took 96 s (bench/results/static_quickstart.json).  ``solve`` takes one right-hand side (n,) or
+    :func:`thread_budget`).  Measured on the quickstart's network at 140 k dofs: factor 4.1 s on 2 cores where
+    CHOLMOD through cholespy (no METIS, simplicial) took 96 s (bench/results/static_quickstart.json).  ``solve`` takes one right-hand side (n,) or
     several (n, k).  ``free`` (bool, (n,)): the factor of K's free-dof block, each prescribed dof decoupled
     with a unit diagonal (b zero there gives x zero there), so that K itself can stay whole for products."""
 

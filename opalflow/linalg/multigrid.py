@@ -9,6 +9,7 @@ from __future__ import annotations
 import functools
 
 import numpy as np
+
 from opalflow.jit import njit
 
 
