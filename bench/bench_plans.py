@@ -1,5 +1,4 @@
-"""The paper's strength studies planned at its resolution (d = 15 nm) and at d = 20 nm: jobs, core-hours,
-memory, before anything runs.
+"""The paper's strength studies planned at its resolution (d = 15 nm) and at 20 nm, before anything runs.
 
     python bench/bench_plans.py [--sample 2]        # ~10 min on 2 cores: it builds the sampled jobs' structures
 
