@@ -105,18 +105,20 @@ def predict(facts: dict, law: dict, ranks: int = 1) -> dict:
     """Wall seconds, core-seconds and peak memory (MiB) of one job with these facts: the build as timed by
     the plan, plus the solve (static: the solver's law) or the time steps (dynamic), plus the outputs."""
     bonds = max(facts["n_bonds"], 1)
-    runs = law.get("quasistatic", {}).get(f"{facts.get('breaking')}, {facts.get('event_tolerance', 0):g}")
-    if facts["method"] == "quasistatic" and runs:
-        with_memory = [r for r in runs if r["peak_MiB"]]
-        wall = facts["build_s"] + _loglog(bonds, [r["bonds"] for r in runs], [r["wall_s"] for r in runs])
-        mem = _loglog(bonds, [r["bonds"] for r in with_memory], [r["peak_MiB"] for r in with_memory])
-        return {"wall_s": wall, "core_s": wall * ranks, "peak_MiB": mem, "priced_by": "measured runs",
-                "events": round(_loglog(bonds, [r["bonds"] for r in runs], [r["events"] for r in runs]))}
-    if facts["method"] in ("static", "quasistatic"):      # quasistatic without measured runs: its first solve
+    if facts["method"] in ("static", "quasistatic"):      # quasistatic: its first solve, unless measured runs
         sv, st = law["solvers"][facts["solver"]], law["static"]
         wall = facts["build_s"] + sv["c"] * bonds ** sv["p"] + st["rest_s0"] + st["rest_s_per_bond"] * bonds
         mem = law["static_memory"]["m0_MiB"] + (law["static_memory"]["m1_MiB"] * bonds if facts["solver"] == "amg"
                                                  else sv["m0_MiB"] + sv["m1_MiB"] * bonds)
+        runs = law.get("quasistatic", {}).get(f"{facts.get('breaking')}, {facts.get('event_tolerance', 0):g}")
+        if facts["method"] == "quasistatic" and runs:
+            sizes = [r["bonds"] for r in runs]
+            wall = facts["build_s"] + _loglog(bonds, sizes, [r["wall_s"] for r in runs])
+            with_memory = [r for r in runs if r["peak_MiB"]]
+            if with_memory:
+                mem = _loglog(bonds, [r["bonds"] for r in with_memory], [r["peak_MiB"] for r in with_memory])
+            return {"wall_s": wall, "core_s": wall * ranks, "peak_MiB": mem, "priced_by": "measured runs",
+                    "events": max(1, round(_loglog(bonds, sizes, [r["events"] for r in runs])))}
     else:
         dyn = law["dynamic"]
         per_bond = dyn["s_per_bond_step"] / (dyn["spring_factor"] if facts.get("bond_model") == "spring" else 1.0)
@@ -221,10 +223,10 @@ def plan_lines(p: dict) -> list[str]:
               f"SLURM (x{MARGIN} margin): --array={s['array']} --ntasks={s['ntasks']} --mem={s['mem']} "
               f"--time={s['time_min']}  ([executor] type = \"slurm\", mem_gb, time_min)"]
     if any(r["method"] == "quasistatic" and r.get("priced_by") for r in p["jobs"]):
-        lines.append(f"quasistatic jobs are priced by the whole runs measured with their breaking rule and event "
-                     f"tolerance ({QUASISTATIC.name}: the standard sample's events, ~"
-                     + ", ".join(f"{r['events']}" for r in p["jobs"] if r.get("events")) + " here; a study's "
-                     "pores or coatings change how many events a run takes)")
+        events = [r["events"] for r in p["jobs"] if "events" in r]
+        lines.append("quasistatic jobs are priced by the whole runs measured with their breaking rule and event "
+                     f"tolerance ({QUASISTATIC.name}: the standard sample's events, {min(events)}-{max(events)} "
+                     "here; a study's pores or coatings change how many events a run takes)")
     if any(r["method"] == "quasistatic" and not r.get("priced_by") for r in p["jobs"]):
         lines.append("quasistatic jobs are priced as their first solve, a lower bound: each broken bond costs a "
                      "re-solve and their number is not known before the run")
