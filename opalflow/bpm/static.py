@@ -37,7 +37,7 @@ import numpy as np
 
 from opalflow.bpm.loading import Supports
 from opalflow.bpm.spec import STATIC_SOLVERS as SOLVERS
-from opalflow.bpm.stiffness import BondNetwork
+from opalflow.bpm.stiffness import BondNetwork, bond_force
 from opalflow.jit import njit
 from opalflow.linalg.direct import Factor, solver_threads
 from opalflow.linalg.krylov import Stop, pcg
@@ -539,10 +539,9 @@ def _operator(net: BondNetwork, free: np.ndarray, use_jax: bool, chunk: int = 1 
 
         def step(acc, b):
             i, j, nv, L, a_r, a_s, bend, twist = b
-            a_r, a_s, bend, twist = a_r[:, None], a_s[:, None], bend[:, None], twist[:, None]
-            half = 0.5 * a_s * L[:, None]
             du, st, dt = u[i] - u[j], th[i] + th[j], th[i] - th[j]
-            F = (a_r - a_s) * jnp.sum(nv * du, 1, keepdims=True) * nv + a_s * du + half * jnp.cross(nv, st)
+            F = bond_force(jnp, nv, L, a_r, a_s, du, st)
+            half, bend, twist = 0.5 * a_s[:, None] * L[:, None], bend[:, None], twist[:, None]
             Ts = half * jnp.cross(nv, du) - 0.5 * half * L[:, None] * (st - jnp.sum(nv * st, 1, keepdims=True) * nv)
             n_dt = jnp.sum(nv * dt, 1, keepdims=True) * nv
             Bd = bend * (dt - n_dt) + twist * n_dt
