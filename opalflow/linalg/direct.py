@@ -37,9 +37,10 @@ class Factor:
     """A sparse Cholesky (LL^T) factor of a symmetric positive definite K: MKL PARDISO (pypardiso; METIS
     nested-dissection ordering, minimum degree up to AMD_MAX_DOFS; supernodes with BLAS 3, the threads of
     :func:`thread_budget`).  Measured on the quickstart's network at 140 k dofs: factor 4.1 s on 2 cores where
-    CHOLMOD through cholespy (no METIS, simplicial) took 96 s (bench/results/static_quickstart.json).  ``solve`` takes one right-hand side (n,) or
-    several (n, k).  ``free`` (bool, (n,)): the factor of K's free-dof block, each prescribed dof decoupled
-    with a unit diagonal (b zero there gives x zero there), so that K itself can stay whole for products."""
+    CHOLMOD through cholespy (no METIS, simplicial) took 96 s (bench/results/static_quickstart.json).
+    ``solve`` takes one right-hand side (n,) or several (n, k).  ``free`` (bool, (n,)): the factor of K's
+    free-dof block, each prescribed dof decoupled with a unit diagonal (b zero there gives x zero there), so
+    that K itself can stay whole for products."""
 
     def __init__(self, K, free: np.ndarray | None = None):
         import scipy.sparse as sp
