@@ -205,8 +205,13 @@ def test_isotropic_average_of_known_tensors():
     assert iso["voigt"]["G"] > iso["reuss"]["G"] and iso["anisotropy_index"] == pytest.approx(0.24, abs=0.01)
 
 
-def test_bond_energy_parts_sum_to_the_quadratic_form():
+@pytest.mark.parametrize("chunk", [1 << 20, 7])
+def test_bond_energy_parts_sum_to_the_quadratic_form(chunk, monkeypatch):
+    """... whether the bonds are summed in one piece or in pieces of ``chunk`` (ENERGY_CHUNK)."""
+    from opalflow.bpm import stiffness
     from opalflow.bpm.stiffness import BondNetwork
+
+    monkeypatch.setattr(stiffness, "ENERGY_CHUNK", chunk)
 
     rng = np.random.default_rng(0)
     n, m = 30, 60

@@ -65,8 +65,10 @@ def test_matrix_is_symmetric_with_six_rigid_body_modes(which):
     net = which(s, coeffs)
     K = np.column_stack([net.matvec(e) for e in np.eye(36)])
     assert np.allclose(K, K.T, atol=1e-12 * np.abs(K).max())
-    from opalflow.bpm.static import diagonal_blocks
+    from opalflow.bpm.static import diagonal_blocks, rotation_diagonal
     assert np.allclose(diagonal_blocks(net), np.array([K[6 * k:6 * k + 6, 6 * k:6 * k + 6] for k in range(6)]))
+    # (block-amg's rotational block Jacobi: the kernel's blocks are K's)
+    assert np.allclose(rotation_diagonal(net), np.array([K[6 * k + 3:6 * k + 6, 6 * k + 3:6 * k + 6] for k in range(6)]))
     # rigid translations and rotations: u = t + w x (x - c), theta = w
     c = s.positions.mean(axis=0)
     for k in range(6):
