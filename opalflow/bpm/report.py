@@ -212,11 +212,11 @@ def git_commit() -> str:
 def provenance_group(h, info: dict) -> None:
     """results.h5's ``provenance`` group, every method's: the spec, LAMMPS's version, opalflow's commit, the
     seeds and the run's facts (``info``: the spec under ``"spec"``, the rest JSON)."""
-    from opalflow.lammps.engine import lammps_info
+    from opalflow.lammps.engine import lammps_version
 
     p = h.create_group("provenance")
     p.attrs["spec"] = json.dumps(info["spec"])
-    p.attrs["lammps_version"] = lammps_info()["version"]
+    p.attrs["lammps_version"] = lammps_version()
     p.attrs["git_commit"] = git_commit()
     p.attrs["seeds"] = json.dumps({name: section["seed"] for name, section in info["spec"].items()
                                    if isinstance(section, dict) and "seed" in section})
