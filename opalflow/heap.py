@@ -9,8 +9,12 @@ touch.  On this machine (a VM) that costs up to 0.6-0.7 s per 78 MB (measured: `
 quasi-static events make such temporaries at every iteration.  With the threshold at 1 GiB and the
 heap not trimmed below 2 GiB, freed memory is reused: the paper's static command on one cached structure
 took 4 min 37 s without (solve 134 s, set-up 87 s), 3 min 21 s with the thresholds set by GLIBC_TUNABLES
-(95 s, 68 s) and 3 min 29 s by this module (bench/results/static_opal_fcc_command.json); peak resident
-memory 9.04 -> 9.1-9.5 GB.  The paper's quasi-static run (its rule): 21 min 56 s -> 14 min 38 s.
+(95 s, 68 s) and 3 min 29 s by this module; peak resident memory 9.04 -> 9.1-9.5 GB.  The paper's
+quasi-static run (its rule): 21 min 56 s -> 14 min 38 s.  The threshold is now mallopt's largest (2 GiB - 1,
+an int): the block-amg set-up of the paper's sample makes temporaries of K_uu's 1.3 GB of blocks (pyamg's
+``abs(S)``, ``omega * D^-1 S``), which above 1 GiB were mapped afresh (``np.abs`` of 1.4 GB: 0.63-0.75 s
+each time, 0.1 s into reused memory); set-up 71 -> 44 s, peak resident memory 8.7 -> 8.9 GB
+(bench/results/static_opal_fcc_command.json).
 
 Huge pages: numpy advises every array of 4 MB or more into transparent huge pages (``madvise(MADV_HUGEPAGE)``).
 Where the kernel's THP ``defrag`` setting is ``always``, ``madvise`` or ``defer+madvise`` (the kernel default is
@@ -33,7 +37,7 @@ from pathlib import Path
 
 #: mallopt's parameters (malloc.h)
 M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3
-MMAP_THRESHOLD = 1 << 30
+MMAP_THRESHOLD = (1 << 31) - 1
 TRIM_THRESHOLD = (1 << 31) - 1
 #: the kernel's setting for what a fault in a huge-page region does when no 2 MB page is free
 THP_DEFRAG = Path("/sys/kernel/mm/transparent_hugepage/defrag")
