@@ -13,7 +13,8 @@ took 4 min 37 s without (solve 134 s, set-up 87 s), 3 min 21 s with the threshol
 quasi-static run (its rule): 21 min 56 s -> 14 min 38 s.  The threshold is now mallopt's largest (2 GiB - 1,
 an int): the block-amg set-up of the paper's sample makes temporaries of K_uu's 1.3 GB of blocks (pyamg's
 ``abs(S)``, ``omega * D^-1 S``), which above 1 GiB were mapped afresh (``np.abs`` of 1.4 GB: 0.63-0.75 s
-each time, 0.1 s into reused memory); set-up 71 -> 44 s, peak resident memory 8.7 -> 8.9 GB
+each time, 0.1 s into reused memory); the paper's static set-up 71 -> 54-55 s (44 s where the structure was
+built in the same process, its pages already faulted in), peak resident memory 8.7 -> 8.4-8.9 GB
 (bench/results/static_opal_fcc_command.json).
 
 Huge pages: numpy advises every array of 4 MB or more into transparent huge pages (``madvise(MADV_HUGEPAGE)``).

