@@ -18,7 +18,8 @@ For each particle diameter of the quickstart sample:
 3. ``--repeats`` alternating triples of whole commands: ``lmp -in in.relax.lmp`` to 1 % and to 0.1 % (each with
    its own drag and exactly the steps it needs) and ``python -m opalflow run ... compression.method=static``
    (structure from the cache, as LAMMPS reads its data file); LAMMPS's loop time (its log) and the whole
-   command's wall against opalflow's set-up + solve (summary.json) and its whole command.
+   command's wall against opalflow's set-up + solve (summary.json) and its whole command.  Both on ``--np``
+   cores: LAMMPS as MPI ranks, opalflow as threads (``OMP_NUM_THREADS``, its thread budget).
 
 ``--retime`` keeps each size's tuning from the .json and redoes only the triples (after a change to opalflow's
 command).  The scan's runs go ``--jobs`` at a time (their step counts do not depend on the load); the timed triples run
@@ -47,12 +48,14 @@ OUT = ROOT / "bench" / "results"
 PY = sys.executable
 
 
-def opalflow_static(diameter: float, out: Path, *sets: str) -> dict:
-    """The whole static command (with ``--set`` ``sets``); its summary and wall time as the user waits for it."""
+def opalflow_static(diameter: float, out: Path, *sets: str, cores: int = 1) -> dict:
+    """The whole static command (with ``--set`` ``sets``); its summary and wall time as the user waits for it.
+    It runs on ``cores`` threads (``OMP_NUM_THREADS``: opalflow's thread budget, its kernels' and the factor's),
+    as LAMMPS on as many MPI ranks: the same cores for both."""
     cmd = [PY, "-m", "opalflow", "run", "quickstart", "--out", str(out), "--set", f"packing.diameter_nm={diameter:g}",
            "--set", "compression.method=static", *(x for v in sets for x in ("--set", v))]
     t = time.perf_counter()
-    subprocess.run(cmd, check=True, capture_output=True)
+    subprocess.run(cmd, check=True, capture_output=True, env={**os.environ, "OMP_NUM_THREADS": str(cores)})
     wall = time.perf_counter() - t
     s = json.loads((out / "summary.json").read_text())
     return {"command_s": wall, "wall_s_recorded": s["wall_s"], "setup_solve_s": s["static_s"],
@@ -150,7 +153,7 @@ def main() -> int:
                     help="x the run's time step (0.8 of the undamped limit); after the first size only the "
                          "one found there and its neighbours")
     ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--np", type=int, default=1)
+    ap.add_argument("--np", type=int, default=1, help="cores of both: LAMMPS's MPI ranks, opalflow's threads (OMP_NUM_THREADS)")
     ap.add_argument("--jobs", type=int, default=2, help="scan runs at a time")
     ap.add_argument("--budget-steps", type=int, default=4000,
                     help="steps of a scan run at d = 60 nm; max(1500, this x (d / 60)^2) at d")
@@ -253,8 +256,8 @@ def timed_row(d: float, cold: dict, deck, factor: float, kept: dict, relax_folde
     triples = []
     for k in range(a.repeats):
         lam = {t: lammps_relax(folders[t], a.np) for t in ("1%", "0.1%")}
-        ours = opalflow_static(d, work / f"static_{k}")
-        plotted = opalflow_static(d, work / f"static_plots_{k}", "compression.plots=all")
+        ours = opalflow_static(d, work / f"static_{k}", cores=a.np)
+        plotted = opalflow_static(d, work / f"static_plots_{k}", "compression.plots=all", cores=a.np)
         for x in lam.values():
             x.pop("samples")
         triples.append({"lammps_to_1%": lam["1%"], "lammps_to_0.1%": lam["0.1%"], "opalflow": ours,
@@ -314,7 +317,7 @@ def write(rows: list[dict], a) -> None:
 
 def markdown(result: dict) -> str:
     """The table of bench/results/peer_static.md."""
-    lines = [f"# {result['what']}", "", "LAMMPS on `lammps_np` MPI rank(s), affine start, `newton on on`, the time "
+    lines = [f"# {result['what']}", "", "LAMMPS on `lammps_np` MPI rank(s) and opalflow on as many threads (`OMP_NUM_THREADS`), affine start, `newton on on`, the time "
              "step and drags found by the scans (in the .json); medians of the alternating triples; each row's "
              "machine, load and date are in the .json. Ratios > 1: opalflow faster.", "",
              "| d (nm) | particles | solver | LAMMPS steps to 1 % / 0.1 % (independent route) | dt x run's | drag "

@@ -132,6 +132,27 @@ def test_threads_follow_the_budget_a_job_sets():
         assert Factor(block_matrix(net, free)[0]).threads == 1
 
 
+def test_kernel_threads_survive_lammps_setting_openmp_to_one_thread(tmp_path):
+    """LAMMPS sets OpenMP's threads to 1 when it starts without OMP_NUM_THREADS: the factor's budget follows
+    (MKL's PARDISO stalled on more), opalflow's own kernels keep the BLAS libraries' count (they fell to one
+    thread when they counted OpenMP's: a quasi-static run that built its structure through LAMMPS)."""
+    import os
+
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    from opalflow.linalg.direct import kernel_threads
+
+    if len(os.sched_getaffinity(0)) < 2:
+        pytest.skip(f"needs 2 CPUs ({len(os.sched_getaffinity(0))} here)")
+    with session(tmp_path) as lmp:
+        lmp.command("units si")
+    openmp = [lib["num_threads"] for lib in threadpool_info() if lib.get("user_api") == "openmp"]
+    if not openmp or min(openmp) > 1:
+        pytest.skip(f"this LAMMPS left OpenMP's threads at {openmp}: nothing to tell apart")
+    with threadpool_limits(limits=2, user_api="blas"):
+        assert kernel_threads() == 2 and thread_budget() == 1
+
+
 def test_recorded_wall_time_covers_the_analysis_and_the_files(tmp_path):
     """summary.json's wall_s of a command-line run counts from the process start to the last result file:
     at least the time from before the call to summary.json's own write."""

@@ -54,9 +54,11 @@ Re-solves (measured in bench/bench_quasistatic.py, kept: ``auto``):
   the factor's strength within 0.7 %, bench/results/quasistatic_tolerance.json); fits samples the factor
   does not;
 - ``block-amg``: the same CG with the static solver's block-amg preconditioner of the intact one: nothing
-  assembled but K_uu in float32, what fits the paper's sample, at ~3x the iterations of ``amg`` (the
-  preconditioner leaves out the coupling of translations and rotations that a broken bond's load mostly
-  is; 31 an event at d = 40 nm) and about half the cost of each;
+  assembled but K_uu in float32, what fits the paper's sample; a symmetric block Gauss-Seidel sweep
+  (rotations, translations, rotations) whose two bond-operator products carry the coupling of translations
+  and rotations that a broken bond's load mostly is (without them, V-cycle and block Jacobi side by side:
+  ~3x the iterations of ``amg``, 31 an event at d = 40 nm; with them, the paper's sample at d = 30 nm, its
+  rule, 105 events: 904 -> 464 CG iterations);
 - the local step (``compression.local_rtol`` > 0, any re-solve): an event first settles by a solve over
   the particles within :data:`LOCAL_HOPS` bonds of its broken ones, the rest held (:class:`LocalSettle`),
   and is re-solved globally only once the residual left passes ``local_rtol`` |b|;
@@ -79,7 +81,7 @@ from opalflow.bpm.static import (DIRECT_MAX_DOFS, block_amg_preconditioner, bloc
                                   particle_amg)
 from opalflow.bpm.stiffness import BondNetwork
 from opalflow.jit import njit
-from opalflow.linalg.direct import Factor
+from opalflow.linalg.direct import Factor, kernel_threads
 from opalflow.linalg.krylov import Stop, pcg
 from opalflow.spec import InputError
 
@@ -302,7 +304,9 @@ class IterativeResolver:
     """CG on the damaged network (the numba bond operator over a copy of the network whose broken bonds have
     zero stiffness: nothing assembled for the product), warm-started from the last solution and
     preconditioned by the preconditioner ``name`` of the network at the start (:data:`PRECONDITIONERS`),
-    prescribed dofs kept by an identity block; stops at an absolute residual of ``rtol`` |b|."""
+    prescribed dofs kept by an identity block; stops at an absolute residual of ``rtol`` |b|.  The product and
+    the preconditioner's own kernels run on the process's thread budget
+    (:func:`opalflow.linalg.direct.kernel_threads`: a study's job, one)."""
 
     factorizations = 1
 
@@ -311,10 +315,11 @@ class IterativeResolver:
         self.name, self.rtol, self.free, self.whole = name, rtol, free.copy(), net
         self.net = dataclasses.replace(net, a_r=net.a_r * alive, a_s=net.a_s * alive, bend=net.bend * alive,
                                        twist=net.twist * alive)
-        self._precondition = PRECONDITIONERS[name](self.net, free, positions)
+        self.threads = kernel_threads()
+        self._precondition = PRECONDITIONERS[name](self.net, free, positions, self.threads)
 
     def matvec(self, x: np.ndarray) -> np.ndarray:
-        return self.net.matvec(x)
+        return self.net.matvec(x, self.threads)
 
     def remove(self, bonds: np.ndarray, free: np.ndarray) -> None:
         for coefficient in (self.net.a_r, self.net.a_s, self.net.bend, self.net.twist):
@@ -327,25 +332,37 @@ class IterativeResolver:
             getattr(self.net, name)[bonds] = getattr(self.whole, name)[bonds]
 
     def solve(self, b: np.ndarray, x0: np.ndarray) -> tuple[np.ndarray, int]:
-        m = self.free.astype(float)
+        """CG under one BLAS thread (as the static method's iterative solvers: :func:`opalflow.linalg.direct.solver_threads`):
+        BLAS's idle threads spin after numpy's dot products, on the cores the bond operator's threads need."""
+        from threadpoolctl import threadpool_limits
+
+        m, held = self.free.astype(float), (~self.free).astype(float)
 
         def matvec(v):
-            return m * self.matvec(m * v) + (1 - m) * v
+            out = self.matvec(m * v)
+            out *= m
+            out += held * v
+            return out
 
         def precondition(r):
-            return m * self._precondition(r) + (1 - m) * r
+            z = self._precondition(r)
+            z *= m
+            z += held * r
+            return z
 
         x0 = np.where(self.free, x0, b)
         r0 = b - matvec(x0)
         scale = float(np.linalg.norm(b))
         if np.linalg.norm(r0) <= self.rtol * scale:
             return x0, 0
-        d, its = pcg(matvec, precondition, r0, Stop(self.rtol * scale / float(np.linalg.norm(r0))), lambda k, r: None)
+        with threadpool_limits(limits=1):
+            d, its = pcg(matvec, precondition, r0, Stop(self.rtol * scale / float(np.linalg.norm(r0))),
+                         lambda k, r: None)
         return x0 + d, its
 
 
-#: the iterative re-solves' preconditioners (module docstring): (network, free dofs, positions) -> v -> z
-PRECONDITIONERS = {"amg": lambda net, free, positions: particle_amg(net, free, positions)[1],
+#: the iterative re-solves' preconditioners (module docstring): (network, free dofs, positions, threads) -> v -> z
+PRECONDITIONERS = {"amg": lambda net, free, positions, threads: particle_amg(net, free, positions, threads)[1],
                    "block-amg": block_amg_preconditioner}
 
 

@@ -1,4 +1,5 @@
-"""The sparse direct factor (MKL PARDISO) and the threads each solver runs on.
+"""The sparse direct factor (MKL PARDISO), the threads each solver runs on, and opalflow's own kernels run
+in parts on threads (:func:`in_parts`).
 
 Used by the static method's ``direct`` solver and the quasi-static method's direct re-solves
 (:mod:`opalflow.bpm.static`, :mod:`opalflow.bpm.quasistatic`).
@@ -19,12 +20,47 @@ def thread_budget() -> int:
     counts = [lib["num_threads"] for lib in threadpool_info() if lib.get("num_threads")]
     return max(1, min(counts, default=len(os.sched_getaffinity(0))))
 
+
+def kernel_threads() -> int:
+    """The threads of opalflow's own kernels (:func:`in_parts`): the smallest thread count of the loaded BLAS
+    libraries (the CPUs, ``OMP_NUM_THREADS`` where set, or a job's limit), not OpenMP's.  LAMMPS sets OpenMP's
+    threads to 1 when it starts without ``OMP_NUM_THREADS``: a quasi-static run that built its structure
+    through LAMMPS ran its kernels on one thread where the same run from the structure cache had two.  The
+    factor keeps :func:`thread_budget`, OpenMP's count included: MKL's PARDISO on more threads than LAMMPS
+    left to OpenMP stalled (measured: a factor of 30 000 dofs that takes a fraction of a second did not end in
+    minutes, and failed with PARDISO's error -2 in the tests)."""
+    import scipy.linalg  # noqa: F401 - numpy's and scipy's BLAS loaded: their limit is the job's
+    from threadpoolctl import threadpool_info
+
+    counts = [lib["num_threads"] for lib in threadpool_info()
+              if lib.get("num_threads") and lib.get("user_api") == "blas"]
+    return max(1, min(counts, default=len(os.sched_getaffinity(0))))
+
+
 def solver_threads(solver: str) -> int:
     """BLAS/OpenMP threads for ``solver``: the iterative ones run sparse products and vector sums that are
     bound by memory, not arithmetic, and lose 3-6x to thread contention on a loaded machine (measured,
     bench/results/static_threads.json): one thread; the direct factor (dense supernodes, BLAS 3) gains
     from every thread it is given (x1.8 at 140 k dofs on 2 cores): the whole budget."""
     return thread_budget() if solver == "direct" else 1
+
+
+_POOL: dict = {}
+
+
+def in_parts(work, parts: int) -> None:
+    """``work(k)`` for k = 0 .. ``parts`` - 1, at once on a pool of threads where ``parts`` > 1.  For numba kernels
+    that release the GIL (``nogil``), each on its own part of the data: the bond operator over its share of
+    the bonds, the V-cycle's products over their share of the rows (:mod:`opalflow.bpm.stiffness`,
+    :mod:`opalflow.linalg.multigrid`).  The caller chooses ``parts``: :func:`kernel_threads`."""
+    if parts <= 1:
+        work(0)
+        return
+    from concurrent.futures import ThreadPoolExecutor
+
+    pool = _POOL.get(parts) or _POOL.setdefault(parts, ThreadPoolExecutor(parts, thread_name_prefix="opalflow"))
+    for done in [pool.submit(work, k) for k in range(parts)]:
+        done.result()
 
 
 #: PARDISO's fill-reducing ordering: minimum degree up to this many dofs, METIS nested dissection above.

@@ -13,7 +13,7 @@ import numpy as np
 from opalflow.jit import njit
 
 
-def amg_preconditioner(K, B):
+def amg_preconditioner(K, B, threads: int = 1):
     """One V-cycle of the smoothed-aggregation AMG of ``K`` (BSR) with near-null space ``B`` (pyamg; Jacobi-smoothed
     prolongation, omega 4/3 over a row-sum (Gershgorin) bound of the spectral radius instead of pyamg's
     Lanczos estimate: at 1.1 M dofs block-amg's set-up 11.6 -> 10.1 s for 46 iterations instead of 45; the
@@ -24,7 +24,8 @@ def amg_preconditioner(K, B):
     9.0 -> 7.4 s).  pyamg starts its spectral-radius estimates from numpy's global random generator: it is
     seeded here (and restored after), so the same matrix gives the same hierarchy, and the same solve to
     the last digit, in any process (a local pool, a Dask worker, a SLURM task).  The sweeps are
-    :func:`v_cycle`'s own (pyamg sets up no smoother).  Returns b -> the V-cycle's approximation of K^-1 b."""
+    :func:`v_cycle`'s own (pyamg sets up no smoother).  Returns b -> the V-cycle's approximation of K^-1 b
+    (its residuals on ``threads`` threads: :func:`residual`)."""
     import pyamg
 
     state = np.random.get_state()
@@ -33,11 +34,11 @@ def amg_preconditioner(K, B):
         ml = pyamg.smoothed_aggregation_solver(K, B=B, strength=("symmetric", {"theta": 0.0}), max_coarse=500,
                                                smooth=("jacobi", {"omega": 4.0 / 3.0, "weighting": "local"}),
                                                improve_candidates=None, presmoother=None, postsmoother=None)
-        return v_cycle(ml)
+        return v_cycle(ml, threads)
     finally:
         np.random.set_state(state)
 
-def v_cycle(ml):
+def v_cycle(ml, threads: int = 1):
     """b -> one V-cycle from x = 0 on pyamg's hierarchy ``ml`` (as MultilevelSolver.__solve: R, P and its
     coarse solver), a forward block Gauss-Seidel sweep (:func:`gauss_seidel`) before the coarse correction and
     a backward one after, run as a forward sweep over a copy of the level's matrix with its rows and columns
@@ -47,9 +48,12 @@ def v_cycle(ml):
     not need, and its block Gauss-Seidel loops over a block size it learns at run time.  Measured: block-amg's
     preconditioner 41 -> 27 ms a call at 140 k dofs (own sweeps in single precision); amg's at the paper's
     sample at d = 45 nm (310 k dofs), the first 40 quasi-static events, 124 -> 65 ms a call for the same
-    405 CG iterations (pyamg's sweeps 115 ms forward and 210 backward a sweep at d = 30 nm, these 70 and 70)."""
+    405 CG iterations (pyamg's sweeps 115 ms forward and 210 backward a sweep at d = 30 nm, these 70 and 70).
+    Each level's residual b - A x is :func:`residual`'s, on ``threads`` threads."""
     levels = ml.levels
-    sweeps = [smoothers(lv.A if lv.A.format == "bsr" else lv.A.tobsr(blocksize=(1, 1))) for lv in levels[:-1]]
+    bsr = [lv.A if lv.A.format == "bsr" else lv.A.tobsr(blocksize=(1, 1)) for lv in levels[:-1]]
+    sweeps = [smoothers(A) for A in bsr]
+    residuals = [residual(A, threads) for A in bsr]
 
     def cycle(lvl: int, b: np.ndarray) -> np.ndarray:
         A = levels[lvl].A
@@ -57,7 +61,7 @@ def v_cycle(ml):
             return np.asarray(ml.coarse_solver(A, b), b.dtype).reshape(b.shape)
         x = np.zeros_like(b)
         sweeps[lvl][0](x, b)
-        x += levels[lvl].P @ cycle(lvl + 1, levels[lvl].R @ (b - A @ x))
+        x += levels[lvl].P @ cycle(lvl + 1, levels[lvl].R @ residuals[lvl](x, b))
         sweeps[lvl][1](x, b)
         return x
 
@@ -128,3 +132,49 @@ def gauss_seidel(bs: int, reversed_order: bool = False):
                 x[at + a] = acc
 
     return sweep
+
+
+#: :func:`residual` runs on threads from this many block rows (the paper's sample's K_uu: 1.6 M)
+PARTS_MIN_ROWS = 20_000
+
+
+def residual(A, threads: int = 1):
+    """(x, b) -> b - A x for a BSR matrix ``A`` (:func:`_residual`: its block size compiled in), its block rows
+    in ``threads`` contiguous shares at once (:func:`opalflow.linalg.direct.in_parts`; each row is one thread's,
+    so any number of threads gives the same digits) from :data:`PARTS_MIN_ROWS` block rows."""
+    from opalflow.linalg.direct import in_parts
+
+    rows = len(A.indptr) - 1
+    parts = threads if rows >= PARTS_MIN_ROWS else 1
+    at = np.linspace(0, rows, parts + 1).astype(np.int64)
+    kernel = _residual(A.blocksize[0])
+
+    def of(x: np.ndarray, b: np.ndarray) -> np.ndarray:
+        r = np.empty_like(b)
+        in_parts(lambda k: kernel(A.indptr, A.indices, A.data, x, b, r, at[k], at[k + 1]), parts)
+        return r
+    return of
+
+
+@functools.cache
+def _residual(bs: int):
+    """r = b - A x on block rows ``first`` .. ``last`` - 1 of a BSR matrix of ``bs`` x ``bs`` blocks (scipy's
+    ``b - A @ x``, in one pass and without its temporaries)."""
+
+    @njit(cache=True, nogil=True)
+    def kernel(indptr, indices, data, x, b, r, first, last):
+        acc = np.empty(bs, data.dtype)
+        for row in range(first, last):
+            at = row * bs
+            for a in range(bs):
+                acc[a] = b[at + a]
+            for jj in range(indptr[row], indptr[row + 1]):
+                xat = indices[jj] * bs
+                for c in range(bs):
+                    xc = x[xat + c]
+                    for a in range(bs):
+                        acc[a] -= data[jj, a, c] * xc
+            for a in range(bs):
+                r[at + a] = acc[a]
+
+    return kernel
