@@ -284,9 +284,8 @@ class Prepared:
     ``solve(b, stop, progress)`` -> (x, iterations) for ``b`` full, zero on prescribed dofs; both run
     under the BLAS threads that suit the solver (:func:`solver_threads`), opalflow's own kernels (the bond
     operator, the V-cycle's residuals) on :func:`kernel_threads` (taken before the limit).  ``matvec(x)``: K x
-    on all dofs (the
-    load vector of prescribed displacements, the reaction), from the direct solver's assembled K, else the
-    bond operator (:meth:`BondNetwork.matvec`)."""
+    on all dofs (the load vector of prescribed displacements, the reaction), from the direct solver's
+    assembled K, else the bond operator (:meth:`BondNetwork.matvec`)."""
 
     def __init__(self, solver: str, net: BondNetwork, free: np.ndarray, positions: np.ndarray):
         from threadpoolctl import threadpool_limits
