@@ -14,11 +14,7 @@ import numpy as np
 def thread_budget() -> int:
     """The threads this process may use: the smallest thread count of its loaded BLAS and OpenMP libraries
     (the CPUs it may run on, or less where a job set a limit: opalflow.runs.jobs.run_job)."""
-    import scipy.linalg  # noqa: F401 - numpy's and scipy's BLAS loaded: their limit is the job's
-    from threadpoolctl import threadpool_info
-
-    counts = [lib["num_threads"] for lib in threadpool_info() if lib.get("num_threads")]
-    return max(1, min(counts, default=len(os.sched_getaffinity(0))))
+    return _smallest_thread_count(("blas", "openmp"))
 
 
 def kernel_threads() -> int:
@@ -29,11 +25,15 @@ def kernel_threads() -> int:
     factor keeps :func:`thread_budget`, OpenMP's count included: MKL's PARDISO on more threads than LAMMPS
     left to OpenMP stalled (measured: a factor of 30 000 dofs that takes a fraction of a second did not end in
     minutes, and failed with PARDISO's error -2 in the tests)."""
+    return _smallest_thread_count(("blas",))
+
+
+def _smallest_thread_count(apis: tuple[str, ...]) -> int:
+    """The smallest thread count of the loaded libraries of threadpoolctl's ``apis`` (the CPUs where none)."""
     import scipy.linalg  # noqa: F401 - numpy's and scipy's BLAS loaded: their limit is the job's
     from threadpoolctl import threadpool_info
 
-    counts = [lib["num_threads"] for lib in threadpool_info()
-              if lib.get("num_threads") and lib.get("user_api") == "blas"]
+    counts = [lib["num_threads"] for lib in threadpool_info() if lib.get("num_threads") and lib.get("user_api") in apis]
     return max(1, min(counts, default=len(os.sched_getaffinity(0))))
 
 
