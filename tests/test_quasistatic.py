@@ -53,17 +53,22 @@ def test_sc_lattice_in_tension_dynamic_run_of_the_tension_loading(tmp_path):
     assert smooth["strength_MPa"] / s["strength_MPa"] == pytest.approx(0.8 * 5 ** -0.25, rel=0.05)
 
 
-@pytest.mark.parametrize("rule", ["dosta", "musen"])
+@pytest.mark.parametrize("rule", ["dosta", "musen", "musen_2020", "musen_crit2"])
 def test_sc_lattice_in_tension_breaks_at_the_bond_strength_by_the_papers_rules(tmp_path, rule):
-    """Pulled along its bonds a bond carries its normal force alone: the paper's rules (eqs. 16-17) break it where
-    LAMMPS's does, at sigma_b pi r_b^2 / a^2."""
+    """Pulled along its bonds a bond carries its normal force alone: the paper's rules (eqs. 16-17) and MUSEN's
+    (2020's, whose terms cancel, and its second criterion, each term alone) break it where LAMMPS's does, at
+    sigma_b pi r_b^2 / a^2, by the rule's normal check."""
+    from opalflow.bpm.quasistatic import CHECKS
+    from opalflow.bpm.spec import BREAKING_RULES
+
     s = opalflow.run("lattice_sc", tmp_path / rule, set=[*TENSION, "compression.method=quasistatic",
                                                           f'bonds.breaking="{rule}"'], quiet=True)
     assert s["strength_MPa"] == pytest.approx(sc_strength(), rel=1e-3)
-    assert "the paper's rule (eqs. 16-17)" in (tmp_path / rule / "report.md").read_text()
+    assert BREAKING_RULES[rule] in (tmp_path / rule / "report.md").read_text()
     # pulled along their axis, the bonds break by the normal check, each in its length bin
-    assert s["broken_bonds_by_check"] == {"normal + bending": {"silica 1.000-1.000": s["broken_bonds"]},
-                                          "shear + twist": {}}
+    normal, *others = CHECKS[rule]
+    assert s["broken_bonds_by_check"] == {normal: {"silica 1.000-1.000": s["broken_bonds"]},
+                                          **{name: {} for name in others}}
 
 
 def test_each_broken_bond_names_its_check_and_length_bin(quick):
@@ -114,7 +119,8 @@ def test_breaking_rules_weigh_the_bond_loads_as_written():
     bt = np.linalg.norm(d - tw[:, None] * net.n, axis=1)
     shear = fs / c[1] + net.twist * np.abs(tw) / c[3]
     normal = net.bend * bt / c[2]
-    got = {rule: breaking_index(net, x, Strengths(*c, rule)) for rule in ("lammps", "dosta", "musen")}
+    got = {rule: breaking_index(net, x, Strengths(*c, rule))
+           for rule in ("lammps", "dosta", "musen", "musen_2020", "musen_crit2")}
     checks = bond_checks(net, x, Strengths(*c, "musen"))
     assert np.allclose(checks[0], fr / c[0] + normal, rtol=1e-12) and np.allclose(checks[1], shear, rtol=1e-12)
     assert np.allclose(bond_checks(net, x, Strengths(*c, "dosta"))[0], np.abs(fr) / c[0] + normal, rtol=1e-12)
@@ -127,6 +133,22 @@ def test_breaking_rules_weigh_the_bond_loads_as_written():
     assert np.all(got["dosta"] >= got["musen"]) and np.any(got["dosta"] > got["musen"])
     both = fr / c[0] + normal > 0
     assert np.all(got["lammps"][both] >= got["musen"][both]) and np.any(got["lammps"] < got["musen"])
+    # MUSEN's code of 2020 (655e066): |M_b| R / I - |F_n| / A over sigma in tension, |M_t| R / J - |F_t| / A over
+    # tau; MUSEN's second criterion: each term alone, bending in tension only
+    twist = net.twist * np.abs(tw) / c[3]
+    r_n, r_b, r_s = fr / c[0], normal, fs / c[1]
+    assert np.allclose(got["musen_2020"], np.maximum(np.where(stretched, np.abs(r_b - np.abs(r_n)), 0.0),
+                                                     np.abs(twist - r_s)), rtol=1e-12)
+    assert np.allclose(got["musen_crit2"], np.max([r_n, np.where(stretched, r_b, 0.0), r_s, twist], axis=0),
+                       rtol=1e-12)
+    # |a - b| <= max(a, b) <= a + b for a, b >= 0: the 2020 rule's index never above the second criterion's, that
+    # never above the additive one's (so the strengths come in the reverse order)
+    assert np.all(got["musen_2020"] <= got["musen_crit2"] + 1e-12) and np.any(got["musen_2020"] < got["musen_crit2"])
+    assert np.all(got["musen_crit2"] <= got["musen"] + 1e-12) and np.any(got["musen_crit2"] < got["musen"])
+    # positively homogeneous (the events' e = 1 / max B_1): twice the field, twice every index; the sign of Fr kept
+    for rule in ("musen_2020", "musen_crit2"):
+        assert np.allclose(breaking_index(net, 2 * x, Strengths(*c, rule)), 2 * got[rule], rtol=1e-12)
+    assert bond_checks(net, x, Strengths(*c, "musen_crit2")).shape == (4, m)
 
 
 def test_contacts_press_in_compression_and_open_in_tension(tmp_path):

@@ -22,15 +22,19 @@ a force's and a moment's part: a bond breaks when
 
     max(|Fr| / Fcr + |Tb| / Tcb, |Fs| / Fcs + |Tt| / Tct) >= 1                          (``"dosta"``),
 
-|Fr| as printed (a compressed bond breaks too), or with the normal force signed (``"musen"``: the code the
-paper ran, MUSEN's GPU kernel ``CUDA_CalcSBForce_E_kernel`` of Models/SolidBonds/BondModelElastic/
-ModelSBElastic.cu, its "standard breakage criteria": the normal force's length turned negative in
-compression, then maxStress1 + maxStress2 >= NormalStrength or maxTorque1 + maxTorque2 >= TangentialStrength;
-Potyondy and Cundall's parallel bond, Int. J. Rock Mech. 41:1329, 2004, eqs. 6-7, is the same).  With the
+|Fr| as printed (a compressed bond breaks too), or with the normal force signed (``"musen"``: MUSEN's code
+today, the paper's equations as the paper's own code computes them since Release 1.70.0, 2021-02-26; its GPU
+kernel ``CUDA_CalcSBForce_E_kernel`` of Models/SolidBonds/BondModelElastic/ModelSBElastic.cu, its "standard
+breakage criteria": the normal force's length turned negative in compression, then maxStress1 + maxStress2 >=
+NormalStrength or maxTorque1 + maxTorque2 >= TangentialStrength; Potyondy and Cundall's parallel bond, Int. J.
+Rock Mech. 41:1329, 2004, eqs. 6-7, is the same).  Which code produced the paper's numbers the paper does not say;
+two more rules follow MUSEN's history (:func:`bond_checks`): ``"musen_2020"``, its first public commit
+(655e066, 2020-07-23, before the paper's publication), whose force and moment terms cancel where the equations
+add them, and ``"musen_crit2"``, its second criterion since 1.70.0, each of the four terms alone.  With the
 critical values of :class:`opalflow.materials.BondCoefficients` (Fcr = sigma A, Tcb = sigma I / r_b, ...) the
 two sums are the normal and the shear stress of eqs. 16-17 over the strengths; LAMMPS's B is their sum, so
 LAMMPS breaks a bond loaded both ways at up to half the paper's load.  Each rule is positively homogeneous
-in the strain, so the events below hold for all three.
+in the strain, so the events below hold for all of them.
 
 Under a prescribed strain e of the top layer the linear network's B of every bond is e B_1 (B_1 at unit
 strain; Fr is linear in e and the magnitudes grow with e > 0), so the next bond to break is the one with
@@ -114,38 +118,72 @@ def breaking_index(net: BondNetwork, x: np.ndarray, c: Strengths) -> np.ndarray:
     """The breaking index of every bond (LAMMPS's B, not clipped, or the paper's, by ``c.rule``) for
     displacements and rotations x (N, 6) (module docstring): the bond forces from the numba operator
     (:meth:`BondNetwork.bond_forces`), the rest in one numba pass (:func:`_bond_checks`; at 1.8 M bonds
-    0.08 s where numpy's gathers and norms took 0.7, once an event)."""
-    normal, shear = bond_checks(net, x, c)
-    return normal + shear if c.rule == "lammps" else np.maximum(normal, shear)
+    0.08 s where numpy's gathers and norms took 0.7, once an event): LAMMPS's B is the sum of its two checks,
+    every other rule's index the largest of its checks."""
+    checks = bond_checks(net, x, c)
+    return checks.sum(axis=0) if c.rule == "lammps" else checks.max(axis=0)
 
 
-def bond_checks(net: BondNetwork, x: np.ndarray, c: Strengths) -> tuple[np.ndarray, np.ndarray]:
-    """The two checks of every bond for x (N, 6), each a load over its strength (Dosta et al. eqs. 16-17):
-    the normal one, Fr / Fcr + |Tb| / Tcb (|Fr| with the rule ``"dosta"``, Fr signed otherwise), and the
-    shear one, |Fs| / Fcs + |Tt| / Tct.  LAMMPS's B is their sum, the paper's rules their larger: the
-    larger is the check that breaks a bond (:data:`CHECKS`)."""
+#: the checks of each breaking rule (:func:`bond_checks`, rows in this order; a broken bond's check is the largest
+#: at its event), as results.h5 numbers them
+CHECKS = {"lammps": ("normal + bending", "shear + twist"),
+          "dosta": ("normal + bending", "shear + twist"),
+          "musen": ("normal + bending", "shear + twist"),
+          "musen_2020": ("bending - normal", "twist - shear"),
+          "musen_crit2": ("normal", "bending", "shear", "twist")}
+#: each rule's number in the numba pass
+_RULE_CODE = {rule: k for k, rule in enumerate(CHECKS)}
+_DOSTA, _MUSEN_2020, _MUSEN_CRIT2 = _RULE_CODE["dosta"], _RULE_CODE["musen_2020"], _RULE_CODE["musen_crit2"]
+
+
+def bond_checks(net: BondNetwork, x: np.ndarray, c: Strengths) -> np.ndarray:
+    """The checks of every bond for x (N, 6), one row each (:data:`CHECKS` names them), each a load over its
+    strength, with the four ratios r_n = Fr / Fcr (Fr signed, tension positive), r_b = |Tb| / Tcb,
+    r_s = |Fs| / Fcs and r_t = |Tt| / Tct (Dosta et al. eqs. 16-17; Fcr = sigma A, Tcb = sigma I / r_b,
+    Fcs = tau A, Tct = tau J / r_b: :class:`opalflow.materials.BondCoefficients`):
+
+    - ``"lammps"``, ``"musen"``: r_n + r_b and r_s + r_t (LAMMPS's B is their sum, MUSEN's ``CONSIDER_BREAKAGE 1``
+      of today their larger);
+    - ``"dosta"``: |r_n| + r_b and r_s + r_t (the paper's eqs. 16-17 as printed);
+    - ``"musen_2020"``: |r_b - |r_n|| for a bond in tension (0 in compression) and |r_t - r_s|: MUSEN's first
+      public code, 655e066 (2020-07-23), Models/SolidBonds/BondModelElastic/ModelSBElastic.cpp (CPU) and
+      ModelSBElastic.cu (GPU, ``CUDA_CalcSBForce_E_kernel``), the same in both: ``dMaxStress = -|F_n| / A +
+      |M_b| d / (2 I)``, ``dMaxTorque = -|F_t| / A + |M_t| d / (4 I)``, broken when ``|dMaxStress| >= sigma``
+      for a bond with ``dStrainTotal > 0`` (``COMPRESSIVE_BREAK`` 0, its default) or ``|dMaxTorque| >= tau``
+      (d = 2 r_b, I = pi r_b^4 / 4: d / (2 I) = r_b / I, d / (4 I) = r_b / J); the terms cancel where the paper's
+      equations add them.  Unchanged up to Release 1.70.0 (1547403, 2021-02-26), which brought the additive rule;
+    - ``"musen_crit2"``: r_n, r_b for a bond in tension (0 in compression), r_s, r_t: MUSEN's
+      ``CONSIDER_BREAKAGE 2`` (since 1547403; today's ModelSBElastic.cpp and .cu, "alternative breakage
+      criteria": ``maxStress1 >= sigma || maxStress2 >= sigma && dStrainTotal > 0 || maxTorque1 >= tau ||
+      maxTorque2 >= tau``, maxStress1 the signed normal stress).
+
+    Every check is positively homogeneous in x, as the events of :func:`solve_fracture` need."""
     F = net.bond_forces(x[:, :3], x[:, 3:])
-    normal, shear = np.empty(len(net.L)), np.empty(len(net.L))
+    checks = np.empty((len(CHECKS[c.rule]), len(net.L)))
     _bond_checks(net.i, net.j, net.n, net.bend, net.twist, F, np.ascontiguousarray(x[:, 3:]), c.fr_c, c.fs_c,
-                 c.tb_c, c.tt_c, c.rule == "dosta", normal, shear)
-    return normal, shear
-
-
-#: a broken bond's check (:func:`bond_checks`, the larger of the two at its event), as results.h5 stores it
-CHECKS = ("normal + bending", "shear + twist")
+                 c.tb_c, c.tt_c, _RULE_CODE[c.rule], checks)
+    return checks
 
 
 @njit(cache=True, nogil=True)
-def _bond_checks(i, j, n, bend, twist, F, theta, fr_c, fs_c, tb_c, tt_c, absolute, normal, shear):
-    for b in range(len(normal)):
+def _bond_checks(i, j, n, bend, twist, F, theta, fr_c, fs_c, tb_c, tt_c, rule, out):
+    for b in range(out.shape[1]):
         p, q = i[b], j[b]
         fr = n[b, 0] * F[b, 0] + n[b, 1] * F[b, 1] + n[b, 2] * F[b, 2]
         d0, d1, d2 = theta[p, 0] - theta[q, 0], theta[p, 1] - theta[q, 1], theta[p, 2] - theta[q, 2]
         tw = n[b, 0] * d0 + n[b, 1] * d1 + n[b, 2] * d2
         fs = math.sqrt((F[b, 0] - fr * n[b, 0]) ** 2 + (F[b, 1] - fr * n[b, 1]) ** 2 + (F[b, 2] - fr * n[b, 2]) ** 2)
         bt = math.sqrt((d0 - tw * n[b, 0]) ** 2 + (d1 - tw * n[b, 1]) ** 2 + (d2 - tw * n[b, 2]) ** 2)
-        normal[b] = (abs(fr) if absolute else fr) / fr_c[b] + bend[b] * bt / tb_c[b]
-        shear[b] = fs / fs_c[b] + twist[b] * abs(tw) / tt_c[b]
+        r_n, r_b = fr / fr_c[b], bend[b] * bt / tb_c[b]
+        r_s, r_t = fs / fs_c[b], twist[b] * abs(tw) / tt_c[b]
+        if rule == _DOSTA:
+            out[0, b], out[1, b] = abs(r_n) + r_b, r_s + r_t
+        elif rule == _MUSEN_2020:
+            out[0, b], out[1, b] = abs(r_b - r_n) if fr > 0.0 else 0.0, abs(r_t - r_s)
+        elif rule == _MUSEN_CRIT2:
+            out[0, b], out[1, b], out[2, b], out[3, b] = r_n, r_b if fr > 0.0 else 0.0, r_s, r_t
+        else:                                           # lammps, musen
+            out[0, b], out[1, b] = r_n + r_b, r_s + r_t
 
 
 class StiffnessMatrix:
@@ -692,10 +730,10 @@ def _breaking_indices(net: BondNetwork, x: np.ndarray, strengths: Strengths, B: 
 
 
 def _checks(net: BondNetwork, x: np.ndarray, strengths: Strengths, broken: np.ndarray) -> list[int]:
-    """Which check (an index into :data:`CHECKS`: normal or shear) breaks each of the ``broken`` bonds."""
+    """Which check (an index into the rule's :data:`CHECKS`: the largest, the first of equals) breaks each of the
+    ``broken`` bonds."""
     ends, pair = _subnetwork(net, broken)
-    normal, shear = bond_checks(pair, x.reshape(net.n_particles, 6)[ends], strengths.part(broken))
-    return (shear > normal).astype(int).tolist()
+    return bond_checks(pair, x.reshape(net.n_particles, 6)[ends], strengths.part(broken)).argmax(axis=0).tolist()
 
 
 def _progress_line(events: list[Event], alive: np.ndarray, strain_max: float, peak_stress: float,

@@ -129,8 +129,8 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
         strength_MPa=got["strength_MPa"], strain_at_peak=got["strain_at_peak"],
         broken_bonds=got["broken_bonds"], broken_bonds_by_material=by_material,
         broken_bonds_at_peak=got.get("broken_bonds_at_peak", 0),
-        broken_bonds_by_check=broken_by_check(res, sample, peak_only=False),
-        broken_bonds_by_check_at_peak=broken_by_check(res, sample, peak_only=True),
+        broken_bonds_by_check=broken_by_check(res, sample, spec.bonds.breaking, peak_only=False),
+        broken_bonds_by_check_at_peak=broken_by_check(res, sample, spec.bonds.breaking, peak_only=True),
         n_particles=s.n_particles, n_bonds=s.n_bonds, solid_fraction=info["solid_fraction"],
         build_s=info["build_s"], quasistatic=_event_facts(spec, res, got["events"], contacts),
         structure=info.get("structure", {}),
@@ -145,7 +145,8 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
     plots = METHODS["quasistatic"].draws_plots(c.plots)
 
     def files(stage):
-        stage("results.h5").write_bytes(h5_bytes(lambda h: _fill_h5(h, res, data, result, sample, info)))
+        stage("results.h5").write_bytes(h5_bytes(lambda h: _fill_h5(h, res, data, result, sample, info,
+                                                                          spec.bonds.breaking)))
         if plots:
             _plot_curve(stage("stress_strain.png"), res, summary)
         frames = _frames(net, data, res)
@@ -213,19 +214,20 @@ def _broken_in_order(res) -> tuple[np.ndarray, np.ndarray]:
             np.concatenate(checks) if checks else np.zeros(0, np.int64))
 
 
-def broken_by_check(res, sample, *, peak_only: bool) -> dict:
-    """Broken bonds counted by the check that broke them (:data:`opalflow.bpm.quasistatic.CHECKS`: Dosta et
-    al. eqs. 16-17 apart, whatever the rule) and by length bin: ``{check: {bin label: count}}``, all events
-    or those before the peak event (``peak_only``)."""
+def broken_by_check(res, sample, rule: str, *, peak_only: bool) -> dict:
+    """Broken bonds counted by the check of ``rule`` that broke them (:data:`opalflow.bpm.quasistatic.CHECKS`:
+    for LAMMPS's rule, the paper's and today's MUSEN's Dosta et al. eqs. 16-17 apart) and by length bin:
+    ``{check: {bin label: count}}``, all events or those before the peak event (``peak_only``)."""
     bonds, checks = _broken_in_order(res)
     if peak_only:
         bonds, checks = (bonds[:sum(len(e.bonds) for e in res.events[:res.peak])],
                          checks[:sum(len(e.bonds) for e in res.events[:res.peak])])
     which, labels = _length_bins(sample)
     out = {}
-    for k, name in enumerate(CHECKS + ("not recorded",)):
-        sel = checks == (k if k < len(CHECKS) else -1)
-        if sel.any() or k < len(CHECKS):
+    names = CHECKS[rule]
+    for k, name in enumerate(names + ("not recorded",)):
+        sel = checks == (k if k < len(names) else -1)
+        if sel.any() or k < len(names):
             counts = np.bincount(which[bonds[sel]], minlength=len(labels))
             out[name] = {label: int(c) for label, c in zip(labels, counts) if c}
     return out
@@ -270,7 +272,7 @@ def _write_dump(path: Path, data, snap: dict) -> None:
         np.savetxt(f, rows, fmt=["%d", "%d", "%.6f", "%.6f", "%.6f", "%.6f", "%d"])
 
 
-def _fill_h5(h, res, data, result, sample, info) -> None:
+def _fill_h5(h, res, data, result, sample, info, rule: str) -> None:
     result.h5_attrs(h, info)
     g = h.create_group("quasistatic")
     ev = res.events
@@ -284,7 +286,7 @@ def _fill_h5(h, res, data, result, sample, info) -> None:
     bonds, checks = _broken_in_order(res)
     put(g, "broken_bond_check", checks.astype(np.int8), "1",
         description="the check that broke each bond (as broken_bond_index): "
-                    + ", ".join(f"{k} {name}" for k, name in enumerate(CHECKS)) + ", -1 not recorded")
+                    + ", ".join(f"{k} {name}" for k, name in enumerate(CHECKS[rule])) + ", -1 not recorded")
     put(g, "broken_bond_length_nm", sample.bond_lengths[bonds], "nm", description="L0 of each broken bond")
     put(g, "broken_bond_length_bin", (data.bond_types[bonds] - 1).astype(np.int32), "1",
         description="length bin (data.lmp bond type - 1) of each broken bond")

@@ -53,13 +53,20 @@ class BondsSpec:
     breaking: str = "lammps"
 
 
-#: bond breaking rules (opalflow.bpm.quasistatic's docstring), each as a report states it: LAMMPS's
+#: bond breaking rules (opalflow.bpm.quasistatic.bond_checks), each as a report states it: LAMMPS's
 #: bpm/rotational (one sum of four ratios, the signed normal force), the paper's eqs. 16-17 as printed (normal
-#: and shear stress apart, |F_n|), and as the paper's code MUSEN computes them (the normal force signed)
+#: and shear stress apart, |F_n|), as the paper's code MUSEN computes them today (the normal force signed), as
+#: MUSEN's first public code computed them (2020: force and moment terms subtracted) and MUSEN's second criterion
+#: (each of the four terms alone)
 BREAKING_RULES = {"lammps": "LAMMPS's rule B = Fr/Fcr + |Fs|/Fcs + |Tb|/Tcb + |Tt|/Tct >= 1",
                   "dosta": "the paper's rule (eqs. 16-17) max(|Fr|/Fcr + |Tb|/Tcb, |Fs|/Fcs + |Tt|/Tct) >= 1",
                   "musen": "the paper's rule (eqs. 16-17) as its code MUSEN computes it, max(Fr/Fcr + |Tb|/Tcb, "
-                           "|Fs|/Fcs + |Tt|/Tct) >= 1 with Fr signed"}
+                           "|Fs|/Fcs + |Tt|/Tct) >= 1 with Fr signed",
+                  "musen_2020": "MUSEN's rule of 2020 (first public commit 655e066), max(||Tb|/Tcb - |Fr|/Fcr| in "
+                                "tension, ||Tt|/Tct - |Fs|/Fcs|) >= 1: the terms the paper's eqs. 16-17 add, "
+                                "subtracted",
+                  "musen_crit2": "MUSEN's second criterion (CONSIDER_BREAKAGE 2), max(Fr/Fcr, |Tb|/Tcb in tension, "
+                                 "|Fs|/Fcs, |Tt|/Tct) >= 1: each term alone"}
 
 
 @dataclass
