@@ -23,8 +23,20 @@ How opalflow's scene becomes a MUSEN scene (MUSEN's text format: its ``Documenta
 - every free particle starts at the velocity of its height in the uniform strain rate (opalflow's affine start);
 - no damping: MUSEN's elastic bond has none (opalflow's dynamic decks damp bonds at ``bonds.damping_ratio``).
 
-opalflow runs the same spec: quasi-static (the paper's rule, contacts off / frictionless / sticking) and dynamic
-(LAMMPS, glued loading, ``bonds.smooth = false``).  Results: bench/results/musen_peer.json.
+``--loading plate`` is the paper's loading instead (section 2.1: "a diamond plate ... moving in the vertical
+direction"): every particle at rest, no driven layer; the plate two triangular walls over the whole periodic box at
+the sample's top (a geometry of compound ``plate``, diamond's contact E and nu, data/materials.toml), moving down at
+the plate speed from the first step (``ModelPWHertzMindlin``); the stress is the walls' z force over the
+cross-section, the strain the plate's displacement over the sample's height.  MUSEN removes a broken bond at once
+(no 1 ns fade in its code), as opalflow's ``bonds.smooth = false``.
+
+``--rule`` names opalflow's breaking rule the row compares (:data:`CRITERION`): ``musen`` and ``musen_crit2`` are
+MUSEN's ``CONSIDER_BREAKAGE`` 1 and 2; ``musen_2020`` needs a CMUSEN whose ModelSBElastic check is that of MUSEN's
+first public commit (655e066).  ``--musen-commit`` says which MUSEN source built the binary; every row records it.
+
+opalflow runs the same spec: quasi-static (the rule given, contacts off / frictionless / sticking) and dynamic
+(LAMMPS, ``bonds.smooth = false``; with the plate: undamped, sample at rest, LAMMPS's rule, the only one it has).
+Every curve gives its first peak (:func:`first_peak`) and its maximum.  Results: bench/results/musen_peer.json.
 """
 from __future__ import annotations
 
@@ -55,6 +67,8 @@ OPAL45 = ["compression.method=quasistatic", "compression.drop_loose=true", "bond
           "compression.event_tolerance=0.05",
           "compression.resolve_rtol=1e-5", 'bonds.breaking="musen"', "compression.snapshot_strains=[]",
           'compression.loading="glued"']
+#: opalflow's breaking rule -> MUSEN's ``CONSIDER_BREAKAGE`` (``musen_2020``: the check of 655e066, built in)
+CRITERION = {"musen": 1, "musen_crit2": 2, "musen_2020": 1}
 #: case -> (workflow, settings, strain_max, opalflow's runs of it: the labels of :data:`OPALFLOW`)
 CASES = {"bulk60": ("quickstart", [*BULK, "packing.diameter_nm=60.0"], 0.05,
                     ["quasistatic", "quasistatic_frictionless", "quasistatic_sticking", "dynamic_lammps_rule"]),
@@ -80,8 +94,9 @@ def loaded(workflow: str, sets: list[str]):
     return spec, loaded_sample(spec, s)
 
 
-def scene_text(spec, sample, speed_m_s: float) -> str:
-    """The MUSEN text scene of ``sample`` (module docstring)."""
+def scene_text(spec, sample, speed_m_s: float, plate: bool = False) -> str:
+    """The MUSEN text scene of ``sample`` (module docstring): glued (the top layer driven, the rest on the affine
+    field) or, with ``plate``, at rest under a plate wall."""
     from opalflow.bpm.deck import particle_material
     from opalflow.materials import contact_properties, material
 
@@ -105,6 +120,12 @@ def scene_text(spec, sample, speed_m_s: float) -> str:
     for a in keys:
         for b in keys:
             lines.append(f"33 {a} {b} 200 {num(c.restitution)} 201 {num(c.friction)} 202 0")
+    if plate:
+        d = contact_properties("diamond")
+        lines.append(f"32 plate plate 0 {num(material('diamond', {})['density_kg_m3'])} 7 "
+                     f"{num(d.youngs_modulus_MPa * 1e6)} 10 {num(d.poisson_ratio)}")
+        for a in keys:
+            lines.append(f"33 {a} plate 200 {num(d.restitution)} 201 {num(d.friction)} 202 0")
     lo, hi = data.box_lo * NM, data.box_hi * NM
     lines.append("22 " + " ".join(num(v) for v in (*lo, *hi)))
     p = [bool(v) for v in data.periodic]
@@ -116,6 +137,8 @@ def scene_text(spec, sample, speed_m_s: float) -> str:
     # uniform strain rate, so the run starts without the shock of a layer set moving against a sample at rest
     # (undamped, that shock rings through the whole run: the opal at d = 45 nm swung between -5.7 and +2.6 MPa)
     rise = np.clip((data.positions[:, 2] - sample.base_nm) / sample.height_nm, 0.0, 1.0)
+    if plate:                              # the paper's test: the sample at rest, nothing driven but the plate
+        driven, rise = np.zeros_like(driven), np.zeros_like(rise)
     for i in range(data.n_particles):
         key = "held" if held[i] else "driven" if driven[i] else "particle"
         vz = -speed_m_s if driven[i] else 0.0 if held[i] else -speed_m_s * float(rise[i])
@@ -126,10 +149,29 @@ def scene_text(spec, sample, speed_m_s: float) -> str:
     for k, ((i, j), L0) in enumerate(zip(data.bonds.tolist(), (sample.bond_lengths * NM).tolist())):
         lines.append(f"0 {data.n_particles + k} 1 9 5 {i} {j} {num(min(d_b[i], d_b[j]))} {num(L0)} "
                      "23 bond 24 0 1e300 2 0")
+    if plate:
+        lines += plate_lines(data.n_particles + data.n_bonds, lo, hi, sample.plate_z0_nm * NM, speed_m_s)
     return "\n".join(lines) + "\n"
 
 
-def script_text(folder: Path, dt: float, end_time: float, saving: float) -> str:
+def plate_lines(first_id: int, lo, hi, z: float, speed_m_s: float) -> list[str]:
+    """The plate: two triangular walls (MUSEN object type 14, vertices by ``44``) over the box's x-y extent at height
+    ``z`` and the geometry that moves them down at ``speed_m_s`` from t = 0 (``25`` name key mass free-motion
+    rotate-about-centre, ``27`` its walls, ``26`` a time-dependent motion: one interval of velocity, rotation centre
+    and rotation velocity; Modules/SimResultsStorage/ImportFromText.cpp, Modules/Geometries/GeometryMotion.h)."""
+    (x0, y0), (x1, y1) = lo[:2], hi[:2]
+    corners = [((x0, y0), (x1, y0), (x1, y1)), ((x0, y0), (x1, y1), (x0, y1))]
+    out = []
+    for k, tri in enumerate(corners):
+        xyz = " ".join(f"{num(a)} {num(b)} {num(z)}" for a, b in tri)
+        out.append(f"0 {first_id + k} 1 14 5 23 plate 24 0 1e300 2 0 44 {xyz}")
+    out += ["25 plate plate 0 0 0 0 0", f"27 2 {first_id} {first_id + 1}",
+            f"26 1 1 0 1e300 0 0 {num(-speed_m_s)} 0 0 0 0 0 0"]
+    return out
+
+
+def script_text(folder: Path, dt: float, end_time: float, saving: float, criterion: int = 1,
+                plate: bool = False) -> str:
     """CMUSEN's script: import the scene, simulate on the CPU (saving the particles' forces alone: all of the
     state of the opal at d = 45 nm, 200 times, is 7.3 GB), export every bond's activity interval (once: at every
     saved time the bonds' lines were 2 GB) and the particles' forces."""
@@ -147,15 +189,15 @@ SELECTIVE_SAVING_P 0 0 1 0 0 0 0
 SELECTIVE_SAVING_SB 0 0 0
 MODEL_PP ModelPPHertzMindlin
 MODEL_SB ModelSBElastic
-MODEL_SB_PARAMS CONSIDER_BREAKAGE 1
-SIMULATION_STEP {num(dt)}
+MODEL_SB_PARAMS CONSIDER_BREAKAGE {criterion}
+""" + ("MODEL_PW ModelPWHertzMindlin\n" if plate else "") + f"""SIMULATION_STEP {num(dt)}
 SAVING_STEP {num(saving)}
 END_TIME {num(end_time)}
 """
     return sim + _export(folder, "bonds.txt", objects="0 1 0", const="1 1 0 0 1", part="0 0 0 0 0 0 0 0 0",
                          extra="TIME_INTERVAL 0 0") \
-        + _export(folder, "export.txt", objects="1 0 0", const="1 1 0 0 0", part="0 0 1 0 0 0 0 0 0",
-                  extra="TEXT_EXPORT_PRECISION 12")
+        + _export(folder, "export.txt", objects="0 0 1" if plate else "1 0 0", const="1 1 0 0 0",
+                  part="0 0 1 0 0 0 0 0 0", extra="TEXT_EXPORT_PRECISION 12\nTEXT_EXPORT_TD_WALL 0 1 0 0")
 
 
 def _export(folder: Path, name: str, *, objects: str, const: str, part: str, extra: str) -> str:
@@ -206,19 +248,19 @@ def read_export(path: Path) -> tuple[dict, dict]:
                 k += 1 + TD_WIDTH[ident]
             else:
                 k += 1
-        if kind == 1:
+        if kind in (1, 14):                  # spheres, triangular walls
             forces[oid] = here
     return forces, ends
 
 
 def run_musen(cmusen: str, spec, sample, folder: Path, strain_max: float, speed_m_s: float, dt: float,
-              points: int, threads: int) -> dict:
+              points: int, threads: int, criterion: int = 1, plate: bool = False) -> dict:
     """Write the scene and script, run CMUSEN, read back the stress-strain curve and the broken bonds."""
     folder.mkdir(parents=True, exist_ok=True)
     height = sample.height_nm * NM
     end = strain_max * height / speed_m_s
-    (folder / "scene.txt").write_text(scene_text(spec, sample, speed_m_s))
-    (folder / "script.txt").write_text(script_text(folder, dt, end, end / points))
+    (folder / "scene.txt").write_text(scene_text(spec, sample, speed_m_s, plate))
+    (folder / "script.txt").write_text(script_text(folder, dt, end, end / points, criterion, plate))
     t0 = time.perf_counter()
     with open(folder / "cmusen.log", "w") as log:
         subprocess.run([cmusen, f"-s={folder / 'script.txt'}", f"-t={threads}"], stdout=log, stderr=subprocess.STDOUT,
@@ -226,12 +268,12 @@ def run_musen(cmusen: str, spec, sample, folder: Path, strain_max: float, speed_
     wall = time.perf_counter() - t0
     forces, _ = read_export(folder / "export.txt")
     _, ends = read_export(folder / "bonds.txt")
-    top = np.flatnonzero(sample.top_layer)
+    n = sample.structure.n_particles
+    top = [k for k in forces if k >= n + sample.structure.n_bonds] if plate else np.flatnonzero(sample.top_layer)
     times = sorted(forces[int(top[0])])
     fz = np.array([sum(forces[int(i)][tt][2] for i in top) for tt in times])
     strain = np.array(times) * speed_m_s / height
-    stress = fz / (sample.area_nm2 * NM * NM) / 1e6          # the layer is pushed up by the sample: F_z > 0
-    n = sample.structure.n_particles
+    stress = fz / (sample.area_nm2 * NM * NM) / 1e6          # the layer (plate) is pushed up by the sample: F_z > 0
     broke = np.array([ends[k] for k in sorted(ends)]) if ends else np.zeros(0)
     broken = int(np.sum((broke > 0) & (broke < 1e299)))
     return {"strain": strain.tolist(), "stress_MPa": stress.tolist(), "wall_s": round(wall, 1),
@@ -240,15 +282,32 @@ def run_musen(cmusen: str, spec, sample, folder: Path, strain_max: float, speed_
             "bond_end_s": sorted(float(t) for t in broke if 0 < t < 1e299)}
 
 
+#: a curve's first peak: its running maximum where the stress first falls below this fraction of it
+FIRST_DROP = 0.9
+
+
+def first_peak(strain, stress) -> tuple[float, float]:
+    """(stress, strain) of a curve's first peak: the running maximum at the first point whose stress is below
+    :data:`FIRST_DROP` of it (the first load drop of 10 %: an undamped run rings by a few per cent); the maximum
+    where it never drops so far."""
+    e, s = np.asarray(strain, float), np.asarray(stress, float)
+    top = np.maximum.accumulate(s)
+    drop = np.flatnonzero((s < FIRST_DROP * top) & (top > 0))
+    k = int(np.argmax(s[:drop[0]])) if len(drop) else int(np.argmax(s))
+    return float(s[k]), float(e[k])
+
+
 def figures(curve: dict, fit_max: float) -> dict:
-    """E (a line through the origin fitted to the curve below ``fit_max`` strain), strength, strain at peak and the
-    bonds broken before it."""
+    """E (a line through the origin fitted to the curve below ``fit_max`` strain), strength (the maximum over the
+    run), strain at peak, the bonds broken before it, and the first peak (:func:`first_peak`)."""
     e, s = np.array(curve["strain"]), np.array(curve["stress_MPa"])
     sel = (e > 0) & (e <= fit_max)
     E = float(np.sum(e[sel] * s[sel]) / np.sum(e[sel] ** 2)) / 1e3 if sel.any() else float("nan")
     p = int(np.argmax(s))
     ends = np.array(curve.get("bond_end_s", []))
+    first, at = first_peak(e, s)
     return {"youngs_modulus_GPa": E, "strength_MPa": float(s[p]), "strain_at_peak": float(e[p]),
+            "first_peak_MPa": first, "strain_at_first_peak": at,
             "broken_bonds_at_peak": int(np.sum(ends * curve["speed_m_s"] / curve["height_m"] < e[p]))}
 
 
@@ -256,7 +315,12 @@ def figures(curve: dict, fit_max: float) -> dict:
 OPALFLOW = {"quasistatic": [],
             "quasistatic_frictionless": ['contacts.quasistatic="frictionless"'],
             "quasistatic_sticking": ['contacts.quasistatic="sticking"'],
-            "dynamic_lammps_rule": ['compression.method="dynamic"', 'bonds.breaking="lammps"']}
+            "dynamic_lammps_rule": ['compression.method="dynamic"', 'bonds.breaking="lammps"'],
+            # the paper's loading on LAMMPS: the plate on the sample at rest, no damping (its rule, the only one)
+            "dynamic_plate_lammps_rule": ['compression.method="dynamic"', 'bonds.breaking="lammps"',
+                                          "compression.global_damping=0.0", "bonds.damping_ratio=0.0"]}
+#: opalflow's runs of a plate row (``--loading plate``)
+PLATE_RUNS = ["quasistatic", "dynamic_plate_lammps_rule"]
 
 
 def run_opalflow(workflow: str, sets: list[str], folder: Path, strain_max: float, speed_m_s: float) -> dict:
@@ -270,7 +334,14 @@ def run_opalflow(workflow: str, sets: list[str], folder: Path, strain_max: float
         s = opalflow.run(workflow, folder, set=[*sets, *extra], quiet=True)
     keys = ("youngs_modulus_GPa", "strength_MPa", "strain_at_peak", "broken_bonds", "broken_bonds_at_peak",
             "broken_bonds_by_check_at_peak", "wall_s")
-    return {k: s[k] for k in keys if k in s}
+    got = {k: s[k] for k in keys if k in s}
+    if s.get("method", "dynamic") == "dynamic" and (folder / "results.h5").exists():
+        import h5py
+
+        with h5py.File(folder / "results.h5") as h:
+            got["first_peak_MPa"], got["strain_at_first_peak"] = first_peak(h["curve/strain"][:],
+                                                                            h["curve/stress_MPa"][:])
+    return got
 
 
 def main() -> None:
@@ -285,33 +356,49 @@ def main() -> None:
     ap.add_argument("--strain-max", type=float, default=None, help="a shorter run (not recorded in bench/results)")
     ap.add_argument("--again", action="store_true", help="run MUSEN again where a row is stored in --out")
     ap.add_argument("--musen-only", action="store_true", help="MUSEN alone, not opalflow's runs")
+    ap.add_argument("--rule", default="musen", choices=sorted(CRITERION),
+                    help="opalflow's breaking rule compared (MUSEN's CONSIDER_BREAKAGE from it; musen_2020 needs a "
+                         "CMUSEN with 655e066's check)")
+    ap.add_argument("--loading", default="glued", choices=["glued", "plate"], help="module docstring")
+    ap.add_argument("--musen-commit", default=os.environ.get("MUSEN_COMMIT"),
+                    help="the MUSEN source the binary was built from (recorded with every row)")
     args = ap.parse_args()
     if not args.cmusen:
         raise SystemExit("give --cmusen PATH (or MUSEN_CMUSEN): a CMUSEN binary built from a MUSEN checkout")
+    if not args.musen_commit:
+        raise SystemExit("give --musen-commit TEXT (or MUSEN_COMMIT): which MUSEN source built the binary")
     from opalflow.bpm.deck import particle_material
     from opalflow.materials import material
 
     workflow, sets, strain_max, runs = CASES[args.case]
-    strain_max = args.strain_max or strain_max
+    plate = args.loading == "plate"
+    sets = [*sets, f'bonds.breaking="{args.rule}"', f'compression.loading="{args.loading}"']
+    runs = PLATE_RUNS if plate else runs
+    strain_max = args.strain_max or (0.06 if plate else strain_max)
     spec, sample = loaded(workflow, sets)
     data = sample.structure
     k_n = sample.coefficients[0].kr / float(np.mean(sample.bond_lengths))       # pN/nm = 1e-3 N/m
     rho = material(particle_material(data.type_names[0], spec.material), spec.materials)["density_kg_m3"]
     mass = float(np.mean(rho * np.pi / 6 * (data.diameters * NM) ** 3))
     dt = args.dt_fraction * float(np.sqrt(mass / (k_n * 1e-3)))
-    folder = args.out / f"{args.case}_v{args.speed:g}"
+    key = f"{args.case}_v{args.speed:g}" + ("" if args.rule == "musen" else f"_{args.rule}") + ("_plate" if plate else "")
+    folder = args.out / key
     row_path = folder / "row.json"
     if row_path.exists() and not args.again:
         musen = json.loads(row_path.read_text())["musen"]
     else:
-        musen = run_musen(args.cmusen, spec, sample, folder, strain_max, args.speed, dt, args.points, args.threads)
-        musen = {**figures(musen, 0.002), **musen}
-    row = {"case": args.case, "workflow": workflow, "set": sets, "strain_max": strain_max, "speed_m_s": args.speed,
+        musen = run_musen(args.cmusen, spec, sample, folder, strain_max, args.speed, dt, args.points, args.threads,
+                          CRITERION[args.rule], plate)
+        musen = {**figures(musen, 0.002), **musen, "commit": args.musen_commit,
+                 "consider_breakage": CRITERION[args.rule]}
+    row = {"case": args.case, "workflow": workflow, "set": sets, "rule": args.rule, "loading": args.loading,
+           "strain_max": strain_max, "speed_m_s": args.speed,
            "n_particles": data.n_particles, "n_bonds": data.n_bonds,
            "height_nm": sample.height_nm, "area_nm2": sample.area_nm2, "musen": musen}
     row_path.write_text(json.dumps(row, indent=1))
-    print(f"MUSEN: E {musen['youngs_modulus_GPa']:.4g} GPa, {musen['strength_MPa']:.4g} MPa at strain "
-          f"{musen['strain_at_peak']:.4f}, {musen['broken_bonds_at_peak']} bonds broken before the peak, "
+    print(f"MUSEN ({args.musen_commit}): E {musen['youngs_modulus_GPa']:.4g} GPa, {musen['strength_MPa']:.4g} MPa at "
+          f"strain {musen['strain_at_peak']:.4f} (first peak {musen['first_peak_MPa']:.4g} MPa at "
+          f"{musen['strain_at_first_peak']:.4f}), {musen['broken_bonds_at_peak']} bonds broken before the peak, "
           f"{musen['broken_bonds']} in all ({musen['wall_s']} s)")
     for label in ([] if args.musen_only else runs):
         extra = OPALFLOW[label]
@@ -320,18 +407,18 @@ def main() -> None:
         dE = got["youngs_modulus_GPa"] / musen["youngs_modulus_GPa"] - 1
         print(f"opalflow {label}: E {got['youngs_modulus_GPa']:.4g} GPa ({dE:+.1%}), "
               f"{got['strength_MPa']:.4g} MPa ({got['strength_MPa'] / musen['strength_MPa'] - 1:+.1%}) at strain "
-              f"{got['strain_at_peak']:.4f}")
+              f"{got['strain_at_peak']:.4f}" + (f", first peak {got['first_peak_MPa']:.4g} MPa at "
+                                                  f"{got['strain_at_first_peak']:.4f}" if "first_peak_MPa" in got else ""))
     row["machine"] = f"{platform.node()}, {os.cpu_count()} cores; CMUSEN on {args.threads} threads"
     if args.strain_max is not None:          # (a shortened run is a try, not a result)
         return
     RESULTS.mkdir(exist_ok=True)
     path = RESULTS / "musen_peer.json"
     rows = json.loads(path.read_text()) if path.exists() else {}
-    rows[f"{args.case}_v{args.speed:g}"] = {k: v for k, v in row.items()}
-    rows[f"{args.case}_v{args.speed:g}"]["musen"] = {k: v for k, v in musen.items()
-                                                      if k not in ("strain", "stress_MPa", "bond_end_s")}
-    rows[f"{args.case}_v{args.speed:g}"]["musen"]["curve"] = {
-        "strain": [round(v, 6) for v in musen["strain"]], "stress_MPa": [round(v, 4) for v in musen["stress_MPa"]]}
+    rows[key] = {k: v for k, v in row.items()}
+    rows[key]["musen"] = {k: v for k, v in musen.items() if k not in ("strain", "stress_MPa", "bond_end_s")}
+    rows[key]["musen"]["curve"] = {"strain": [round(v, 6) for v in musen["strain"]],
+                                   "stress_MPa": [round(v, 4) for v in musen["stress_MPa"]]}
     path.write_text(json.dumps(rows, indent=1) + "\n")
 
 
