@@ -360,6 +360,7 @@ def main() -> None:
                     help="opalflow's breaking rule compared (MUSEN's CONSIDER_BREAKAGE from it; musen_2020 needs a "
                          "CMUSEN with 655e066's check)")
     ap.add_argument("--loading", default="glued", choices=["glued", "plate"], help="module docstring")
+    ap.add_argument("--runs", nargs="*", choices=sorted(OPALFLOW), help="opalflow's runs (default: the case's)")
     ap.add_argument("--musen-commit", default=os.environ.get("MUSEN_COMMIT"),
                     help="the MUSEN source the binary was built from (recorded with every row)")
     args = ap.parse_args()
@@ -373,7 +374,7 @@ def main() -> None:
     workflow, sets, strain_max, runs = CASES[args.case]
     plate = args.loading == "plate"
     sets = [*sets, f'bonds.breaking="{args.rule}"', f'compression.loading="{args.loading}"']
-    runs = PLATE_RUNS if plate else runs
+    runs = args.runs or (PLATE_RUNS if plate else runs)
     strain_max = args.strain_max or (0.06 if plate else strain_max)
     spec, sample = loaded(workflow, sets)
     data = sample.structure
