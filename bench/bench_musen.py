@@ -416,7 +416,8 @@ def main() -> None:
     RESULTS.mkdir(exist_ok=True)
     path = RESULTS / "musen_peer.json"
     rows = json.loads(path.read_text()) if path.exists() else {}
-    rows[key] = {k: v for k, v in row.items()}
+    kept = {k: v for k, v in rows.get(key, {}).items() if k.startswith("opalflow_")}     # runs not repeated now
+    rows[key] = {**kept, **row}
     rows[key]["musen"] = {k: v for k, v in musen.items() if k not in ("strain", "stress_MPa", "bond_end_s")}
     rows[key]["musen"]["curve"] = {"strain": [round(v, 6) for v in musen["strain"]],
                                    "stress_MPa": [round(v, 4) for v in musen["stress_MPa"]]}
