@@ -127,7 +127,9 @@ def scene_text(spec, sample, speed_m_s: float, plate: bool = False) -> str:
         for a in keys:
             lines.append(f"33 {a} plate 200 {num(d.restitution)} 201 {num(d.friction)} 202 0")
     lo, hi = data.box_lo * NM, data.box_hi * NM
-    lines.append("22 " + " ".join(num(v) for v in (*lo, *hi)))
+    # the simulation domain holds the plate too (MUSEN leaves what lies outside it out of the contact search)
+    top = max(float(hi[2]), (sample.plate_z0_nm + 2 * float(np.max(data.diameters))) * NM) if plate else float(hi[2])
+    lines.append("22 " + " ".join(num(v) for v in (*lo, *hi[:2], top)))
     p = [bool(v) for v in data.periodic]
     if any(p):
         lines.append(f"28 1 {int(p[0])} {int(p[1])} {int(p[2])} " + " ".join(num(v) for v in (*lo, *hi)))
@@ -160,7 +162,7 @@ def plate_lines(first_id: int, lo, hi, z: float, speed_m_s: float) -> list[str]:
     rotate-about-centre, ``27`` its walls, ``26`` a time-dependent motion: one interval of velocity, rotation centre
     and rotation velocity; Modules/SimResultsStorage/ImportFromText.cpp, Modules/Geometries/GeometryMotion.h)."""
     (x0, y0), (x1, y1) = lo[:2], hi[:2]
-    corners = [((x0, y0), (x1, y0), (x1, y1)), ((x0, y0), (x1, y1), (x0, y1))]
+    corners = [((x0, y0), (x1, y1), (x1, y0)), ((x0, y0), (x0, y1), (x1, y1))]     # normals down, to the sample
     out = []
     for k, tri in enumerate(corners):
         xyz = " ".join(f"{num(a)} {num(b)} {num(z)}" for a, b in tri)
@@ -197,7 +199,7 @@ END_TIME {num(end_time)}
     return sim + _export(folder, "bonds.txt", objects="0 1 0", const="1 1 0 0 1", part="0 0 0 0 0 0 0 0 0",
                          extra="TIME_INTERVAL 0 0") \
         + _export(folder, "export.txt", objects="0 0 1" if plate else "1 0 0", const="1 1 0 0 0",
-                  part="0 0 1 0 0 0 0 0 0", extra="TEXT_EXPORT_PRECISION 12\nTEXT_EXPORT_TD_WALL 0 1 0 0")
+                  part="0 0 1 0 0 0 0 0 0", extra="TEXT_EXPORT_PRECISION 12\nTEXT_EXPORT_TD_WALL 1 1 0 0")
 
 
 def _export(folder: Path, name: str, *, objects: str, const: str, part: str, extra: str) -> str:
@@ -222,16 +224,16 @@ TEXT_EXPORT_GENERATORS 0 0
 TD_WIDTH = {12: 3, 15: 3, 16: 3, 18: 1, 20: 3, 31: 4, 36: 9, 37: 1, 42: 3, 43: 1, 45: 3}
 
 
-def read_export(path: Path) -> tuple[dict, dict]:
-    """(per particle id {time: force (3,)}, per bond id its activity end time) from MUSEN's text export (read a
-    line at a time: a big scene's export is gigabytes)."""
-    forces, ends = {}, {}
+def read_export(path: Path) -> tuple[dict, dict, dict]:
+    """(per particle or wall id {time: force (3,)}, per bond id its activity end time, per wall id {time: height of
+    its first vertex}) from MUSEN's text export (read a line at a time: a big scene's export is gigabytes)."""
+    forces, ends, heights = {}, {}, {}
     for line in open(path):
         t = line.split()
         if not t or t[0] != "0":
             continue
         oid, kind = int(t[1]), int(t[3])
-        k, here, now = 4, {}, None
+        k, here, z, now = 4, {}, {}, None
         while k < len(t):
             ident = int(t[k])
             if ident == 24:
@@ -244,13 +246,18 @@ def read_export(path: Path) -> tuple[dict, dict]:
             elif ident == 20 and now is not None:
                 here[now] = np.array([float(v) for v in t[k + 1:k + 4]])
                 k += 4
+            elif ident == 44 and now is not None:
+                z[now] = float(t[k + 3])
+                k += 10
             elif ident in TD_WIDTH:
                 k += 1 + TD_WIDTH[ident]
             else:
                 k += 1
         if kind in (1, 14):                  # spheres, triangular walls
             forces[oid] = here
-    return forces, ends
+        if z:
+            heights[oid] = z
+    return forces, ends, heights
 
 
 def run_musen(cmusen: str, spec, sample, folder: Path, strain_max: float, speed_m_s: float, dt: float,
@@ -266,13 +273,17 @@ def run_musen(cmusen: str, spec, sample, folder: Path, strain_max: float, speed_
         subprocess.run([cmusen, f"-s={folder / 'script.txt'}", f"-t={threads}"], stdout=log, stderr=subprocess.STDOUT,
                        check=True, cwd=folder)
     wall = time.perf_counter() - t0
-    forces, _ = read_export(folder / "export.txt")
-    _, ends = read_export(folder / "bonds.txt")
+    forces, _, heights = read_export(folder / "export.txt")
+    _, ends, _ = read_export(folder / "bonds.txt")
     n = sample.structure.n_particles
     top = [k for k in forces if k >= n + sample.structure.n_bonds] if plate else np.flatnonzero(sample.top_layer)
     times = sorted(forces[int(top[0])])
     fz = np.array([sum(forces[int(i)][tt][2] for i in top) for tt in times])
-    strain = np.array(times) * speed_m_s / height
+    if plate:                              # the plate's own travel (MUSEN moves a wall twice in its first step)
+        z = heights[int(top[0])]
+        strain = (z[times[0]] - np.array([z[tt] for tt in times])) / height
+    else:
+        strain = np.array(times) * speed_m_s / height
     stress = fz / (sample.area_nm2 * NM * NM) / 1e6          # the layer (plate) is pushed up by the sample: F_z > 0
     broke = np.array([ends[k] for k in sorted(ends)]) if ends else np.zeros(0)
     broken = int(np.sum((broke > 0) & (broke < 1e299)))
@@ -375,7 +386,8 @@ def main() -> None:
     plate = args.loading == "plate"
     sets = [*sets, f'bonds.breaking="{args.rule}"', f'compression.loading="{args.loading}"']
     runs = args.runs or (PLATE_RUNS if plate else runs)
-    strain_max = args.strain_max or (0.06 if plate else strain_max)
+    # the plate seats on the rough top before it loads the sample: past the glued run's strain
+    strain_max = args.strain_max or (max(0.06, 1.6 * strain_max) if plate else strain_max)
     spec, sample = loaded(workflow, sets)
     data = sample.structure
     k_n = sample.coefficients[0].kr / float(np.mean(sample.bond_lengths))       # pN/nm = 1e-3 N/m
