@@ -327,11 +327,12 @@ OPALFLOW = {"quasistatic": [],
             "quasistatic_frictionless": ['contacts.quasistatic="frictionless"'],
             "quasistatic_sticking": ['contacts.quasistatic="sticking"'],
             "dynamic_lammps_rule": ['compression.method="dynamic"', 'bonds.breaking="lammps"'],
+            "quasistatic_lammps_rule": ['bonds.breaking="lammps"'],
             # the paper's loading on LAMMPS: the plate on the sample at rest, no damping (its rule, the only one)
             "dynamic_plate_lammps_rule": ['compression.method="dynamic"', 'bonds.breaking="lammps"',
                                           "compression.global_damping=0.0", "bonds.damping_ratio=0.0"]}
 #: opalflow's runs of a plate row (``--loading plate``)
-PLATE_RUNS = ["quasistatic", "dynamic_plate_lammps_rule"]
+PLATE_RUNS = ["quasistatic", "quasistatic_lammps_rule", "dynamic_plate_lammps_rule"]
 
 
 def run_opalflow(workflow: str, sets: list[str], folder: Path, strain_max: float, speed_m_s: float) -> dict:
