@@ -318,8 +318,8 @@ def _check_table(summary) -> list[str]:
     names = [name for name in total]
     labels = sorted({label for counts in total.values() for label in counts},
                     key=lambda label: (label.split(" ")[0], label.split(" ")[-1]))
-    lines = ["Bonds broken by each check (Dosta et al. eqs. 16-17 apart; L0 / d by length bin), before the peak / "
-             "in all:",
+    lines = ["Bonds broken by each check of the breaking rule (the largest of its checks at the event: "
+             "opalflow.bpm.quasistatic.CHECKS; L0 / d by length bin), before the peak / in all:",
              "", "| length bin | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
     for label in labels:
         lines.append(f"| {label} | " + " | ".join(f"{peak.get(n, {}).get(label, 0)} / {total[n].get(label, 0)}"
