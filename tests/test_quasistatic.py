@@ -64,7 +64,8 @@ def test_sc_lattice_in_tension_breaks_at_the_bond_strength_by_the_papers_rules(t
     s = opalflow.run("lattice_sc", tmp_path / rule, set=[*TENSION, "compression.method=quasistatic",
                                                           f'bonds.breaking="{rule}"'], quiet=True)
     assert s["strength_MPa"] == pytest.approx(sc_strength(), rel=1e-3)
-    assert BREAKING_RULES[rule] in (tmp_path / rule / "report.md").read_text()
+    report = (tmp_path / rule / "report.md").read_text()
+    assert BREAKING_RULES[rule] in report and "| length bin | " + " | ".join(CHECKS[rule]) + " |" in report
     # pulled along their axis, the bonds break by the normal check, each in its length bin
     normal, *others = CHECKS[rule]
     assert s["broken_bonds_by_check"] == {normal: {"silica 1.000-1.000": s["broken_bonds"]},
