@@ -310,18 +310,20 @@ def first_peak(strain, stress) -> tuple[float, float]:
     return float(s[k]), float(e[k])
 
 
-def figures(curve: dict, fit_max: float) -> dict:
+def figures(curve: dict, fit_max: float, plate: bool) -> dict:
     """E (a line through the origin fitted to the curve below ``fit_max`` strain), strength (the maximum over the
-    run), strain at peak, the bonds broken before it, and the first peak (:func:`first_peak`)."""
+    run), strain at peak, the bonds broken before it, and with the ``plate`` the first peak (:func:`first_peak`;
+    a glued start rings, so its first drop is no peak)."""
     e, s = np.array(curve["strain"]), np.array(curve["stress_MPa"])
     sel = (e > 0) & (e <= fit_max)
     E = float(np.sum(e[sel] * s[sel]) / np.sum(e[sel] ** 2)) / 1e3 if sel.any() else float("nan")
     p = int(np.argmax(s))
     ends = np.array(curve.get("bond_end_s", []))
-    first, at = first_peak(e, s)
-    return {"youngs_modulus_GPa": E, "strength_MPa": float(s[p]), "strain_at_peak": float(e[p]),
-            "first_peak_MPa": first, "strain_at_first_peak": at,
-            "broken_bonds_at_peak": int(np.sum(ends * curve["speed_m_s"] / curve["height_m"] < e[p]))}
+    got = {"youngs_modulus_GPa": E, "strength_MPa": float(s[p]), "strain_at_peak": float(e[p]),
+           "broken_bonds_at_peak": int(np.sum(ends * curve["speed_m_s"] / curve["height_m"] < e[p]))}
+    if plate:
+        got["first_peak_MPa"], got["strain_at_first_peak"] = first_peak(e, s)
+    return got
 
 
 #: opalflow's runs of the same spec: label -> settings added
@@ -412,18 +414,17 @@ def main() -> None:
     else:
         musen = run_musen(args.cmusen, spec, sample, folder, strain_max, args.speed, dt, args.points, args.threads,
                           CRITERION[args.rule], plate)
-        musen = {**figures(musen, 0.002), **musen, "commit": args.musen_commit,
+        musen = {**figures(musen, 0.002, plate), **musen, "commit": args.musen_commit,
                  "consider_breakage": CRITERION[args.rule]}
-        if not plate:                      # (the glued start rings: a first peak is the plate's measure)
-            del musen["first_peak_MPa"], musen["strain_at_first_peak"]
     row = {"case": args.case, "workflow": workflow, "set": sets, "rule": args.rule, "loading": args.loading,
            "strain_max": strain_max, "speed_m_s": args.speed,
            "n_particles": data.n_particles, "n_bonds": data.n_bonds,
            "height_nm": sample.height_nm, "area_nm2": sample.area_nm2, "musen": musen}
     row_path.write_text(json.dumps(row, indent=1))
     print(f"MUSEN ({args.musen_commit}): E {musen['youngs_modulus_GPa']:.4g} GPa, {musen['strength_MPa']:.4g} MPa at "
-          f"strain {musen['strain_at_peak']:.4f} (first peak {musen['first_peak_MPa']:.4g} MPa at "
-          f"{musen['strain_at_first_peak']:.4f}), {musen['broken_bonds_at_peak']} bonds broken before the peak, "
+          f"strain {musen['strain_at_peak']:.4f}" + (f" (first peak {musen['first_peak_MPa']:.4g} MPa at "
+          f"{musen['strain_at_first_peak']:.4f})" if plate else "") + f", {musen['broken_bonds_at_peak']} bonds "
+          "broken before the peak, "
           f"{musen['broken_bonds']} in all ({musen['wall_s']} s)")
     for label in ([] if args.musen_only else runs):
         extra = OPALFLOW[label]

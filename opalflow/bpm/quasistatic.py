@@ -80,7 +80,7 @@ import numpy as np
 
 from opalflow.bpm.contacts import Contacts, joined
 from opalflow.bpm.loading import Supports
-from opalflow.bpm.spec import RESOLVERS
+from opalflow.bpm.spec import BREAKING_RULES, RESOLVERS
 from opalflow.bpm.static import (DIRECT_MAX_DOFS, block_amg_preconditioner, block_matrix, bond_blocks, loose_particles,
                                   particle_amg)
 from opalflow.bpm.stiffness import BondNetwork
@@ -131,6 +131,8 @@ CHECKS = {"lammps": ("normal + bending", "shear + twist"),
           "musen": ("normal + bending", "shear + twist"),
           "musen_2020": ("bending - normal", "twist - shear"),
           "musen_crit2": ("normal", "bending", "shear", "twist")}
+if set(CHECKS) != set(BREAKING_RULES):        # (one list of rules: the spec's; a rule needs its checks here)
+    raise ImportError(f"opalflow.bpm.quasistatic.CHECKS lacks or adds rules: {set(CHECKS) ^ set(BREAKING_RULES)}")
 #: each rule's number in the numba pass
 _RULE_CODE = {rule: k for k, rule in enumerate(CHECKS)}
 _DOSTA, _MUSEN_2020, _MUSEN_CRIT2 = _RULE_CODE["dosta"], _RULE_CODE["musen_2020"], _RULE_CODE["musen_crit2"]
