@@ -94,9 +94,11 @@ def loaded(workflow: str, sets: list[str]):
     return spec, loaded_sample(spec, s)
 
 
-def scene_text(spec, sample, speed_m_s: float, plate: bool = False) -> str:
+def scene_text(spec, sample, speed_m_s: float, plate: bool = False, legacy: bool = False) -> str:
     """The MUSEN text scene of ``sample`` (module docstring): glued (the top layer driven, the rest on the affine
-    field) or, with ``plate``, at rest under a plate wall."""
+    field) or, with ``plate``, at rest under a plate wall.  ``legacy`` (a MUSEN before 1.70.0): the simulation
+    domain two diameters wider than the periodic box on every side (655e066's Verlet grid spans the domain alone
+    and writes the periodic images of particles near a side out of its bounds: a segfault at the first step)."""
     from opalflow.bpm.deck import particle_material
     from opalflow.materials import contact_properties, material
 
@@ -129,7 +131,8 @@ def scene_text(spec, sample, speed_m_s: float, plate: bool = False) -> str:
     lo, hi = data.box_lo * NM, data.box_hi * NM
     # the simulation domain holds the plate too (MUSEN leaves what lies outside it out of the contact search)
     top = max(float(hi[2]), (sample.plate_z0_nm + 2 * float(np.max(data.diameters))) * NM) if plate else float(hi[2])
-    lines.append("22 " + " ".join(num(v) for v in (*lo, *hi[:2], top)))
+    margin = 2 * float(np.max(data.diameters)) * NM if legacy else 0.0
+    lines.append("22 " + " ".join(num(v) for v in (*(lo - margin), *(hi[:2] + margin), top + margin)))
     p = [bool(v) for v in data.periodic]
     if any(p):
         lines.append(f"28 1 {int(p[0])} {int(p[1])} {int(p[2])} " + " ".join(num(v) for v in (*lo, *hi)))
@@ -172,11 +175,25 @@ def plate_lines(first_id: int, lo, hi, z: float, speed_m_s: float) -> list[str]:
     return out
 
 
+def musen_version(cmusen: str) -> tuple[int, ...]:
+    """The version CMUSEN reports (``cmusen -v``: "Version: 1.63.4" for 655e066, the first public commit)."""
+    out = subprocess.run([cmusen, "-v"], capture_output=True, text=True).stdout
+    words = next((line.split()[1] for line in out.splitlines() if line.startswith("Version:")), "0")
+    return tuple(int(v) for v in words.split(".") if v.isdigit())
+
+
+#: MUSEN before Release 1.70.0 (1547403): the text export's older script keys (ScriptAnalyzer.cpp of 655e066)
+#: and one breaking rule only (``CONSIDER_BREAKAGE 1`` is 2020's check: opalflow's ``musen_2020``)
+LEGACY = (1, 70)
+
+
 def script_text(folder: Path, dt: float, end_time: float, saving: float, criterion: int = 1,
-                plate: bool = False) -> str:
+                plate: bool = False, legacy: bool = False) -> str:
     """CMUSEN's script: import the scene, simulate on the CPU (saving the particles' forces alone: all of the
     state of the opal at d = 45 nm, 200 times, is 7.3 GB), export every bond's activity interval (once: at every
-    saved time the bonds' lines were 2 GB) and the particles' forces."""
+    saved time the bonds' lines were 2 GB) and the particles' forces.  ``legacy``: a MUSEN older than
+    :data:`LEGACY` (its export keys: objects p/sb/lb/walls, constants id/type/geometry/material/activity, one
+    ``TEXT_EXPORT_TD`` of eleven flags, force the fifth; no time interval, no wall coordinates)."""
     sim = f"""JOB
 COMPONENT IMPORT_FROM_TEXT
 SOURCE_FILE {folder / 'scene.txt'}
@@ -196,28 +213,26 @@ MODEL_SB_PARAMS CONSIDER_BREAKAGE {criterion}
 SAVING_STEP {num(saving)}
 END_TIME {num(end_time)}
 """
-    return sim + _export(folder, "bonds.txt", objects="0 1 0", const="1 1 0 0 1", part="0 0 0 0 0 0 0 0 0",
-                         extra="TIME_INTERVAL 0 0") \
-        + _export(folder, "export.txt", objects="0 0 1" if plate else "1 0 0", const="1 1 0 0 0",
-                  part="0 0 1 0 0 0 0 0 0", extra="TEXT_EXPORT_PRECISION 12\nTEXT_EXPORT_TD_WALL 1 1 0 0")
+    if legacy:
+        off = ["TEXT_EXPORT_GEOMETRIES 0 0 0"]
+        return sim + _export(folder, "bonds.txt", ["TEXT_EXPORT_OBJECTS 0 1 0 0", "TEXT_EXPORT_CONST 1 1 0 0 1",
+                                                   "TEXT_EXPORT_TD 0 0 0 0 0 0 0 0 0 0 0", *off]) \
+            + _export(folder, "export.txt", ["TEXT_EXPORT_OBJECTS 1 0 0 0", "TEXT_EXPORT_CONST 1 1 0 0 0",
+                                             "TEXT_EXPORT_TD 0 0 0 0 1 0 0 0 0 0 0", *off])
+    off = ["TEXT_EXPORT_TD_BOND 0 0 0 0 0 0 0", "TEXT_EXPORT_GEOMETRIES 0 0 0 0", "TEXT_EXPORT_GENERATORS 0 0"]
+    return sim + _export(folder, "bonds.txt", ["TEXT_EXPORT_OBJECTS 0 1 0", "TEXT_EXPORT_CONST 1 1 0 0 1",
+                                               "TEXT_EXPORT_TD_PART 0 0 0 0 0 0 0 0 0", "TIME_INTERVAL 0 0", *off]) \
+        + _export(folder, "export.txt", [f"TEXT_EXPORT_OBJECTS {'0 0 1' if plate else '1 0 0'}",
+                                         "TEXT_EXPORT_CONST 1 1 0 0 0", "TEXT_EXPORT_TD_PART 0 0 1 0 0 0 0 0 0",
+                                         "TEXT_EXPORT_TD_WALL 1 1 0 0", *off])
 
 
-def _export(folder: Path, name: str, *, objects: str, const: str, part: str, extra: str) -> str:
-    """One EXPORT_TO_TEXT job of run.mdem: the objects, constant and particle properties chosen, nothing else."""
-    return f"""JOB
-COMPONENT EXPORT_TO_TEXT
-SOURCE_FILE {folder / 'run.mdem'}
-RESULT_FILE {folder / name}
-TEXT_EXPORT_OBJECTS {objects}
-TEXT_EXPORT_CONST {const}
-TEXT_EXPORT_TD_PART {part}
-TEXT_EXPORT_TD_BOND 0 0 0 0 0 0 0
-TEXT_EXPORT_SCENE 0 0 0 0
-TEXT_EXPORT_GEOMETRIES 0 0 0 0
-TEXT_EXPORT_MATERIALS 0 0 0
-TEXT_EXPORT_GENERATORS 0 0
-{extra}
-"""
+def _export(folder: Path, name: str, keys: list[str]) -> str:
+    """One EXPORT_TO_TEXT job of run.mdem: the objects, constant and time-dependent properties ``keys`` choose,
+    nothing else (what is not named is off; today's keys and a legacy MUSEN's, :func:`script_text`)."""
+    lines = ["JOB", "COMPONENT EXPORT_TO_TEXT", f"SOURCE_FILE {folder / 'run.mdem'}", f"RESULT_FILE {folder / name}",
+             *keys, "TEXT_EXPORT_SCENE 0 0 0 0", "TEXT_EXPORT_MATERIALS 0 0 0", "TEXT_EXPORT_PRECISION 12"]
+    return "\n".join(lines) + "\n"
 
 
 #: values after each time-dependent identifier of MUSEN's text export (ETXTCommands)
@@ -261,13 +276,13 @@ def read_export(path: Path) -> tuple[dict, dict, dict]:
 
 
 def run_musen(cmusen: str, spec, sample, folder: Path, strain_max: float, speed_m_s: float, dt: float,
-              points: int, threads: int, criterion: int = 1, plate: bool = False) -> dict:
+              points: int, threads: int, criterion: int = 1, plate: bool = False, legacy: bool = False) -> dict:
     """Write the scene and script, run CMUSEN, read back the stress-strain curve and the broken bonds."""
     folder.mkdir(parents=True, exist_ok=True)
     height = sample.height_nm * NM
     end = strain_max * height / speed_m_s
-    (folder / "scene.txt").write_text(scene_text(spec, sample, speed_m_s, plate))
-    (folder / "script.txt").write_text(script_text(folder, dt, end, end / points, criterion, plate))
+    (folder / "scene.txt").write_text(scene_text(spec, sample, speed_m_s, plate, legacy))
+    (folder / "script.txt").write_text(script_text(folder, dt, end, end / points, criterion, plate, legacy))
     t0 = time.perf_counter()
     with open(folder / "cmusen.log", "w") as log:
         subprocess.run([cmusen, f"-s={folder / 'script.txt'}", f"-t={threads}"], stdout=log, stderr=subprocess.STDOUT,
@@ -397,6 +412,11 @@ def main() -> None:
 
     workflow, sets, strain_max, runs = CASES[args.case]
     plate = args.loading == "plate"
+    version = musen_version(args.cmusen)
+    legacy = version < LEGACY
+    if legacy and (args.rule != "musen_2020" or plate):
+        raise SystemExit(f"CMUSEN {'.'.join(map(str, version))} (before 1.70.0) breaks bonds by 2020's check only "
+                         "(--rule musen_2020) and exports no wall coordinates (--loading glued)")
     sets = [*sets, f'bonds.breaking="{args.rule}"', f'compression.loading="{args.loading}"']
     runs = args.runs or (PLATE_RUNS if plate else runs)
     strain_max = args.strain_max or (PLATE_STRAIN[args.case] if plate else strain_max)
@@ -406,16 +426,17 @@ def main() -> None:
     rho = material(particle_material(data.type_names[0], spec.material), spec.materials)["density_kg_m3"]
     mass = float(np.mean(rho * np.pi / 6 * (data.diameters * NM) ** 3))
     dt = args.dt_fraction * float(np.sqrt(mass / (k_n * 1e-3)))
-    key = f"{args.case}_v{args.speed:g}" + ("" if args.rule == "musen" else f"_{args.rule}") + ("_plate" if plate else "")
+    key = (f"{args.case}_v{args.speed:g}" + ("" if args.rule == "musen" else f"_{args.rule}") + ("_plate" if plate else "")
+           + (f"_musen{'.'.join(map(str, version))}" if legacy else ""))
     folder = args.out / key
     row_path = folder / "row.json"
     if row_path.exists() and not args.again:
         musen = json.loads(row_path.read_text())["musen"]
     else:
         musen = run_musen(args.cmusen, spec, sample, folder, strain_max, args.speed, dt, args.points, args.threads,
-                          CRITERION[args.rule], plate)
+                          CRITERION[args.rule], plate, legacy)
         musen = {**figures(musen, 0.002, plate), **musen, "commit": args.musen_commit,
-                 "consider_breakage": CRITERION[args.rule]}
+                 "version": ".".join(map(str, version)), "consider_breakage": CRITERION[args.rule]}
     row = {"case": args.case, "workflow": workflow, "set": sets, "rule": args.rule, "loading": args.loading,
            "strain_max": strain_max, "speed_m_s": args.speed,
            "n_particles": data.n_particles, "n_bonds": data.n_bonds,

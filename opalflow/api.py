@@ -8,7 +8,7 @@
 
 A workflow is a file path, the name of a file in ``workflows/`` (``opalflow.workflows()`` lists them), a
 workflow table as a dict (the TOML's content), or a spec already made.  ``set`` overrides fields: a dict
-``{"section.key": value}`` (Python values) or a list of ``"section.key=value"`` strings (TOML values, as
+``{"section.key": value}`` (Python values), or one ``"section.key=value"`` string or a list of them (TOML values, as
 ``--set``).  Bad input raises :class:`opalflow.spec.InputError` (one line: field, value, what is allowed)
 before anything is written; a failed LAMMPS run raises :class:`opalflow.lammps.engine.EngineError` with
 its log tail and keeps the folder; Ctrl-C raises :class:`opalflow.lammps.engine.Interrupted` (a
@@ -27,7 +27,7 @@ from opalflow.resources import WORKFLOWS
 from opalflow.runs.spec import executor_from_raw
 from opalflow.spec import SpecError, WorkflowSpec, apply_overrides, read_toml, set_value
 
-Settings = dict[str, Any] | list[str] | None
+Settings = dict[str, Any] | list[str] | str | None
 
 
 def _stderr(msg: str) -> None:
@@ -67,8 +67,13 @@ def raw_workflow(workflow: str | Path | dict | WorkflowSpec, set: Settings = Non
     if isinstance(set, dict):
         for path, value in set.items():
             set_value(raw, str(path), value)
-    elif set:
+    elif isinstance(set, str):                  # one "section.key=value" (not a list of its characters)
+        apply_overrides(raw, [set])
+    elif isinstance(set, (list, tuple)) and all(isinstance(x, str) for x in set):
         apply_overrides(raw, list(set))
+    elif set is not None:
+        raise SpecError("set", repr(set)[:80], "must be a dict {'section.key': value}, a 'section.key=value' "
+                        "string or a list of them")
     return raw
 
 
@@ -80,6 +85,8 @@ def load_workflow(workflow: str | Path | dict | WorkflowSpec, set: Settings = No
 
 
 def _folder(out: str | Path, field: str = "out") -> Path:
+    if not str(out).strip():
+        raise SpecError(field, str(out), "give a folder name (an empty one would be the current folder)")
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise SpecError(field, str(out), "exists and is not a folder")
@@ -106,8 +113,8 @@ def run(workflow: str | Path | dict | WorkflowSpec | None, out: str | Path, *, s
     job; ``quiet``: no progress lines on stderr.
     """
     out = _folder(out)
-    if resume and workflow is None:
-        spec = registry.spec_from_dict(run_json(out, "--resume")["spec"])
+    if resume:
+        spec = resumed_spec(out, workflow, set)
     elif workflow is None:
         raise SpecError("workflow", None, "give a workflow file or name (or resume with an out folder)")
     else:
@@ -134,6 +141,39 @@ def run(workflow: str | Path | dict | WorkflowSpec | None, out: str | Path, *, s
             raise SpecError("--suffix", suffix, "is for runs on this machine (a submitted run uses the launcher)")
         return submit(spec, out, ex, np_=np, say=_say(quiet))
     return run_kind(kind, spec, out, np_=np, resume=resume, say=_say(quiet), suffix=suffix)
+
+
+def resumed_spec(out: Path, workflow=None, set: Settings = None) -> WorkflowSpec:
+    """The spec a ``--resume`` of ``out`` goes on with: the one its run.json stores (the truth).  A workflow or
+    ``set`` given beside it must give the same spec, else one line names the first difference; a finished run
+    is not resumed (one line)."""
+    from opalflow.runs.record import RunRecord, is_finished
+
+    record = RunRecord.read(out, "--resume")
+    stored = registry.spec_from_dict(record.spec)
+    if workflow is not None or set:
+        given = load_workflow(stored if workflow is None else workflow, set).to_dict()
+        where = first_difference(record.spec, given)
+        if where is not None:
+            path, was, now = where
+            raise SpecError("--resume", str(out), f"its run has {path} = {was!r}, this command gives {now!r}; a "
+                            "resume goes on with the spec it started with: drop the workflow and --set, or run "
+                            "the new spec into another folder")
+    if record.state == "finished" or is_finished(out):
+        raise SpecError("--resume", str(out), "holds a finished run: nothing to resume (status shows it; run "
+                        "into another folder to run it again)")
+    return stored
+
+
+def first_difference(a, b, path: str = ""):
+    """(dotted path, value in ``a``, value in ``b``) of the first place two spec tables differ, None if equal."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        for key in sorted(set(a) | set(b)):
+            where = first_difference(a.get(key), b.get(key), f"{path}.{key}" if path else key)
+            if where is not None:
+                return where
+        return None
+    return None if a == b else (path, a, b)
 
 
 def executor_of(workflow, set: Settings = None, override: str | None = None):

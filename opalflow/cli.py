@@ -11,7 +11,7 @@ import os
 import signal
 import sys
 
-from opalflow import api, registry
+from opalflow import STARTED, api, registry
 from opalflow.spec import InputError
 from opalflow.version import __version__
 
@@ -55,7 +55,7 @@ def cmd_run(args) -> int:
     from opalflow.lammps.engine import EngineError
     from opalflow.runs.record import command_run
 
-    command_run(args.out)
+    command_run(args.out, STARTED)
 
     try:
         summary = api.run(args.workflow, args.out, set=args.set, np=args.np, resume=args.resume, suffix=args.suffix,
@@ -152,15 +152,9 @@ def interrupted(args, exc: KeyboardInterrupt, terminated: bool = False) -> str:
     out = getattr(args, "out", None)
     if args.command != "run" or out is None:
         return where
-    try:
-        kind = registry.get(api.run_json(out)["spec"]["kind"])
-    except InputError:
-        return f"{where}; nothing was prepared in {out} yet: run the same command again"
-    if "resume" in kind.options:
-        if kind.resumable and not registry.resolve(kind.resumable)(out):
-            return f"{where}; no restart file was written yet: run the same command again (it starts anew)"
-        return f"{where}; resume with: python -m opalflow run --out {out} --resume"
-    return f"{where}; finished parts are kept in {out}: run the same command again to go on"
+    from opalflow.runs.status import how_to_go_on
+
+    return f"{where}; {how_to_go_on(out)}"
 
 
 def parser() -> argparse.ArgumentParser:
@@ -246,6 +240,11 @@ def main(argv: list[str] | None = None) -> int:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
     except OSError as exc:
+        if exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS, errno.ENOTDIR, errno.EISDIR):
+            # a folder or file this user cannot use: theirs to change, as bad input is
+            print(f"error: {exc.filename or 'a file'}: {exc.strerror}; choose a folder you can write to (or make "
+                  "it writable)", file=sys.stderr)
+            return 2
         if exc.errno not in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT):
             raise
         print(f"error: cannot write {exc.filename or 'a result file'}: {exc.strerror}; files written before "

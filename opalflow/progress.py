@@ -42,7 +42,7 @@ class Progress:
         if self.folder is not None:
             write_json_atomic(Path(self.folder) / PROGRESS_FILE, {
                 "step": step, "total": self.total, "rate_steps_s": rate, "left_s": left if rate > 0 else None,
-                "strain": strain, "time": time.time()})
+                "strain": strain, "unit": self.unit, "time": time.time()})
 
 
 def note(folder: Path, message: str) -> None:

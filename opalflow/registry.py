@@ -119,7 +119,8 @@ class Kind:
         if not self.analyze:
             raise SpecError("folder", str(folder), f"a {self.name} run has no analysis of its own: its run "
                             "writes the results")
-        return resolve(self.analyze)(folder)
+        with folder_lock(folder, "folder"):
+            return resolve(self.analyze)(folder)
 
 
 def _compression(name: str, spec: str, scene: str, summary: str) -> Kind:

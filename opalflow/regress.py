@@ -35,7 +35,7 @@ import numpy as np
 
 from opalflow.resources import DATA
 from opalflow.spec import SpecError, check_name
-from opalflow.store import read_json, write_json_atomic
+from opalflow.store import DamagedFile, folder_lock, read_json, write_json_atomic
 from opalflow.version import __version__
 
 REFERENCES = DATA / "regression"
@@ -70,7 +70,39 @@ def read_reference(name: str) -> dict:
     path = REFERENCES / f"{name}.json"
     if not path.exists():
         raise SpecError("regress", name, f"no reference of that name: one of {', '.join(names())}")
-    return read_json(path, "a regression reference", f"restore it (`git checkout -- data/regression/{name}.json`)", keys=("workflow",))
+    remedy = f"restore it (`git checkout -- data/regression/{name}.json`)"
+    ref = read_json(path, "a regression reference", remedy, keys=("workflow",))
+    wrong = reference_fault(ref)
+    if wrong:
+        raise DamagedFile(path, "a regression reference", f"damaged: {wrong}", remedy)
+    return ref
+
+
+def _tolerance(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and 0 <= x < float("inf")
+
+
+def reference_fault(ref: dict) -> str:
+    """What is wrong with the types of a reference's fields ("" where nothing is): read before anything runs."""
+    if not isinstance(ref["workflow"], str):
+        return f"workflow is a {type(ref['workflow']).__name__}, not a name"
+    for table in ("set", "keys", "curves", "without"):
+        if not isinstance(ref.get(table, {}), dict):
+            return f"{table} is a {type(ref[table]).__name__}, not a table"
+    if "seconds" in ref and not _tolerance(ref["seconds"]):
+        return f"seconds = {ref['seconds']!r}, not a number of seconds"
+    for key, spec in ref.get("keys", {}).items():
+        if not isinstance(spec, dict):
+            return f"keys.{key} is a {type(spec).__name__}, not a table"
+        for t in ("rtol", "atol"):
+            if t in spec and not _tolerance(spec[t]):
+                return f"keys.{key}.{t} = {spec[t]!r}, not a tolerance (a number >= 0)"
+    for key, spec in ref.get("curves", {}).items():
+        if not isinstance(spec, dict) or not _tolerance(spec.get("tol")):
+            return f"curves.{key} has no tolerance tol (a number >= 0)"
+        if not all(isinstance(spec.get(k), str) for k in ("x", "y")):
+            return f"curves.{key} needs x and y (dataset names)"
+    return ""
 
 
 def lookup(summary: dict, path: str):
@@ -244,6 +276,11 @@ def regress(selected: list[str] | None = None, *, out: Path | None = None, fast:
     if update is not None and not update.strip():
         raise SpecError("--why", update, "say why the references change (it is recorded in their history)")
     out = Path(out) if out is not None else Path(tempfile.mkdtemp(prefix="opalflow-regress-"))
+    with folder_lock(out, "--out"):
+        return _regress(refs, out, update, say), out
+
+
+def _regress(refs: dict, out: Path, update: str | None, say) -> list[Check]:
     checks = []
     for name, ref in refs.items():
         if settings(ref) is None:
@@ -262,7 +299,7 @@ def regress(selected: list[str] | None = None, *, out: Path | None = None, fast:
         if update is not None:
             write_json_atomic(REFERENCES / f"{name}.json", updated(name, ref, res, seconds, update))
             say(f"  updated data/regression/{name}.json ({update})")
-    return checks, out
+    return checks
 
 
 def table(checks: list[Check], title: str) -> list[str]:

@@ -69,10 +69,16 @@ class WorkflowSpec:
 def read_toml(path: str | Path) -> dict:
     """The raw table of a workflow file (without a ``name``: the file's stem, where that is a name)."""
     path = Path(path)
+    if path.is_dir():
+        raise SpecError("workflow", str(path), "is a folder, not a workflow file (.toml)")
     try:
-        raw = tomllib.loads(path.read_text())
+        raw = tomllib.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise SpecError("workflow", str(path), "file not found") from None
+    except OSError as exc:
+        raise SpecError("workflow", str(path), f"cannot be read ({exc.strerror})") from None
+    except UnicodeDecodeError:
+        raise SpecError("workflow", str(path), "is not a text file (a workflow is TOML in UTF-8)") from None
     except tomllib.TOMLDecodeError as exc:
         raise SpecError("workflow", str(path), f"not valid TOML ({exc})") from None
     if "name" not in raw and NAME_RE.fullmatch(path.stem) and len(path.stem) <= NAME_MAX:

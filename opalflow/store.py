@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import socket
 from contextlib import contextmanager
 from pathlib import Path
@@ -19,13 +20,26 @@ from opalflow.spec import InputError
 
 LOCK_FILE = ".opalflow.lock"
 
+#: fault injection (tests/test_rundir.py): ``OPALFLOW_FAILPOINT=N`` kills the process that imported opalflow with
+#: it set (SIGKILL: no handler, no cleanup) at its N-th write point, a temporary file written and not yet renamed;
+#: the variable is taken out of the environment, so processes started by this one (LAMMPS, jobs) do not count
+_FAILPOINT = {"at": os.environ.pop("OPALFLOW_FAILPOINT", ""), "pid": os.getpid(), "seen": 0}
+
+
+def failpoint() -> None:
+    """A write point (see :data:`_FAILPOINT`); nothing unless ``OPALFLOW_FAILPOINT`` was set."""
+    if _FAILPOINT["at"] and os.getpid() == _FAILPOINT["pid"]:
+        _FAILPOINT["seen"] += 1
+        if _FAILPOINT["seen"] == int(_FAILPOINT["at"]):
+            os.kill(os.getpid(), signal.SIGKILL)
+
 
 class DamagedFile(InputError):
     """A file opalflow wrote and reads back that is missing, cut short or without what it must hold (one line:
     the file, what it is, what is wrong, what to do)."""
 
     def __init__(self, path, what: str, wrong: str, remedy: str):
-        self.path = Path(path)
+        self.path, self.wrong = Path(path), wrong
         super().__init__(f"{path} ({what}): {wrong}; {remedy}")
 
 
@@ -69,6 +83,7 @@ def atomic_path(path: str | os.PathLike, tmp_name: str | None = None):
         if isinstance(exc, OSError) and not exc.filename:
             raise OSError(exc.errno, exc.strerror, str(path)) from None
         raise
+    failpoint()
     os.replace(tmp, path)
 
 
@@ -96,6 +111,7 @@ def staged_files(folder: str | os.PathLike):
             raise OSError(exc.errno, exc.strerror, str(folder / name)) from None
         raise
     for name in staged:
+        failpoint()
         os.replace(folder / f".staged.{name}", folder / name)
 
 
@@ -142,32 +158,51 @@ def _alive(pid: int) -> bool:
 
 
 @contextmanager
-def folder_lock(folder: str | os.PathLike):
+def folder_lock(folder: str | os.PathLike, field: str = "--out"):
     """Hold ``folder`` for this process: ``.opalflow.lock`` holds the owner's pid and host.
 
-    A second run into a folder that a live process holds is refused (InputError, one line); the
-    lock of a process that died (killed, machine restarted) is taken over.  A folder this call
-    created is removed again if nothing else was written into it (a run refused on its input).
+    Every verb that writes into a run folder takes it (run, resume, build, check, analyze, regress, a study's
+    jobs); ``status`` only reads.  A folder held by a live process, or by a process on another host (not
+    checkable from here), is refused in one line naming the owner (InputError, ``field``: the option that named
+    the folder); the lock of a process of this host that died (killed, machine restarted) is taken over.  A
+    folder this call created is removed again if nothing else was written into it (a run refused on its input).
     """
+    if not str(folder).strip():
+        raise InputError(f"{field} = {str(folder)!r}: give a folder name (an empty one would be the current folder)")
     folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise InputError(f"{field} = {str(folder)!r}: exists and is not a folder; choose a folder")
     created = not folder.exists()
-    folder.mkdir(parents=True, exist_ok=True)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"{field} = {str(folder)!r}: cannot be made ({exc.strerror}); choose a folder you can "
+                         "write to") from None
     lock = folder / LOCK_FILE
-    while True:
-        try:
-            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
-            break
-        except FileExistsError:
+    mine = folder / f"{LOCK_FILE}.{socket.gethostname()}.{os.getpid()}"
+    try:
+        # the lock appears with its owner written (a hard link of a finished file): never empty to a reader
+        mine.write_text(f"{os.getpid()} {socket.gethostname()}\n")
+        while True:
             try:
-                pid = int(lock.read_text().split()[0])
-            except (OSError, ValueError, IndexError):
-                pid = 0
-            if pid and _alive(pid):
-                raise InputError(f"--out = {str(folder)!r}: in use by a running opalflow (pid {pid}, "
-                                 f"{lock}); wait for it or choose another folder") from None
-            lock.unlink(missing_ok=True)                    # stale: its owner is gone
-    with os.fdopen(fd, "w") as f:
-        f.write(f"{os.getpid()} {socket.gethostname()}\n")
+                os.link(mine, lock)
+                break
+            except FileExistsError:
+                owner = lock_owner(folder)
+                if owner is not None and owner[0] and process_alive(*owner) is not False:
+                    pid, host = owner
+                    raise InputError(f"{field} = {str(folder)!r}: in use by a running opalflow (pid {pid} on {host}, "
+                                     f"{lock}); wait for it or choose another folder"
+                                     + ("" if host == socket.gethostname() else
+                                        f" (if that process is gone, remove {lock})")) from None
+                lock.unlink(missing_ok=True)                    # stale: its owner is gone
+    except OSError as exc:
+        raise InputError(f"{field} = {str(folder)!r}: cannot be written ({exc.strerror}); choose a folder you "
+                         "can write to") from None
+    finally:
+        mine.unlink(missing_ok=True)
+    for left in (*folder.glob(".staged.*"), *folder.glob("*.tmp"), *folder.glob("*.tmp.*")):
+        left.unlink(missing_ok=True)            # a killed writer's temporary files: the lock says it is gone
     try:
         yield folder
     finally:

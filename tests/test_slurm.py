@@ -92,6 +92,20 @@ def test_scancel_half_the_array_then_rerun_runs_only_the_missing_jobs(slurm, tmp
     assert energies(out) == energies(ref)
 
 
+def test_a_refused_submission_shows_failed_with_the_reason(slurm, tmp_path):
+    """A partition the cluster lacks: sbatch refuses the array; the study ends in one line, and status shows
+    each job failed with sbatch's reason (it showed them pending, as if queued)."""
+    out = tmp_path / "refused"
+    proc = subprocess.run(study_cmd(out, "slurm", *STATIC4, 'executor.partition="nosuchpartition"'),
+                          capture_output=True, text=True)
+    last = proc.stderr.strip().splitlines()[-1]
+    assert proc.returncode == 2 and last.startswith("error: executor.type = 'slurm': sbatch refused the array: "), last
+    assert "Invalid partition" in last
+    status = subprocess.run([sys.executable, "-m", "opalflow", "status", str(out)], capture_output=True, text=True)
+    assert status.returncode == 0 and "4 failed" in status.stdout and "pending" not in status.stdout, status.stdout
+    assert "not submitted (sbatch refused the array" in status.stdout
+
+
 def test_a_study_survives_a_controller_restart(slurm, tmp_path):
     out = tmp_path / "slurm"
     study = subprocess.Popen(study_cmd(out, "slurm", *DYNAMIC4), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,

@@ -234,10 +234,10 @@ def analyze(out: Path, started: float | None = None, lammps_s: float | None = No
     wall_s = None if started is None else time.perf_counter() - started
     record = record or RunRecord.read(out)
     info = record.facts()
-    mech.tidy_curve(out / "curve.txt")
     try:
+        mech.tidy_curve(out / "curve.txt")
         curve = mech.read_curve(out / "curve.txt")
-    except ValueError as exc:
+    except ValueError as exc:                    # (UnicodeDecodeError too: a binary file in its place)
         raise SpecError("folder", str(out), f"curve.txt is damaged or empty ({str(exc).splitlines()[0]})") from None
     height = info["height_nm"]
     strain, stress, stress_plate, stress_substrate = curve_strain_stress(curve, info)

@@ -31,6 +31,7 @@ from opalflow.bpm.result import CompressionResult
 from opalflow.bpm.static_run import network_run, particle_stress
 from opalflow.bpm.stiffness import per_bond
 from opalflow.runs.record import finish
+from opalflow.progress import note
 from opalflow.lammps.engine import Interrupted, Preempted, stop_requested
 from opalflow.spec import SpecError
 from opalflow.store import (DamagedFile, atomic_path, h5_bytes, new_figure, put, read_json, save_figure,
@@ -93,14 +94,19 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
     """Build the scene, run the event loop, write the results (see the module docstring)."""
     t0 = time.perf_counter()
     c = spec.compression
-    state = resumed_state(out, say) if resume else None
-    s = scene_of(spec).structure(spec, say)
+
+    def tell(line: str) -> None:                 # said, and kept in progress.json for status
+        say(line)
+        note(out, line)
+
+    state = resumed_state(out, tell) if resume else None
+    s = scene_of(spec).structure(spec, tell)
     loading = LOADINGS[c.loading]
     sample, net, info, record, written = network_run(spec, s, out, t0, launcher="in-process (quasi-static)",
                                                    resume=STATE if resume else "")
     data = sample.structure
     contacts = contacts_of(spec, data)
-    say(f"quasi-static ({loading.title}): {s.n_particles} particles, {s.n_bonds} bonds, to strain {c.strain_max:g}"
+    tell(f"quasi-static ({loading.title}): {s.n_particles} particles, {s.n_bonds} bonds, to strain {c.strain_max:g}"
         + (f"; contacts: {describe_contacts(contacts, spec.contacts.quasistatic, spec.contacts.reference_strain)}"
            if contacts else ""))
     try:
@@ -109,7 +115,7 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
                              events_max=c.events_max, tolerance=c.event_tolerance, resolver=c.resolver,
                              rtol=c.resolve_rtol, local_rtol=c.local_rtol, state=state,
                              checkpoint=lambda st: save_state(out, st), should_stop=stop_requested,
-                             contacts=contacts, say=say)
+                             contacts=contacts, say=tell)
     except Stopped as exc:                       # a scheduler's signal: the state is saved, a requeue resumes
         record.end(out, "interrupted", last_step=exc.events)
         raise Preempted(out, exc.events) from None

@@ -100,7 +100,7 @@ def _inputs(info: dict, summary: dict) -> list[str]:
                       + ("from the data file, " if info.get("source") else
                          f"cutoff {spec['bonds']['cutoff_factor']:g} d, ") + f"model {spec['bonds']['model']}, "
                       f"{'breakable' if spec['bonds']['breakable'] else 'unbreakable'}"),
-            ("solid fraction", f"{info['solid_fraction']:.4f} of the sample volume")]
+            *fraction_rows(info, structure)]
     if info.get("source"):
         rows.insert(1, ("data file", info["source"]))
     if "porosity" in structure:
@@ -125,10 +125,21 @@ def _inputs(info: dict, summary: dict) -> list[str]:
                  f" between unbonded particles" if contacts["enabled"] else "none (bonds only)"))
     rows.append(("loading", f"{c['loading']} at {info['plate_speed_m_s']:g} m/s to strain {c['strain_max']:g}; "
                  f"snapshots at {', '.join(f'{e:g}' for e in c['snapshot_strains']) or 'none'}"))
-    rows.append(("time step", f"{info['timestep_s']:.3g} s ({summary['steps']} of {info['steps']} steps; stability "
+    ran = (f"{info['steps']} steps, the curve's last row at step {summary['steps']}" if summary["complete"] else
+           f"stopped at step {summary['steps']} of {info['steps']}")
+    rows.append(("time step", f"{info['timestep_s']:.3g} s ({ran}; stability "
                  f"limit {info['timestep_estimate_s']['limit']:.3g} s, stiffest: {info['timestep_estimate_s']['stiffest_mode']}); "
                  f"global damping {c['global_damping']:g}"))
     return ["## Inputs", "", "| input | value |", "|---|---|", *[f"| {k} | {v} |" for k, v in rows], ""]
+
+
+def fraction_rows(info: dict, structure: dict) -> list[tuple[str, str]]:
+    """The packing fraction (the spheres' packing before pores, what the deck's ``solid_fraction`` holds) and,
+    where pores were cut, the sample's own solid fraction (1 - total porosity): two numbers, each named."""
+    rows = [("packing fraction", f"{info['solid_fraction']:.4f} (the spheres' packing before pores)")]
+    if "total_porosity" in structure:
+        rows.append(("solid fraction", f"{1 - structure['total_porosity']:.4f} of the sample volume (after pores)"))
+    return rows
 
 
 def _session_row(k: int, x: dict) -> str:
@@ -263,7 +274,7 @@ def network_inputs(info: dict, sample) -> list[str]:
             ("bonds", f"{info['n_bonds']} ({info['n_bonds'] / max(1, info['n_particles']):.1f} per particle), "
                       + ("from the data file, " if info.get("source") else f"cutoff {b['cutoff_factor']:g} d, ")
                       + f"model {b['model']}, {len(sample.bins.lengths)} length bins"),
-            ("solid fraction", f"{info['solid_fraction']:.4f} of the sample volume")]
+            *fraction_rows(info, structure)]
     if info.get("source"):
         rows.insert(1, ("data file", info["source"]))
     if "porosity" in structure:

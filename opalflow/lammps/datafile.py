@@ -24,6 +24,7 @@ import numpy as np
 
 from opalflow.spec import InputError
 from opalflow.structure import Structure
+from opalflow.store import failpoint
 
 DECIMALS = 6
 BLOCK = 1 << 20
@@ -124,6 +125,7 @@ def write_data(path: str | os.PathLike, s: Structure, title: str = "opalflow") -
                 f.write(_join([_digits(np.arange(a + 1, b + 1), wb),
                                _digits(s.bond_types[a:b], _width(s.bond_types.max())),
                                _digits(s.bonds[a:b, 0] + 1, wid), _digits(s.bonds[a:b, 1] + 1, wid)]))
+    failpoint()
     os.replace(tmp, path)
 
 

@@ -24,7 +24,7 @@ from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
-from opalflow.runs.jobs import Outcome, job_record, outcome, run_job
+from opalflow.runs.jobs import Outcome, job_record, outcome, run_job, settle
 from opalflow.runs.spec import ExecutorSpec
 from opalflow.spec import InputError
 
@@ -147,7 +147,10 @@ class SlurmExecutor:
         script.write_text(self.script(root, listing, len(folders)))
         res = _slurm(["sbatch", "--parsable", str(script)])
         if res.returncode:
-            raise InputError(f"executor.type = 'slurm': sbatch refused the array: {res.stderr.strip()}")
+            why = "sbatch refused the array: " + "; ".join(x.strip() for x in res.stderr.strip().splitlines())
+            for f in folders:                    # status shows the refusal, not a job pending forever
+                settle(Path(f), "failed", error=f"not submitted ({why}); run the study again to submit it")
+            raise InputError(f"executor.type = 'slurm': {why}")
         array = res.stdout.strip().split(";")[0]
         with open(root / "slurm" / "arrays.txt", "a") as f:      # for status and for scancel by hand
             f.write(f"{array} {len(folders)} {script.name}\n")

@@ -85,7 +85,7 @@ def outcome(folder: str | os.PathLike) -> Outcome:
     return Outcome(state, str(folder), error=f"not finished ({state})", log_tail=rec.log_tail if rec else "")
 
 
-def _settle(folder: Path, state: str, **fields) -> None:
+def settle(folder: Path, state: str, **fields) -> None:
     """The job's record ends ``state`` (with ``fields``: error, log tail, peak memory)."""
     rec = job_record(folder)
     if rec is None:
@@ -161,15 +161,15 @@ def _run_job(folder: Path, np_: int) -> Outcome:
                   and (not kind.resumable or registry.resolve(kind.resumable)(folder)))
         summary = run_kind(kind, spec, folder, np_=np_, resume=resume, say=say)
     except Preempted as exc:
-        _settle(folder, "requeued")
+        settle(folder, "requeued")
         requeue_self(say)
         return Outcome("requeued", str(folder), step=exc.step)
     except (Exception, KeyboardInterrupt) as exc:  # noqa: BLE001 - the job's failure is its result
         first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         tail = log_tail(folder)
-        _settle(folder, "failed", error=first, log_tail=tail)
+        settle(folder, "failed", error=first, log_tail=tail)
         return Outcome("failed", str(folder), error=first, log_tail=tail)
-    _settle(folder, "finished", peak_rss_MiB=peak_rss_MiB())
+    settle(folder, "finished", peak_rss_MiB=peak_rss_MiB())
     return Outcome("finished", str(folder), summary)
 
 

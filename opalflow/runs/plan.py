@@ -162,12 +162,18 @@ def measured(folder: Path, label: str, single: bool) -> dict | None:
     if not s or s.get("state") == "built":
         return None
     rec = job_record(job)
-    return {"wall_s": s.get("wall_s"), "peak_MiB": rec.peak_rss_MiB if rec is not None else None}
+    wall, peak = s.get("wall_s"), rec.peak_rss_MiB if rec is not None else None
+    number = lambda x: x if isinstance(x, (int, float)) and not isinstance(x, bool) and x >= 0 else None  # noqa: E731
+    return {"wall_s": number(wall), "peak_MiB": number(peak)}
 
 
 def plan(spec, *, ranks: int = 1, sample: int = 3, against: Path | None = None, say=print) -> dict:
     """Price the jobs of ``spec`` (``sample`` of a study's jobs are built, spread from the first to the last;
     the others are interpolated between them) and return rows and totals."""
+    if isinstance(sample, bool) or not isinstance(sample, int) or sample < 0:
+        raise SpecError("--sample", sample, "must be an integer >= 0 (0: build every job)")
+    if against is not None and not (Path(against).is_dir() and (Path(against) / "run.json").exists()):
+        raise SpecError("--measured", str(against), "is not a run or study folder (it has no run.json)")
     law = laws()
     kind = registry.get(spec.kind)
     jobs = jobs_of(spec)

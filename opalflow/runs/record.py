@@ -30,8 +30,8 @@ from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
 
-from opalflow.spec import SpecError
-from opalflow.store import json_text, staged_files, write_json_atomic
+from opalflow.spec import InputError, SpecError
+from opalflow.store import DamagedFile, json_text, read_json, staged_files, write_json_atomic
 
 #: version of the run.json layout; :meth:`RunRecord.read` upgrades older files (schema 2: a study job's state
 #: in job.json beside it)
@@ -134,11 +134,18 @@ class RunRecord:
         path = Path(folder) / RECORD
         if not path.exists():
             raise SpecError(field_name, str(folder), "no run.json: this folder holds no prepared run")
+        old = Path(folder) / OLD_JOB_FILE
         try:
-            raw = json.loads(path.read_text())
-            old = Path(folder) / OLD_JOB_FILE
-            return cls.from_dict(raw, json.loads(old.read_text()) if old.exists() else None)
-        except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError, AttributeError) as exc:
+            raw = read_json(path, "the run's record", "")
+            job = read_json(old, "a study job's old state", "") if old.exists() else None
+        except DamagedFile as exc:           # (unreadable, a folder, cut short, not an object)
+            name = exc.path.name
+            raise SpecError(field_name, str(folder), (f"{name} is {exc.wrong}" if exc.wrong.startswith("damaged")
+                                                      else f"{name}: {exc.wrong}") + "; build the folder again"
+                            ) from None
+        try:
+            return cls.from_dict(raw, job)
+        except (KeyError, TypeError, AttributeError, ValueError) as exc:
             raise SpecError(field_name, str(folder), f"run.json is damaged ({type(exc).__name__}: {exc}); build "
                             "the folder again") from None
 
@@ -147,7 +154,7 @@ class RunRecord:
         """The record of ``folder``, None where there is none or it is damaged."""
         try:
             return cls.read(folder) if cls.exists(folder) else None
-        except SpecError:
+        except InputError:
             return None
 
     @classmethod
@@ -161,6 +168,8 @@ class RunRecord:
         names = {f.name for f in dataclasses.fields(cls)}
         rec = cls(**{k: v for k, v in raw.items() if k in names})
         rec.spec["kind"]                      # noqa: B018 - a record without a kind is damaged
+        if rec.state not in STATES or not isinstance(rec.deck, dict) or not isinstance(raw.get("sessions", []), list):
+            raise ValueError(f"state {rec.state!r}, deck or sessions of the wrong kind")
         rec.sessions = [Session(**s) for s in raw.get("sessions", [])]
         if job and rec.schema < 3:            # schema 2: a study job's state in job.json beside run.json
             rec.label, rec.spec_hash, rec.attempted = job.get("label", ""), job.get("hash", ""), job.get("attempted")
@@ -252,22 +261,23 @@ def refuse_finished(folder: str | os.PathLike) -> None:
     if is_finished(folder):
         raise SpecError("--out", str(folder), "holds a finished run (summary.json, results): write into another "
                         "folder or remove it first")
+    record = RunRecord.read_or_none(folder)
+    if record is not None and record.state == "finished":
+        raise SpecError("--out", str(folder), "holds a finished run (run.json) whose summary.json is missing or "
+                        f"damaged: 'python -m opalflow analyze {folder}' writes it again; or write into another "
+                        "folder")
 
 
-#: the command line's run: its folder and when the process started (time.perf_counter's clock)
+#: the command line's run: its folder and when its process imported opalflow (time.perf_counter's clock)
 _COMMAND: dict = {}
 
 
-def command_run(folder: str | os.PathLike) -> None:
-    """The command line runs into ``folder``: that run's wall time counts from the process's start
-    (Python's start and the imports are part of what the user waits for)."""
-    age = 0.0
-    try:       # /proc/self/stat field 22: the start in clock ticks after boot; /proc/uptime: now
-        start = int(Path("/proc/self/stat").read_text().rsplit(")", 1)[1].split()[19]) / os.sysconf("SC_CLK_TCK")
-        age = max(0.0, float(Path("/proc/uptime").read_text().split()[0]) - start)
-    except (OSError, ValueError, IndexError):
-        pass
-    _COMMAND.update(folder=Path(folder).resolve(), started=time.perf_counter() - age)
+def command_run(folder: str | os.PathLike, started: float) -> None:
+    """The command line runs into ``folder``: that run's wall time counts from ``started`` (``time.perf_counter()``
+    when the process imported opalflow, :data:`opalflow.STARTED`: the imports are part of what the user waits
+    for; the process's own start is not used, as a shell running ``pip install ...; python -m opalflow run ...``
+    starts it before the install)."""
+    _COMMAND.update(folder=Path(folder).resolve(), started=started)
 
 
 def finish(folder: str | os.PathLike, summary: dict, report: str | Callable[[], str], *,
@@ -302,7 +312,7 @@ def finish(folder: str | os.PathLike, summary: dict, report: str | Callable[[], 
     if record is None and RunRecord.exists(folder):
         try:
             record = RunRecord.read(folder)
-        except SpecError:
+        except InputError:
             record = None
     if record is not None:
         record.end(folder, "finished", wall_s=summary.get("wall_s"))
@@ -325,7 +335,7 @@ def tracked(spec, folder: str | os.PathLike):
         if RunRecord.exists(folder):
             try:
                 record = RunRecord.read(folder)
-            except SpecError:
+            except InputError:
                 record = None
         if record is None or record.spec != spec.to_dict() or record.state == "pending":
             if not folder.exists():

@@ -6,12 +6,14 @@ message: :mod:`opalflow.progress`) and ``summary.json`` (the headline of a finis
 """
 from __future__ import annotations
 
+import math
 import time
 from collections import Counter
 from pathlib import Path
 
+from opalflow import registry
 from opalflow.runs.record import RunRecord, is_finished, read_summary
-from opalflow.spec import SpecError
+from opalflow.spec import InputError, SpecError
 from opalflow.store import DamagedFile, lock_owner, process_alive, read_json
 
 #: the record's states (opalflow.runs.record.STATES, built shown as pending) and what status sees besides:
@@ -19,19 +21,45 @@ from opalflow.store import DamagedFile, lock_owner, process_alive, read_json
 STATES = ("pending", "running", "requeued", "interrupted", "died", "finished", "failed", "damaged")
 
 
+def _number(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
 def _progress(folder: Path) -> tuple[str, float | None]:
-    """What the running job says (step, rate, time left; or its last message) and its seconds left."""
+    """What the running job says (step, rate, time left; or its last message) and its seconds left; a
+    progress.json that is damaged or holds other types says so instead (the run itself is not judged by it)."""
     try:
         p = read_json(folder / "progress.json", "the run's progress", "")
     except DamagedFile:
-        return "", None
-    age = time.time() - p.get("time", 0)
+        return ("" if not (folder / "progress.json").exists() else "progress.json unreadable"), None
+    age = time.time() - p["time"] if _number(p.get("time")) else 0.0
     stale = f" (as of {age:.0f} s ago)" if age > 30 else ""
-    if "message" in p:
+    if isinstance(p.get("message"), str):
         return p["message"] + stale, None
-    left = p.get("left_s")
-    return (f"step {p['step']}/{p['total']} ({100 * p['step'] / max(p['total'], 1):.0f} %), "
-            f"{p['rate_steps_s']:.0f} steps/s, {'?' if left is None else f'{left:.0f} s'} left{stale}"), left
+    if not all(_number(p.get(k)) for k in ("step", "total", "rate_steps_s")):
+        return "progress.json holds no step count (damaged?)", None
+    left = p.get("left_s") if _number(p.get("left_s")) else None
+    unit = p.get("unit") if isinstance(p.get("unit"), str) else "step"
+    return (f"{unit} {p['step']:.0f}/{p['total']:.0f} ({100 * p['step'] / max(p['total'], 1):.0f} %), "
+            f"{p['rate_steps_s']:.2g} {unit}s/s, {'?' if left is None else f'{left:.0f} s'} left{stale}"), left
+
+
+def how_to_go_on(folder: str | Path) -> str:
+    """What continues an interrupted run in ``folder`` (the same line the run prints when it stops): its
+    resume where the kind resumes and something was saved to resume from, else running it again."""
+    folder = Path(folder)
+    try:
+        rec = RunRecord.read(folder)
+        kind = registry.get(rec.spec.get("kind", registry.DEFAULT_KIND))
+    except InputError:
+        return f"nothing was prepared in {folder} yet: run the same command again"
+    if rec.spec_hash:
+        return "run the study again: it continues this job"
+    if "resume" in kind.options:
+        if kind.resumable and not registry.resolve(kind.resumable)(folder):
+            return "no restart file was written yet: run the same command again (it starts anew)"
+        return f"resume with: python -m opalflow run --out {folder} --resume"
+    return f"finished parts are kept in {folder}: run the same command again to go on"
 
 
 def run_state(folder: Path) -> tuple[str, dict]:
@@ -50,7 +78,7 @@ def run_state(folder: Path) -> tuple[str, dict]:
         return "pending", {}
     try:
         rec = RunRecord.read(folder)
-    except SpecError as exc:
+    except InputError as exc:
         return "damaged", {"error": str(exc)}
     last = rec.sessions[-1] if rec.sessions else None
     meta = {"error": rec.error, "log_tail": rec.log_tail, "host": last.host if last else "",
@@ -67,8 +95,7 @@ def run_state(folder: Path) -> tuple[str, dict]:
             state = "died"
             meta["error"] = ((f"its process (pid {owner[0]}) is gone" if owner else "no process holds it")
                              + " without ending the run (killed?): "
-                             + ("run the study again: it continues this job" if rec.spec_hash else
-                                f"continue it with `python -m opalflow run --out {folder} --resume`"))
+                             + how_to_go_on(folder))
         elif alive is None:
             meta["where"] = f"on {owner[1]}, not checked from here"
     return state, meta
@@ -91,15 +118,18 @@ def status_lines(folder: str | Path, tail: int = 8) -> list[str]:
         where = meta.get("where") or " ".join(
             x for x in (meta.get("host", ""), f"slurm {meta['slurm_job']}" if meta.get("slurm_job") else "") if x)
         if state == "finished":
-            s = read_summary(job) or {}
+            s = read_summary(job)
+            if s is None or not isinstance(s.get("headline"), str):
+                rows.append(f"  finished  {label}: its summary.json is missing or damaged: `python -m opalflow "
+                            f"analyze {job}` writes it again")
+                continue
             wall = s.get("wall_s")
-            rows.append(f"  finished  {label}: {s.get('headline', '')}" + (f" ({wall:.0f} s)" if wall else ""))
+            rows.append(f"  finished  {label}: {s['headline']}" + (f" ({wall:.0f} s)" if _number(wall) else ""))
         elif state in ("failed", "died", "damaged"):
             rows.append(f"  {state.upper():<9} {label}: {meta.get('error') or 'no reason recorded'} [{job}]")
             rows += [f"            | {line}" for line in meta.get("log_tail", "").splitlines()[-tail:]]
         elif state == "interrupted":
-            rows.append(f"  {state:<11} {label}: stopped (Ctrl-C or SIGTERM){_sessions(job)}; continue it with "
-                        f"`python -m opalflow run --out {job} --resume`")
+            rows.append(f"  {state:<11} {label}: stopped (Ctrl-C or SIGTERM){_sessions(job)}; {how_to_go_on(job)}")
         elif state in ("running", "requeued"):
             said, left = _progress(job)
             if state == "running":
@@ -116,6 +146,6 @@ def status_lines(folder: str | Path, tail: int = 8) -> list[str]:
 def _sessions(folder: Path) -> str:
     try:
         rec = RunRecord.read(folder)
-    except SpecError:
+    except InputError:
         return ""
     return f", {len(rec.sessions)} session(s), {rec.requeues} requeue(s)" if rec.sessions else ""
