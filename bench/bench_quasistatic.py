@@ -499,8 +499,10 @@ SIZE_SETS = ['pores.arrangement="none"', 'boundary.sides="periodic"', "packing.d
              'compression.plots="none"']
 
 
-def size(out: Path, breaking: str, names: list[str]) -> None:
-    """The rows of :data:`SIZE_PLAN` (those named, or all), plate and glued (a finished run in ``--out`` is read)."""
+def size(out: Path, breaking: str, names: list[str], seeds: list[int], loadings: list[str]) -> None:
+    """The rows of :data:`SIZE_PLAN` (those named, or all) under each of ``loadings``, one packing per seed of
+    ``seeds`` (packing.seed; the workflow's, 1, where none is given: the rows without ``seed``), a finished run in
+    ``--out`` read."""
     import opalflow
 
     path = RESULTS / f"quasistatic_size_{breaking}.json"
@@ -508,17 +510,18 @@ def size(out: Path, breaking: str, names: list[str]) -> None:
     for name, (cx, cy), a, D, layers in SIZE_PLAN:
         if names and name not in names:
             continue
-        for loading in ("plate", "glued"):
-            folder = out / f"{name}_{loading}_{breaking}"
+        for loading, seed in ((x, k) for x in loadings for k in (seeds or [None])):
+            folder = out / (f"{name}_{loading}_{breaking}" + (f"_seed{seed}" if seed is not None else ""))
             sets = [*SIZE_SETS, f"pores.cells_x={cx}", f"pores.cells_y={cy}", f"pores.spacing_nm={a}",
                     f"pores.diameter_nm={D}", f"pores.layers={layers}", f'compression.loading="{loading}"',
-                    f'bonds.breaking="{breaking}"']
+                    f'bonds.breaking="{breaking}"', *([f"packing.seed={seed}"] if seed is not None else [])]
             done = folder / "summary.json"
             s = json.loads(done.read_text()) if done.exists() else opalflow.run("quickstart", folder, set=sets,
                                                                                  quiet=True)
             info = json.loads((folder / "run.json").read_text())["deck"]
             ratio = s["strength_MPa"] / (1e3 * s["youngs_modulus_GPa"])
             row = {"name": name, "loading": loading, "breaking": breaking, "set": sets,
+                   **({"seed": seed} if seed is not None else {}),
                    "cross_section_um2": info["area_nm2"] / 1e6, "height_um": info["height_nm"] / 1e3,
                    "n_particles": s["n_particles"], "n_bonds": s["n_bonds"],
                    "youngs_modulus_GPa": s["youngs_modulus_GPa"], "strength_MPa": s["strength_MPa"],
@@ -529,9 +532,10 @@ def size(out: Path, breaking: str, names: list[str]) -> None:
                    "machine": machine()}
             print(json.dumps({k: row[k] for k in ("name", "loading", "n_particles", "youngs_modulus_GPa",
                                                   "strength_MPa", "strength_over_E", "wall_s")}), flush=True)
-            kept = {(r["name"], r["loading"]): r for r in json.loads(path.read_text())["rows"]} if path.exists() else {}
-            kept[(name, loading)] = row
-            rows = [kept[k] for k in sorted(kept, key=lambda k: ([n for n, *_ in SIZE_PLAN].index(k[0]), k[1]))]
+            key = lambda r: (r["name"], r["loading"], r.get("seed", 0))          # noqa: E731 (seed 0: the workflow's)
+            kept = {key(r): r for r in json.loads(path.read_text())["rows"]} if path.exists() else {}
+            kept[key(row)] = row
+            rows = [kept[k] for k in sorted(kept, key=lambda k: ([n for n, *_ in SIZE_PLAN].index(k[0]), k[1], k[2]))]
             path.write_text(json.dumps({"paper": paper, "rows": rows}, indent=1) + "\n")
 
 
@@ -550,6 +554,9 @@ def main(argv=None) -> None:
                    "verify: the run to check")
     p.add_argument("--at", type=int, nargs="*", default=[], help="verify: event indices (0-based) to check")
     p.add_argument("--only", nargs="*", default=[], help="gap, size: the rows to run (names of GAP_PLAN, SIZE_PLAN)")
+    p.add_argument("--seeds", type=int, nargs="*", default=[], help="size: packing seeds (default: the workflow's)")
+    p.add_argument("--loadings", nargs="*", default=["plate", "glued"], choices=["plate", "glued"],
+                   help="size: the loadings run (default both)")
     a = p.parse_args(argv)
     from threadpoolctl import threadpool_limits
 
@@ -563,7 +570,7 @@ def main(argv=None) -> None:
         elif a.part == "gap":
             gap(out, a.only)
         elif a.part == "size":
-            size(out, a.breaking, a.only)
+            size(out, a.breaking, a.only, a.seeds, a.loadings)
         else:
             {"dynamic": dynamic, "resolvers": resolvers, "compare": compare, "tolerance": tolerance,
              "local": local}[a.part](out)

@@ -1,4 +1,4 @@
-"""The test suite as CI runs it, timed: -> bench/results/test_suite.json.
+"""The test suite as CI runs it, timed, with each skip's reason: -> bench/results/test_suite.json.
 
 Clones this repository's HEAD into a fresh folder and runs ``bash .ci/run`` there (LIGGGHTS and a one-node SLURM
 where root can start them, a new virtual environment, the README's test command), as CI does after each
@@ -30,8 +30,11 @@ def summary(log: str) -> dict:
     line = [ln for ln in log.splitlines() if re.search(r"\d+ (passed|failed)", ln)][-1]
     counts = {k: int(v) for v, k in re.findall(r"(\d+) (passed|failed|skipped|errors?)", line)}
     workers = re.search(r"created: (\d+)/\d+ workers", log)
+    # -ra's summary: "SKIPPED [2] tests/test_slurm.py:30: no SLURM running and not root: ..."
+    skips = [{"tests": int(n), "where": where, "reason": why}
+             for n, where, why in re.findall(r"^SKIPPED \[(\d+)\] (\S+?): (.*)$", log, re.M)]
     return {**counts, "pytest_s": float(re.search(r"in ([\d.]+)s", line).group(1)),
-            "workers": int(workers.group(1)) if workers else 1, "line": line.strip("= ")}
+            "workers": int(workers.group(1)) if workers else 1, "line": line.strip("= "), "skips": skips}
 
 
 def main() -> int:

@@ -155,8 +155,8 @@ def resumed_spec(out: Path, workflow=None, set: Settings = None) -> WorkflowSpec
         given = load_workflow(stored if workflow is None else workflow, set).to_dict()
         where = first_difference(record.spec, given)
         if where is not None:
-            path, was, now = where
-            raise SpecError("--resume", str(out), f"its run has {path} = {was!r}, this command gives {now!r}; a "
+            path, was, now = (where[0], *(repr(v) if len(repr(v)) <= 60 else repr(v)[:57] + "..." for v in where[1:]))
+            raise SpecError("--resume", str(out), f"its run has {path} = {was}, this command gives {now}; a "
                             "resume goes on with the spec it started with: drop the workflow and --set, or run "
                             "the new spec into another folder")
     if record.state == "finished" or is_finished(out):
@@ -168,7 +168,11 @@ def resumed_spec(out: Path, workflow=None, set: Settings = None) -> WorkflowSpec
 def first_difference(a, b, path: str = ""):
     """(dotted path, value in ``a``, value in ``b``) of the first place two spec tables differ, None if equal."""
     if isinstance(a, dict) and isinstance(b, dict):
-        for key in sorted(set(a) | set(b)):
+        # kind and name first, then a table's own values, then its sub-tables: the difference a user recognises
+        def order(k):
+            return (k not in ("kind", "name"), isinstance(a.get(k), dict) or isinstance(b.get(k), dict), k)
+
+        for key in sorted(set(a) | set(b), key=order):
             where = first_difference(a.get(key), b.get(key), f"{path}.{key}" if path else key)
             if where is not None:
                 return where

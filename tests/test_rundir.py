@@ -382,7 +382,7 @@ FUZZ = settings(max_examples=FUZZ_EXAMPLES or 150, derandomize=not FUZZ_EXAMPLES
 def test_fuzzed_set_values_end_in_a_result_or_one_line(tmp_path_factory, sets, verb, capsys):
     """Any --set on build, plan and run --resume: exit 0, or exit 2 with one line; never a traceback."""
     out = tmp_path_factory.mktemp("fz")
-    flags = [x for k, v in sets for x in ("--set", f"{k}={v}")]
+    flags = [f"--set={k}={v}" for k, v in sets]          # (the = form: a value may start with "-")
     argv = {"build": ["build", "lattice_sc", "--out", str(out / "b"), *flags],
             "plan": ["plan", "lattice_sc", "--sample", "1", *flags],
             "run-resume": ["run", "--out", str(out / "r"), "--resume", *flags]}[verb]

@@ -7,6 +7,7 @@ and the mechanics computed from them.
 from __future__ import annotations
 
 import re
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,7 +25,9 @@ CURVE_COLUMNS = ["step", "plate_dz_nm", "plate_fz_pN", "substrate_fz_pN", "intac
 
 def read_curve(path: Path) -> dict[str, np.ndarray]:
     """curve.txt as columns; rows repeated by a resumed run keep their last value."""
-    rows = np.loadtxt(path, comments="#", ndmin=2)
+    with warnings.catch_warnings():           # (an empty file: said once, below, not also as numpy's warning)
+        warnings.simplefilter("ignore", UserWarning)
+        rows = np.loadtxt(path, comments="#", ndmin=2)
     if rows.size == 0:
         raise ValueError(f"{path} holds no data rows")
     steps = rows[:, 0]
