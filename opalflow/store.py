@@ -201,8 +201,9 @@ def folder_lock(folder: str | os.PathLike, field: str = "--out"):
                          "can write to") from None
     finally:
         mine.unlink(missing_ok=True)
-    for left in (*folder.glob(".staged.*"), *folder.glob("*.tmp"), *folder.glob("*.tmp.*")):
-        left.unlink(missing_ok=True)            # a killed writer's temporary files: the lock says it is gone
+    if (folder / "run.json").exists():          # a run folder (never a user's own folder given as --out)
+        for left in (*folder.glob(".staged.*"), *folder.glob("*.tmp"), *folder.glob("*.tmp.*")):
+            left.unlink(missing_ok=True)        # a killed writer's temporary files: the lock says it is gone
     try:
         yield folder
     finally:

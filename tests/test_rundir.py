@@ -325,8 +325,8 @@ def test_a_run_killed_at_every_write_point_ends_with_the_same_numbers(tmp_path):
 
 def test_a_study_killed_at_every_write_point_ends_with_the_same_numbers(tmp_path):
     """The same for a study (two static jobs of the bulk): killed at each write point of the study's own process
-    (its jobs' records, each job's results, the aggregation's table, figure and summary), then run again: the
-    uninterrupted study's numbers."""
+    (its jobs' records and the aggregation's files: 5 points here; each job's own writes happen in a worker process,
+    as the single run above), then run again: the uninterrupted study's numbers."""
     argv = ["run", "bulk_silica", "--set", "study.method=static", "--set", "study.diameters_nm=[60.0, 80.0]"]
     ref = tmp_path / "ref"
     assert _opalflow(argv + ["--out", str(ref)]).returncode == 0
@@ -356,7 +356,7 @@ def test_a_study_killed_at_every_write_point_ends_with_the_same_numbers(tmp_path
 
 
 # ----------------------------------------------------------------------------- fuzzing (Hypothesis)
-from hypothesis import HealthCheck, given, settings, strategies as st  # noqa: E402
+from hypothesis import HealthCheck, example, given, settings, strategies as st  # noqa: E402
 
 #: fields of lattice_sc's spec (every section) and arbitrary ones
 SET_KEYS = st.sampled_from(["lattice.cells_z", "lattice.spacing_nm", "lattice.arrangement", "bonds.cutoff_factor",
@@ -377,6 +377,8 @@ FUZZ = settings(max_examples=FUZZ_EXAMPLES or 150, derandomize=not FUZZ_EXAMPLES
 
 
 @FUZZ
+@example(sets=[("compression.strain_max", "nan")], verb="run-resume")
+@example(sets=[("-", "nan")], verb="build")                        # found by a random run: a value like an option
 @given(sets=st.lists(st.tuples(SET_KEYS, SET_VALUES), min_size=1, max_size=3),
        verb=st.sampled_from(["build", "plan", "run-resume"]))
 def test_fuzzed_set_values_end_in_a_result_or_one_line(tmp_path_factory, sets, verb, capsys):
@@ -404,6 +406,8 @@ def built_lattice(tmp_path_factory):
 
 
 @FUZZ
+@example(name="curve.txt", content=b"\x80", verb="analyze")          # found by a random run: UnicodeDecodeError
+@example(name="progress.json", content=b"{}", verb="status")       # the review's case: KeyError
 @given(name=st.sampled_from(["run.json", "summary.json", "progress.json", "curve.txt", "data.lmp"]),
        content=st.binary(max_size=64) | JSON_VALUES.map(lambda v: json.dumps(v).encode()),
        verb=st.sampled_from(["status", "analyze", "run-resume", "build", "plan-measured"]))
