@@ -40,8 +40,9 @@ def _progress(folder: Path) -> tuple[str, float | None]:
         return "progress.json holds no step count (damaged?)", None
     left = p.get("left_s") if _number(p.get("left_s")) else None
     unit = p.get("unit") if isinstance(p.get("unit"), str) else "step"
-    return (f"{unit} {p['step']:.0f}/{p['total']:.0f} ({100 * p['step'] / max(p['total'], 1):.0f} %), "
-            f"{p['rate_steps_s']:.2g} {unit}s/s, {'?' if left is None else f'{left:.0f} s'} left{stale}"), left
+    rate = f"{p['rate_steps_s']:.0f}" if p["rate_steps_s"] >= 10 else f"{p['rate_steps_s']:.2g}"
+    return (f"{unit} {p['step']:.0f}/{p['total']:.0f} ({100 * p['step'] / max(p['total'], 1):.0f} %), {rate} {unit}s/s, "
+            f"{'?' if left is None else f'{left:.0f} s'} left{stale}"), left
 
 
 def how_to_go_on(folder: str | Path) -> str:
