@@ -157,8 +157,16 @@ def interrupted(args, exc: KeyboardInterrupt, terminated: bool = False) -> str:
     return f"{where}; {how_to_go_on(out)}"
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """argparse with its errors in one line, as every other refusal (argparse prints the usage block first):
+    ``error: argument --set: expected one argument (python -m opalflow build --help)``, exit 2."""
+
+    def error(self, message):
+        self.exit(2, f"error: {message} ({self.prog} --help)\n")
+
+
 def parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="python -m opalflow", description=__doc__)
+    ap = OneLineParser(prog="python -m opalflow", description=__doc__)
     ap.add_argument("--version", action="version", version=f"opalflow {__version__}")
     sub = ap.add_subparsers(dest="command", required=True)
     sub.add_parser("info", help="opalflow and LAMMPS versions, packages, accelerators").set_defaults(func=cmd_info)
