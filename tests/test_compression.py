@@ -251,6 +251,9 @@ def interrupted(whole, dest, rows_past_restart: int = 7):
     (dest / "snapshots").mkdir()
     for name in ("data.lmp", "in.lmp", "resume.lmp", "run.sh", "run.json"):
         (dest / name).write_bytes((whole / name).read_bytes())
+    record = RunRecord.read(dest)               # as a SIGKILL leaves it: running, its last session not ended
+    record.state, record.sessions[-1].ended = "running", ""
+    record.write(dest)
     steps = sorted(int(p.name.split(".")[1]) for p in whole.glob("restart.*.bin"))
     restart = steps[len(steps) // 2]
     for step in steps:

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from opalflow.cli import main
+from opalflow.runs.record import RunRecord
 from opalflow.tersoff.parameters import load_parameters, write_tersoff
 from opalflow.tersoff.polycrystal.check import compare_with_lammps
 from opalflow.tersoff.polycrystal.crystal import single_crystal
@@ -159,6 +160,11 @@ def test_tension_workflow_static_and_dynamic(tmp_path):
     _, st = _run(tmp_path / "static", "polycrystal_tension", *common, 'tension.method="static"')
     assert st["youngs_modulus_GPa"] == pytest.approx(s["youngs_modulus_GPa"], rel=2e-3)
     assert st["poisson_ratio"] == pytest.approx(s["poisson_ratio"], abs=2e-3)
+    assert main(["run", "--out", str(out), "--resume"]) == 2     # a finished run is not resumed
+    record = RunRecord.read(out)                # killed before its summary: --resume skips the finished samples
+    record.state = "running"
+    record.write(out)
+    (out / "summary.json").unlink()
     assert main(["run", "--out", str(out), "--resume"]) == 0
     again = json.loads((out / "summary.json").read_text())
     assert again["youngs_modulus_GPa"] == s["youngs_modulus_GPa"] and again["wall_s"] < s["wall_s"]
