@@ -26,6 +26,7 @@ from opalflow import registry
 from opalflow.resources import WORKFLOWS
 from opalflow.runs.spec import executor_from_raw
 from opalflow.spec import SpecError, WorkflowSpec, apply_overrides, read_toml, set_value
+from opalflow.store import usable_folder
 
 Settings = dict[str, Any] | list[str] | str | None
 
@@ -84,15 +85,6 @@ def load_workflow(workflow: str | Path | dict | WorkflowSpec, set: Settings = No
     return registry.spec_from_dict(raw, raw_workflow(workflow) if set else None)
 
 
-def _folder(out: str | Path, field: str = "out") -> Path:
-    if not str(out).strip():
-        raise SpecError(field, str(out), "give a folder name (an empty one would be the current folder)")
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise SpecError(field, str(out), "exists and is not a folder")
-    return out
-
-
 def run_json(out: str | Path, field: str = "folder") -> dict:
     """The run record of a prepared run folder as a dict (kind, spec, state, deck facts, sessions)."""
     import dataclasses
@@ -112,7 +104,7 @@ def run(workflow: str | Path | dict | WorkflowSpec | None, out: str | Path, *, s
     (else the workflow's ``[executor]``): a study sends its jobs there, any other workflow goes there as one
     job; ``quiet``: no progress lines on stderr.
     """
-    out = _folder(out)
+    out = usable_folder(out, "out")
     if resume:
         spec = resumed_spec(out, workflow, set)
     elif workflow is None:
@@ -210,7 +202,7 @@ def build(workflow: str | Path | dict | WorkflowSpec, out: str | Path, *, set: S
           quiet: bool = False) -> dict:
     """Everything a run writes before it runs (structure, data.lmp, in.lmp, run.sh, summary.json); no run."""
     spec = load_workflow(workflow, set)
-    return registry.get(spec.kind).build_workflow(spec, _folder(out), say=_say(quiet))
+    return registry.get(spec.kind).build_workflow(spec, usable_folder(out, "out"), say=_say(quiet))
 
 
 def check(workflow: str | Path | dict | WorkflowSpec, out: str | Path, *, set: Settings = None, steps: int = 3000,
@@ -224,7 +216,7 @@ def check(workflow: str | Path | dict | WorkflowSpec, out: str | Path, *, set: S
     if strain is not None and not 0 < strain <= 0.9:
         raise SpecError("--strain", strain, "must be in (0, 0.9] (compress the sample this far)")
     spec = load_workflow(workflow, set)
-    return registry.get(spec.kind).check_workflow(spec, _folder(out), say=_say(quiet), steps=steps,
+    return registry.get(spec.kind).check_workflow(spec, usable_folder(out, "out"), say=_say(quiet), steps=steps,
                                                   timestep_factor=timestep_factor, bisect=bisect, strain=strain)
 
 

@@ -78,7 +78,7 @@ def read_reference(name: str) -> dict:
     return ref
 
 
-def _tolerance(x) -> bool:
+def _nonnegative(x) -> bool:
     return isinstance(x, (int, float)) and not isinstance(x, bool) and 0 <= x < float("inf")
 
 
@@ -89,16 +89,16 @@ def reference_fault(ref: dict) -> str:
     for table in ("set", "keys", "curves", "without"):
         if not isinstance(ref.get(table, {}), dict):
             return f"{table} is a {type(ref[table]).__name__}, not a table"
-    if "seconds" in ref and not _tolerance(ref["seconds"]):
+    if "seconds" in ref and not _nonnegative(ref["seconds"]):
         return f"seconds = {ref['seconds']!r}, not a number of seconds"
     for key, spec in ref.get("keys", {}).items():
         if not isinstance(spec, dict):
             return f"keys.{key} is a {type(spec).__name__}, not a table"
         for t in ("rtol", "atol"):
-            if t in spec and not _tolerance(spec[t]):
+            if t in spec and not _nonnegative(spec[t]):
                 return f"keys.{key}.{t} = {spec[t]!r}, not a tolerance (a number >= 0)"
     for key, spec in ref.get("curves", {}).items():
-        if not isinstance(spec, dict) or not _tolerance(spec.get("tol")):
+        if not isinstance(spec, dict) or not _nonnegative(spec.get("tol")):
             return f"curves.{key} has no tolerance tol (a number >= 0)"
         if not all(isinstance(spec.get(k), str) for k in ("x", "y")):
             return f"curves.{key} needs x and y (dataset names)"

@@ -157,6 +157,16 @@ def _alive(pid: int) -> bool:
         return True
 
 
+def usable_folder(folder: str | os.PathLike, field: str = "--out") -> Path:
+    """``folder`` as a Path where it can be one (InputError, one line, where it is empty or an existing file)."""
+    if not str(folder).strip():
+        raise InputError(f"{field} = {str(folder)!r}: give a folder name (an empty one would be the current folder)")
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise InputError(f"{field} = {str(folder)!r}: exists and is not a folder; choose a folder")
+    return folder
+
+
 @contextmanager
 def folder_lock(folder: str | os.PathLike, field: str = "--out"):
     """Hold ``folder`` for this process: ``.opalflow.lock`` holds the owner's pid and host.
@@ -167,11 +177,7 @@ def folder_lock(folder: str | os.PathLike, field: str = "--out"):
     the folder); the lock of a process of this host that died (killed, machine restarted) is taken over.  A
     folder this call created is removed again if nothing else was written into it (a run refused on its input).
     """
-    if not str(folder).strip():
-        raise InputError(f"{field} = {str(folder)!r}: give a folder name (an empty one would be the current folder)")
-    folder = Path(folder)
-    if folder.exists() and not folder.is_dir():
-        raise InputError(f"{field} = {str(folder)!r}: exists and is not a folder; choose a folder")
+    folder = usable_folder(folder, field)
     created = not folder.exists()
     try:
         folder.mkdir(parents=True, exist_ok=True)
