@@ -97,7 +97,8 @@ def loaded(workflow: str, sets: list[str]):
 def scene_text(spec, sample, speed_m_s: float, plate: bool = False, legacy: bool = False) -> str:
     """The MUSEN text scene of ``sample`` (module docstring): glued (the top layer driven, the rest on the affine
     field) or, with ``plate``, at rest under a plate wall.  ``legacy`` (a MUSEN before 1.70.0): the simulation
-    domain two diameters wider than the periodic box on every side (655e066's Verlet grid spans the domain alone
+    domain two diameters wider than the periodic box on every side (655e066's Verlet grid, ContactAnalyzers/VerletList.cpp
+    RecalcParticlesPositions, spans the domain alone
     and writes the periodic images of particles near a side out of its bounds: a segfault at the first step)."""
     from opalflow.bpm.deck import particle_material
     from opalflow.materials import contact_properties, material
