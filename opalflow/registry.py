@@ -70,6 +70,9 @@ class Kind:
     options : the names in :data:`OPTIONS` it takes.
     resumable : ``"module:function"`` called as ``resumable(folder)`` -> bool: whether ``--resume`` has something
         to go on from in the folder (a restart file); "" where a written run record is enough.
+    result : ``"module:Class"`` of its :class:`opalflow.runs.result.Result` subclass: what its summary.json reads
+        back as (a finished job's :attr:`opalflow.runs.jobs.Outcome.result`); "" for the generic class (every key
+        in ``extra``).
     refusal : why it does not take the others (said when one is given).
     summary : one line for ``list`` and ``info``.
     """
@@ -85,11 +88,16 @@ class Kind:
     jobs: str = ""
     options: tuple[str, ...] = ()
     resumable: str = ""
+    result: str = ""
     refusal: str = ""
     summary: str = ""
 
     def spec_class(self) -> type[WorkflowSpec]:
         return resolve(self.spec)
+
+    def result_class(self) -> type:
+        """Its result class (:class:`opalflow.runs.result.Result` where it names none)."""
+        return resolve(self.result or "opalflow.runs.result:Result")
 
     def run_workflow(self, spec: WorkflowSpec, out: Path, *, say=print, np_: int = 1, resume: bool = False,
                      suffix: str | None = None, executor=None) -> dict:
@@ -123,38 +131,44 @@ class Kind:
             return resolve(self.analyze)(folder)
 
 
-def _compression(name: str, spec: str, scene: str, summary: str) -> Kind:
-    """A bonded-particle scene compressed by a plate: the pipeline of :mod:`opalflow.bpm`."""
+def _compression(name: str, spec: str, scene: str, summary: str,
+                 result: str = "opalflow.bpm.result:CompressionResult") -> Kind:
+    """A bonded-particle scene compressed by a plate: the pipeline of :mod:`opalflow.bpm`; ``result``: its
+    track's subclass of :class:`opalflow.bpm.result.CompressionResult` where it has one."""
     return Kind(name, spec, run="opalflow.bpm.pipeline:run_workflow", build="opalflow.bpm.pipeline:build",
                 analyze="opalflow.bpm.pipeline:analyze_folder",
                 check="opalflow.bpm.stability:check_workflow", scene=scene, cost="opalflow.bpm.pipeline:cost_facts",
                 options=("np", "resume", "suffix"), resumable="opalflow.bpm.pipeline:resumable",
-                summary=summary)
+                result=result, summary=summary)
 
 
 _TERSOFF_REFUSAL = ("atomistic workflows run in-process and take seconds; stability.workers sets how many "
                     "MD runs go at once")
 
+_TERSOFF_RESULT = "opalflow.tersoff.result:TersoffResult"
+
 _POLYCRYSTAL_REFUSAL = "the samples run batched in-process (JAX); --resume skips finished runs"
 
 BUILTIN = {k.name: k for k in (
     _compression("opal", "opalflow.opal.spec:OpalWorkflow", "opalflow.opal.scene:SCENE",
-                 "inverse opal (packing, pores, coating, substrate) compressed by a plate"),
+                 "inverse opal (packing, pores, coating, substrate) compressed by a plate",
+                 "opalflow.opal.result:OpalResult"),
     _compression("lattice", "opalflow.lattice.spec:LatticeWorkflow", "opalflow.lattice.scene:SCENE",
                  "regular lattice of bonded spheres compressed by a plate (analytic checks)"),
     _compression("datafile", "opalflow.datafile.spec:DatafileWorkflow", "opalflow.datafile.scene:SCENE",
                  "your own bpm/sphere data file compressed by a plate"),
     _compression("aerogel", "opalflow.aerogel.spec:AerogelWorkflow", "opalflow.aerogel.scene:SCENE",
-                 "silica aerogel: a DLCA/RLCA aggregate bonded at its contacts, compressed between walls"),
+                 "silica aerogel: a DLCA/RLCA aggregate bonded at its contacts, compressed between walls",
+                 "opalflow.aerogel.result:AerogelResult"),
     Kind("aggregation", "opalflow.aerogel.spec:AggregationWorkflow", "opalflow.aerogel.run:run_aggregation",
          refusal="an aggregation runs in-process (numba); aggregate.particles sets its size",
          summary="DLCA/RLCA aggregate in a periodic cube: fractal dimension two ways, pictures, data file"),
     Kind("tersoff_properties", "opalflow.tersoff.spec:TersoffWorkflow", "opalflow.tersoff.workflow:run_properties",
-         options=("suffix",), refusal=_TERSOFF_REFUSAL, summary="lattice constant, cohesive energy, elastic constants of a .tersoff file"),
+         options=("suffix",), result=_TERSOFF_RESULT, refusal=_TERSOFF_REFUSAL, summary="lattice constant, cohesive energy, elastic constants of a .tersoff file"),
     Kind("tersoff_fit", "opalflow.tersoff.spec:TersoffWorkflow", "opalflow.tersoff.workflow:run_fit",
-         refusal=_TERSOFF_REFUSAL, summary="fit of a Tersoff set to target properties (loss eq. 13)"),
+         result=_TERSOFF_RESULT, refusal=_TERSOFF_REFUSAL, summary="fit of a Tersoff set to target properties (loss eq. 13)"),
     Kind("tersoff_stability", "opalflow.tersoff.spec:TersoffWorkflow", "opalflow.tersoff.workflow:run_stability",
-         options=("suffix",), refusal=_TERSOFF_REFUSAL, summary="MD stability of a Tersoff set under four boundary conditions"),
+         options=("suffix",), result=_TERSOFF_RESULT, refusal=_TERSOFF_REFUSAL, summary="MD stability of a Tersoff set under four boundary conditions"),
     Kind("polycrystal_tension", "opalflow.tersoff.polycrystal.spec:TensionWorkflow",
          "opalflow.tersoff.polycrystal.run:run_tension", options=("resume",), refusal=_POLYCRYSTAL_REFUSAL,
          summary="polycrystal of tetrahedral elements with 64-atom Tersoff samples: tension -> E, Poisson ratio"),

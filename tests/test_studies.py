@@ -9,6 +9,7 @@ import sys
 import numpy as np
 import pytest
 
+from opalflow.opal.result import OpalResult
 from opalflow.resources import WORKFLOWS
 from opalflow.registry import load_spec
 from opalflow.studies import run as studies
@@ -113,8 +114,8 @@ def test_newton_calibration_on_a_known_model(tmp_path, monkeypatch):
             mat = job.spec.materials["silica"]
             e_b, s_b = mat["bond_youngs_modulus_GPa"], mat["bond_strength_MPa"]
             calls.append((e_b, s_b))
-            out_[job.label] = {"youngs_modulus_GPa": 0.26 * e_b, "strength_MPa": 0.44 * s_b * (1 + 0.02 * e_b / 6.53),
-                               "wall_s": 0.0}
+            out_[job.label] = OpalResult(youngs_modulus_GPa=0.26 * e_b,
+                                         strength_MPa=0.44 * s_b * (1 + 0.02 * e_b / 6.53), wall_s=0.0)
         return out_
 
     monkeypatch.setattr(studies, "sweep", fake_sweep)

@@ -24,6 +24,7 @@ from scipy.sparse.csgraph import connected_components
 
 from opalflow.aerogel.aggregation import Aggregate, aggregate, box_edge, gaussian_diameters
 from opalflow.aerogel.loops import bond_cutoff, deflect_dangling, loop_statistics, network_bonds, winding_rank
+from opalflow.aerogel.result import AerogelResult
 from opalflow.aerogel.spec import RANDOM_PLACEMENT_MAX, AggregateSpec, AerogelWorkflow
 from opalflow.bpm.scene import Scene
 from opalflow.materials import material
@@ -154,8 +155,6 @@ def statistics(s: Structure) -> dict:
             "cut_bonds": s.meta["cut_bonds"], "aggregation_s": s.meta["aggregation_s"]}
 
 
-#: what each run summary carries of the statistics (the density study plots against them)
-RUN_KEYS = ("solid_fraction", "density_kg_m3", "mean_coordination", "loops_per_10k", "dropped_unattached")
 
 
 def _describe(st: dict) -> str:
@@ -169,4 +168,4 @@ def _describe(st: dict) -> str:
             f"({st['dropped_unattached']} spheres left out: no bond path to the bottom after the cut)")
 
 
-SCENE = Scene(build=build_aerogel, statistics=statistics, run_keys=RUN_KEYS, describe=_describe)
+SCENE = Scene(build=build_aerogel, statistics=statistics, run_keys=AerogelResult.facts(), describe=_describe)

@@ -252,8 +252,8 @@ def analyze(out: Path, started: float | None = None, lammps_s: float | None = No
     snapshots, histograms = read_snapshots(out, info, curve, strain)
 
     breakable = info["spec"]["bonds"]["breakable"]
-    result = CompressionResult(
-        workflow=info["workflow"], method="dynamic", loading=info["spec"]["compression"]["loading"],
+    result = CompressionResult.of(
+        info["spec"]["kind"], info.get("structure", {}), workflow=info["workflow"], method="dynamic", loading=info["spec"]["compression"]["loading"],
         youngs_modulus_GPa=fit.modulus_MPa / 1e3, youngs_modulus_specimen_GPa=fit_top.modulus_MPa / 1e3,
         elastic_window_strain=list(fit.window), elastic_fit_r2=fit.r2,
         # the peak of a loading that breaks nothing is not a strength
@@ -268,7 +268,7 @@ def analyze(out: Path, started: float | None = None, lammps_s: float | None = No
         stress_by_material={f"{v['strain']:.4f}": v["by_material"] for v in snapshots.values()},
         solid_fraction=info["solid_fraction"], bond_stiffness_error_max=info["bond_stiffness_error_max"],
         timestep_estimate_s=info["timestep_estimate_s"], build_timings_s=info.get("build_timings_s"),
-        structure=info.get("structure", {}), statistics=info.get("statistics", {}), rate_check=rate_check)
+        statistics=info.get("statistics", {}), rate_check=rate_check)
     result.headline = report.headline(result.summary(), info.get("references", {}), breakable)
     result.refer(info.get("references", {}))
     if not result.complete:

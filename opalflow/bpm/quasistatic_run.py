@@ -129,8 +129,8 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
     broken = ~res.alive
     by_material = {m: int(np.sum(broken & (materials == m))) for m in sorted(set(sample.bins.materials))}
     E = got["youngs_modulus_GPa"]
-    result = CompressionResult(
-        workflow=spec.name, method="quasistatic", loading=loading.name,
+    result = CompressionResult.of(
+        spec.kind, info.get("structure", {}), workflow=spec.name, method="quasistatic", loading=loading.name,
         youngs_modulus_GPa=E, youngs_modulus_specimen_GPa=E,
         strength_MPa=got["strength_MPa"], strain_at_peak=got["strain_at_peak"],
         broken_bonds=got["broken_bonds"], broken_bonds_by_material=by_material,
@@ -139,7 +139,6 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
         broken_bonds_by_check_at_peak=broken_by_check(res, sample, spec.bonds.breaking, peak_only=True),
         n_particles=s.n_particles, n_bonds=s.n_bonds, solid_fraction=info["solid_fraction"],
         build_s=info["build_s"], quasistatic=_event_facts(spec, res, got["events"], contacts),
-        structure=info.get("structure", {}),
         headline=f"E = {E:.4g} GPa, strength = {got['strength_MPa']:.4g} MPa (strain at peak "
                  f"{got['strain_at_peak']:.4f}; quasi-static, {got['events']} events, {got['broken_bonds']} "
                  f"bonds broken)" if got["events"] else

@@ -13,6 +13,7 @@ import dataclasses
 import json
 from dataclasses import dataclass, field
 
+from opalflow import registry
 from opalflow.bpm.report import provenance_group, reference_errors, why
 from opalflow.runs.result import Result, key
 from opalflow.version import __version__
@@ -21,6 +22,7 @@ DYNAMIC, STATIC, QUASISTATIC, TENSOR = "dynamic", "static", "quasistatic", "tens
 LOADED = (DYNAMIC, STATIC, QUASISTATIC)           # a loaded sample (not the periodic tensor)
 BREAKING = (DYNAMIC, QUASISTATIC)                 # bonds that break: a strength
 SOLVED = (STATIC, TENSOR)                         # one linear solve
+ALL = (*LOADED, TENSOR)
 #: the strength's name by loading (bending: the flexural stress 3FL / (2bh^2) at the peak, ASTM D790)
 STRENGTH = {"plate": "compressive", "glued": "compressive", "tension": "tensile", "bending": "flexural"}
 
@@ -90,7 +92,6 @@ class CompressionResult(Result):
     opalflow_version: str = key(*LOADED, TENSOR, default=__version__)
     headline: str = key(*LOADED, TENSOR, default="")
     reference: dict = key(*LOADED, TENSOR)
-    structure: dict = field(default_factory=dict)    # the scene's run keys (Scene.run_keys): they win
     statistics: dict = field(default_factory=dict)   # the scene's other statistics: where no key above has them
 
     @property
@@ -98,10 +99,31 @@ class CompressionResult(Result):
         """The method, or ``tensor`` for the static solve of a sample periodic in x, y and z."""
         return TENSOR if self.loading == "periodic" else self.method
 
+    @classmethod
+    def of(cls, kind: str, structure: dict, **keys) -> CompressionResult:
+        """A run of ``kind``: its track's result class (:attr:`opalflow.registry.Kind.result`), the structure's
+        numbers (``Scene.run_keys``) over the method's ``keys``; a structure's number that the class does not
+        declare goes to ``statistics``."""
+        track = registry.get(kind).result_class()
+        track = track if issubclass(track, cls) else cls
+        names = {f.name for f in dataclasses.fields(track)}
+        keys.setdefault("statistics", {})
+        keys["statistics"] = {**{k: v for k, v in structure.items() if k not in names}, **keys["statistics"]}
+        return track(**{**keys, **{k: v for k, v in structure.items() if k in names}})
+
+    @classmethod
+    def facts(cls) -> tuple[str, ...]:
+        """The structure's numbers a track's class declares (its scene's ``run_keys``)."""
+        return tuple(cls.__annotations__)
+
     def summary(self) -> dict:
-        """summary.json: the method's keys, the scene's run keys over them and its other statistics beside."""
-        out = {**super().summary(), **self.structure}
+        """summary.json: the method's keys and the structure's, the scene's other statistics beside."""
+        out = super().summary()
         return {**out, **{k: v for k, v in self.statistics.items() if k not in out}}
+
+    def rest(self, keys: dict) -> None:
+        """Read back: summary.json's keys that no field declares are the scene's statistics (and the run's state)."""
+        self.statistics.update(keys)
 
     def refer(self, references: dict) -> CompressionResult:
         """Each reference value ({key: (value, source)}) with its source and this result's error against it."""

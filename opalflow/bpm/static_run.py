@@ -141,8 +141,8 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
         sigma = sigma_unit * e
         snapshots[e] = {"sigma_MPa": sigma,
                         "by_material": mech.stress_by_material(sigma, types, data.type_names)}
-    result = CompressionResult(
-        workflow=spec.name, method="static", loading=c.loading,
+    result = CompressionResult.of(
+        spec.kind, info.get("structure", {}), workflow=spec.name, method="static", loading=c.loading,
         youngs_modulus_GPa=E_GPa, youngs_modulus_specimen_GPa=E_GPa,
         n_particles=s.n_particles, n_bonds=s.n_bonds, solid_fraction=info["solid_fraction"],
         solver=res.solver, iterations=res.iterations, relative_residual=res.residual,
@@ -156,7 +156,6 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
         stress_by_material={f"{e:.4f}": v["by_material"] for e, v in snapshots.items()},
         bond_strain_per_strain={"mean": float(strain_unit.mean()), "std": float(strain_unit.std()),
                                 "min": float(strain_unit.min()), "max": float(strain_unit.max())},
-        structure=info.get("structure", {}),
         headline=f"E = {E_GPa:.4g} GPa (static, {res.solver}: {res.iterations} iterations, residual "
                  f"{res.residual:.1e}, {res.seconds:.1f} s)").refer(info["references"])
     summary = result.summary()
@@ -259,8 +258,8 @@ def run_tensor(spec: BpmWorkflow, s, out: Path, t0: float, say=print) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     write_data(out / "data.lmp", data, title=f"opalflow {__version__} {spec.name} (static, periodic)")
     _record(spec, info, out).begin(out, launcher="in-process (static solve)")
-    result = CompressionResult(
-        workflow=spec.name, method="static", loading="periodic", stiffness_tensor_GPa=C.tolist(),
+    result = CompressionResult.of(
+        spec.kind, {}, workflow=spec.name, method="static", loading="periodic", stiffness_tensor_GPa=C.tolist(),
         youngs_modulus_GPa=float(E[2]), youngs_moduli_GPa={"x": float(E[0]), "y": float(E[1]), "z": float(E[2])},
         poisson_ratio_zx=float(-S[0, 2] / S[2, 2]), bulk_modulus_GPa=float(1.0 / S[:3, :3].sum()),
         youngs_modulus_isotropic_GPa=iso["hill"]["E"], poisson_ratio_isotropic=iso["hill"]["nu"],

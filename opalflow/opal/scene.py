@@ -15,6 +15,7 @@ from opalflow.bpm.bonds import bond_types_by_material, describe_network, find_bo
 from opalflow.bpm.scene import Scene
 from opalflow.materials import material
 from opalflow.opal import pores as pore_geometry
+from opalflow.opal.result import OpalResult
 from opalflow.packing import dense_random_packing
 from opalflow.opal.spec import OpalWorkflow, sample_box_nm
 from opalflow.opal.windows import coating_surface_distance, window_openings
@@ -239,8 +240,6 @@ def structure_statistics(s: Structure) -> dict:
     return stats
 
 
-#: structure statistics of an opal that its run summary carries (studies plot against them)
-STRUCTURE_KEYS = ("porosity", "total_porosity", "density_kg_m3")
 
 
 def _describe(stats: dict) -> str:
@@ -253,4 +252,4 @@ def opal_structure(spec: OpalWorkflow, progress=None) -> Structure:
     return build_opal(spec, progress)[0]
 
 
-SCENE = Scene(build=opal_structure, statistics=structure_statistics, run_keys=STRUCTURE_KEYS, describe=_describe)
+SCENE = Scene(build=opal_structure, statistics=structure_statistics, run_keys=OpalResult.facts(), describe=_describe)

@@ -233,7 +233,7 @@ def executor(spec: ExecutorSpec, np_: int = 1):
 def run_jobs(jobs, root: Path, ex: ExecutorSpec | None = None, *, np_: int = 1,
              say: Callable[[str], None] = print) -> dict[str, Outcome]:
     """Run every unfinished job of ``jobs`` (:class:`opalflow.runs.jobs.Job`) through the executor ``ex``
-    (local by default) and return label -> :class:`opalflow.runs.jobs.Outcome` (finished with its summary,
+    (local by default) and return label -> :class:`opalflow.runs.jobs.Outcome` (finished with its result,
     failed with its reason and log tail).  Finished jobs are read from their folders."""
     from opalflow.runs.jobs import prepare
 
@@ -241,7 +241,7 @@ def run_jobs(jobs, root: Path, ex: ExecutorSpec | None = None, *, np_: int = 1,
     root = Path(root)
     done, todo = prepare(jobs, root)
     say(f"{len(jobs)} jobs: {len(done)} finished before, {len(todo)} to run ({ex.type} executor)")
-    results = {j.label: Outcome("finished", str(j.folder(root).resolve()), done[j.label])
+    results = {j.label: Outcome.finished(j.folder(root).resolve(), j.spec.kind, done[j.label])
                for j in jobs if j.label in done}
     if todo:
         labels = {str(j.folder(root).resolve()): j.label for j in todo}

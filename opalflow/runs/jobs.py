@@ -18,8 +18,10 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from opalflow import registry
 from opalflow.progress import note
 from opalflow.runs.record import RunRecord, finished_summary, run_kind, spec_digest
+from opalflow.runs.result import Result
 from opalflow.spec import WorkflowSpec
 
 
@@ -44,20 +46,30 @@ class Job:
 
 @dataclass
 class Outcome:
-    """What a job came to: ``finished`` (its ``summary``), ``failed`` (``error`` and the LAMMPS ``log_tail``),
+    """What a job came to: ``finished`` (its ``result``, of its kind's result class), ``failed`` (``error`` and the LAMMPS ``log_tail``),
     ``requeued`` (its scheduler stopped it at ``step``; the requeued job goes on from there), or ``pending`` /
     ``running`` where it was collected before it ended (``error`` says so)."""
 
     state: str
     folder: str
-    summary: dict | None = None
+    result: Result | None = None
     error: str = ""
     log_tail: str = ""
     step: int | None = None
 
+    @classmethod
+    def finished(cls, folder: str | os.PathLike, kind: str, summary: dict) -> Outcome:
+        """A finished job: its summary read back as ``kind``'s result class."""
+        return cls("finished", str(folder), (registry.get(kind).result_class() if kind else Result).from_summary(summary))
+
     @property
     def ok(self) -> bool:
         return self.state == "finished"
+
+    @property
+    def summary(self) -> dict | None:
+        """The finished job's summary.json as written (None where it has not finished)."""
+        return None if self.result is None else self.result.summary()
 
 
 def job_record(folder: str | os.PathLike) -> RunRecord | None:
@@ -76,9 +88,9 @@ def outcome(folder: str | os.PathLike) -> Outcome:
     """What a job folder holds now: finished with its summary, failed with its error and log tail, or where
     it stands (pending, running, requeued) when it has not ended."""
     summary = finished_summary(folder)
-    if summary is not None:
-        return Outcome("finished", str(folder), summary)
     rec = job_record(folder)
+    if summary is not None:
+        return Outcome.finished(folder, rec.kind if rec is not None else "", summary)
     state = rec.state if rec is not None else "pending"
     if state == "failed":
         return Outcome("failed", str(folder), error=rec.error or "failed", log_tail=rec.log_tail)
@@ -130,14 +142,13 @@ def run_job(folder: str, np_: int = 1, threads: int = 1) -> Outcome:
 
 
 def _run_job(folder: Path, np_: int) -> Outcome:
-    from opalflow import registry
     from opalflow.lammps.engine import Preempted
 
     rec = job_record(folder)
     label = rec.label if rec is not None and rec.label else folder.name
     done = finished_summary(folder)
     if done is not None:
-        return Outcome("finished", str(folder), done)
+        return Outcome.finished(folder, rec.kind if rec is not None else "", done)
 
     last = [0.0]
 
@@ -170,7 +181,7 @@ def _run_job(folder: Path, np_: int) -> Outcome:
         settle(folder, "failed", error=first, log_tail=tail)
         return Outcome("failed", str(folder), error=first, log_tail=tail)
     settle(folder, "finished", peak_rss_MiB=peak_rss_MiB())
-    return Outcome("finished", str(folder), summary)
+    return Outcome.finished(folder, spec.kind, summary)
 
 
 def peak_rss_MiB() -> float:

@@ -11,6 +11,8 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 
+from opalflow.runs.record import finished_summary
+
 
 def key(*cases: str, label: str = "", fmt: str = "{:.4g}", optional: bool = False, default=None):
     """A result key: the cases that give it, its report row (``label``, ``fmt``; none without a label),
@@ -20,7 +22,33 @@ def key(*cases: str, label: str = "", fmt: str = "{:.4g}", optional: bool = Fals
 
 @dataclass
 class Result:
-    """A run's result; subclasses declare the keys (:func:`key`) and say the run's :attr:`case`."""
+    """A run's result; subclasses declare the keys (:func:`key`) and say the run's :attr:`case`.
+
+    Read back from a run folder as the same object (:meth:`read`, :meth:`from_summary`: the pattern of atomate2's
+    task documents).  ``extra``: summary.json's keys that no field declares (the run's ``state``; a kind without
+    a result class of its own reads back as this class with every key here).
+    """
+
+    extra: dict = field(default_factory=dict)
+
+    @classmethod
+    def from_summary(cls, summary: dict) -> Result:
+        """The result a summary.json holds: each key a field of this class, the others :meth:`rest`."""
+        names = {f.name for f in dataclasses.fields(cls) if f.init and f.name != "extra"}
+        out = cls(**{k: v for k, v in summary.items() if k in names})
+        out.rest({k: v for k, v in summary.items() if k not in names})
+        return out
+
+    @classmethod
+    def read(cls, folder) -> Result | None:
+        """The result of the finished run in ``folder`` (None where it has not finished or its summary.json is
+        cut short)."""
+        summary = finished_summary(folder)
+        return None if summary is None else cls.from_summary(summary)
+
+    def rest(self, keys: dict) -> None:
+        """Keep summary.json's keys that no field declares (in ``extra``; a subclass may keep them elsewhere)."""
+        self.extra.update(keys)
 
     @property
     def case(self) -> str:
@@ -34,4 +62,5 @@ class Result:
     def summary(self) -> dict:
         """summary.json (before :func:`opalflow.runs.record.finish` adds the state); the values are this object's
         own (a dict filled later, such as a timings dict, is filled in both)."""
-        return {k: getattr(self, k) for k in self.keys()}
+        own = {k: getattr(self, k) for k in self.keys()}
+        return {**own, **{k: v for k, v in self.extra.items() if k not in own}}

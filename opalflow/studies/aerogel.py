@@ -71,19 +71,19 @@ def aerogel_models(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]
     rows, curves = [], {}
     for bond, contact in COMBINATIONS:
         runs = [res[f"{bond}_{contact}_s{s}"] for s in st.seeds if f"{bond}_{contact}_s{s}" in res]
-        E = _mean_std([r["youngs_modulus_GPa"] * 1e6 for r in runs])
-        S = _mean_std([r["strength_MPa"] * 1e3 for r in runs])
+        E = _mean_std([r.youngs_modulus_GPa * 1e6 for r in runs])
+        S = _mean_std([r.strength_MPa * 1e3 for r in runs])
         rows.append({"bonds": bond, "contacts": contact, "runs": len(runs), "E_kPa": E[0], "E_std_kPa": E[1],
                      "strength_kPa": S[0], "strength_std_kPa": S[1],
-                     "broken_bonds": _mean_std([r.get("broken_bonds") for r in runs])[0],
-                     "wall_s": float(sum(r["wall_s"] for r in runs))})
+                     "broken_bonds": _mean_std([r.broken_bonds for r in runs])[0],
+                     "wall_s": float(sum(r.wall_s for r in runs))})
         curves[(bond, contact)] = [c for s in st.seeds if (c := _curve(out, jobs[f"{bond}_{contact}_s{s}"]))]
-    static = _mean_std([res[f"static_s{s}"]["youngs_modulus_GPa"] * 1e6 for s in st.seeds if f"static_s{s}" in res])
+    static = _mean_std([res[f"static_s{s}"].youngs_modulus_GPa * 1e6 for s in st.seeds if f"static_s{s}" in res])
     first = f"parallel_hertz_s{st.seeds[0]}"
     rate = None
     if first in res and "half_speed" in res:
-        e1, e2 = res[first]["youngs_modulus_GPa"], res["half_speed"]["youngs_modulus_GPa"]
-        s1, s2 = res[first]["strength_MPa"], res["half_speed"]["strength_MPa"]
+        e1, e2 = res[first].youngs_modulus_GPa, res["half_speed"].youngs_modulus_GPa
+        s1, s2 = res[first].strength_MPa, res["half_speed"].strength_MPa
         rate = {"speed_m_s": job_spec(spec, []).compression.plate_speed_m_s, "E_change": e2 / e1 - 1,
                 "strength_change": s2 / s1 - 1, "quasi_static": abs(e2 / e1 - 1) < 0.02}
     _plot_models(curves, out / "models.png")
@@ -181,13 +181,14 @@ def aerogel_density(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str
         a, b = f"{name}_static", name
         if a not in res:
             continue
-        r = {"loop_model": model, "target_solid_fraction": f, "seed": s, "solid_fraction": res[a]["solid_fraction"],
-             "density_kg_m3": res[a]["density_kg_m3"], "E_kPa": res[a]["youngs_modulus_GPa"] * 1e6,
-             "mean_coordination": res[a].get("mean_coordination"), "loops_per_10k": res[a].get("loops_per_10k"),
-             "energy_split": res[a].get("energy_split", {}),
-             "E_dynamic_kPa": res[b]["youngs_modulus_GPa"] * 1e6 if b in res else None,
-             "strength_kPa": res[b]["strength_MPa"] * 1e3 if b in res else None,
-             "wall_s": res[a]["wall_s"] + (res[b]["wall_s"] if b in res else 0.0)}
+        static, dy = res[a], res.get(b)
+        r = {"loop_model": model, "target_solid_fraction": f, "seed": s, "solid_fraction": static.solid_fraction,
+             "density_kg_m3": static.density_kg_m3, "E_kPa": static.youngs_modulus_GPa * 1e6,
+             "mean_coordination": static.mean_coordination, "loops_per_10k": static.loops_per_10k,
+             "energy_split": static.energy_split or {},
+             "E_dynamic_kPa": dy.youngs_modulus_GPa * 1e6 if dy else None,
+             "strength_kPa": dy.strength_MPa * 1e3 if dy else None,
+             "wall_s": static.wall_s + (dy.wall_s if dy else 0.0)}
         series[model].append(r)
     ref = literature()["density_scaling"]
     models = {}

@@ -79,8 +79,8 @@ def calibration(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
     target = np.array([st.target_E_GPa, st.target_strength_MPa])
     history, runs, jac, prev = [], 0, None, None
 
-    def result(summary) -> np.ndarray:
-        return np.array([summary["youngs_modulus_GPa"], summary["strength_MPa"]])
+    def result(r) -> np.ndarray:
+        return np.array([r.youngs_modulus_GPa, r.strength_MPa])
 
     converged = False
     while runs < st.max_runs:
@@ -100,7 +100,7 @@ def calibration(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
                         "error_strength": err[1], "dem_runs": runs,
                         "fd_points": [{"bond_E_GPa": p[0], "bond_strength_MPa": p[1], "youngs_modulus_GPa": v[0],
                                        "strength_MPa": v[1]} for p, v in zip(points[1:], values[1:])],
-                        "wall_s": sum(s["wall_s"] or 0.0 for s in summaries.values())})
+                        "wall_s": sum(s.wall_s or 0.0 for s in summaries.values())})
         say(f"calibration iteration {len(history)}: E_b = {x[0]:.4g} GPa, sigma_b = {x[1]:.4g} MPa -> "
             f"E = {y[0]:.4g} GPa ({100 * err[0]:+.2f} %), strength = {y[1]:.4g} MPa ({100 * err[1]:+.2f} %), "
             f"{runs} runs")
@@ -171,14 +171,14 @@ def bulk(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
             continue
         s = res[job.label]
         e_b = material(job.spec.material, job.spec.materials)["bond_youngs_modulus_GPa"]
-        k_e = s["youngs_modulus_specimen_GPa"] / e_b
-        table[label_number(d)] = {"diameter_nm": d, "E_macro_GPa": s["youngs_modulus_specimen_GPa"], "K_E": k_e,
-                          "E_plate_GPa": s["youngs_modulus_GPa"], "K_E_plate": s["youngs_modulus_GPa"] / e_b,
-                          "strength_MPa": s.get("strength_MPa"), "strain_at_peak": s.get("strain_at_peak"),
-                          "broken_bonds": s.get("broken_bonds"), "n_particles": s["n_particles"], "wall_s": s["wall_s"]}
-        rows.append(f"| {d:g} | {s['n_particles']} | {s['youngs_modulus_specimen_GPa']:.3f} | {k_e:.3f} | "
-                    f"{s['youngs_modulus_GPa']:.3f} | {fmt_value(s.get('strength_MPa'), '.1f')} | "
-                    f"{fmt_value(s.get('strain_at_peak'), '.4f')} | {fmt_value(s.get('broken_bonds'), 'd')} | {s['wall_s']:.0f} |")
+        k_e = s.youngs_modulus_specimen_GPa / e_b
+        table[label_number(d)] = {"diameter_nm": d, "E_macro_GPa": s.youngs_modulus_specimen_GPa, "K_E": k_e,
+                          "E_plate_GPa": s.youngs_modulus_GPa, "K_E_plate": s.youngs_modulus_GPa / e_b,
+                          "strength_MPa": s.strength_MPa, "strain_at_peak": s.strain_at_peak,
+                          "broken_bonds": s.broken_bonds, "n_particles": s.n_particles, "wall_s": s.wall_s}
+        rows.append(f"| {d:g} | {s.n_particles} | {s.youngs_modulus_specimen_GPa:.3f} | {k_e:.3f} | "
+                    f"{s.youngs_modulus_GPa:.3f} | {fmt_value(s.strength_MPa, '.1f')} | "
+                    f"{fmt_value(s.strain_at_peak, '.4f')} | {fmt_value(s.broken_bonds, 'd')} | {s.wall_s:.0f} |")
     finest = table[min(table, key=lambda k: table[k]["diameter_nm"])]
     exp = paper()["coating"]
     titania = {k: {"E_exp_GPa": v[0], "E_b_GPa": v[0] / finest["K_E"], "E_b_paper_GPa": v[0] / ref["K_E"]}
@@ -245,8 +245,8 @@ def coating(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
         s = res[job.label]
         table.append({"thickness_nm": t, "case": case, "E_exp_GPa": e_exp,
                       "bond_E_GPa": None if e_exp is None else e_exp / k_e,
-                      "youngs_modulus_GPa": s["youngs_modulus_GPa"], "strength_MPa": s.get("strength_MPa"),
-                      "n_particles": s["n_particles"], "wall_s": s["wall_s"]})
+                      "youngs_modulus_GPa": s.youngs_modulus_GPa, "strength_MPa": s.strength_MPa,
+                      "n_particles": s.n_particles, "wall_s": s.wall_s})
     uncoated = next((r["strength_MPa"] for r in table if r["case"] == "uncoated"), None)
     for r in table:           # each coating's strength against the uncoated sample's (Fig. 9)
         r["strength_vs_uncoated"] = r["strength_MPa"] / uncoated if uncoated and r["strength_MPa"] else None
@@ -318,9 +318,9 @@ def porosity(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
         if job.label not in res:
             continue
         r = res[job.label]
-        runs.append({"target_porosity": p, "seed": s, "porosity": r["porosity"], "density_kg_m3": r["density_kg_m3"],
-                     "youngs_modulus_GPa": r["youngs_modulus_GPa"], "strength_MPa": r.get("strength_MPa"),
-                     "wall_s": r["wall_s"]})
+        runs.append({"target_porosity": p, "seed": s, "porosity": r.porosity, "density_kg_m3": r.density_kg_m3,
+                     "youngs_modulus_GPa": r.youngs_modulus_GPa, "strength_MPa": r.strength_MPa,
+                     "wall_s": r.wall_s})
     eps = np.array([r["porosity"] for r in runs])
     e = np.array([r["youngs_modulus_GPa"] for r in runs])
     fits = {"E_exponential": fit_exponential(eps, e), "E_power": fit_power(eps, e)}
@@ -423,8 +423,8 @@ def convergence(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
             continue
         r = res[job.label]
         by_setting.setdefault((cells, d), []).append(
-            {"seed": s, "youngs_modulus_GPa": r["youngs_modulus_GPa"], "strength_MPa": r.get("strength_MPa", math.nan),
-             "wall_s": r["wall_s"], "n_particles": r["n_particles"], "n_bonds": r["n_bonds"],
+            {"seed": s, "youngs_modulus_GPa": r.youngs_modulus_GPa, "strength_MPa": math.nan if r.strength_MPa is None else r.strength_MPa,
+             "wall_s": r.wall_s, "n_particles": r.n_particles, "n_bonds": r.n_bonds,
              "area_um2": cells[0] * cells[1] * base.pores.spacing_nm ** 2 * math.sqrt(3) * 1e-6})
     rows = []
     for (cells, d), runs in by_setting.items():
@@ -522,11 +522,11 @@ def sides(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
         if job.label not in res:
             continue
         s, how = res[job.label], job.label.removeprefix("sides_")
-        table[how] = {k: s.get(k) for k in ("youngs_modulus_GPa", "youngs_modulus_specimen_GPa", "strength_MPa",
-                                             "strain_at_peak", "broken_bonds", "n_particles", "n_bonds", "wall_s")}
-        rows.append(f"| {how} | {s['n_particles']} | {s['n_bonds']} | {s['youngs_modulus_GPa']:.4g} | "
-                    f"{fmt_value(s.get('strength_MPa'), '.4g')} | {fmt_value(s.get('strain_at_peak'), '.4f')} | "
-                    f"{fmt_value(s.get('broken_bonds'), 'd')} | {s['wall_s']:.0f} |")
+        table[how] = {k: getattr(s, k) for k in ("youngs_modulus_GPa", "youngs_modulus_specimen_GPa", "strength_MPa",
+                                                 "strain_at_peak", "broken_bonds", "n_particles", "n_bonds", "wall_s")}
+        rows.append(f"| {how} | {s.n_particles} | {s.n_bonds} | {s.youngs_modulus_GPa:.4g} | "
+                    f"{fmt_value(s.strength_MPa, '.4g')} | {fmt_value(s.strain_at_peak, '.4f')} | "
+                    f"{fmt_value(s.broken_bonds, 'd')} | {s.wall_s:.0f} |")
         frames, box, d = fracture.load_frames(job.folder(out))
         if frames:
             runs[f"{how} sides"] = (frames, box, d)

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from opalflow import registry
 from opalflow.bpm.methods import METHODS
+from opalflow.bpm.result import CompressionResult
 from opalflow.resources import WORKFLOWS
 from opalflow.runs.executors import run_jobs
 from opalflow.runs.jobs import Job, job_record
@@ -37,11 +38,12 @@ def study_set(st) -> list[str]:
     return st.paper_set if st.paper_scale else st.set
 
 
-def sweep(spec, out: Path, jobs: list[Job], say) -> dict[str, dict]:
-    """Run a study's jobs through its executor (``spec.executor``); the failed ones are left out of the
-    result (their folders say why: :func:`failed_jobs`)."""
+def sweep(spec, out: Path, jobs: list[Job], say) -> dict[str, CompressionResult]:
+    """Run a study's jobs through its executor (``spec.executor``): label -> the result of each finished job (its
+    kind's class: :class:`opalflow.bpm.result.CompressionResult` or a track's subclass); the failed ones are left
+    out (their folders say why: :func:`failed_jobs`)."""
     res = run_jobs(jobs, out, spec.executor, np_=spec.study.np, say=say)
-    return {k: v.summary for k, v in res.items() if v.ok}
+    return {k: v.result for k, v in res.items() if v.ok}
 
 
 def failed_jobs(out: Path, since: float) -> dict[str, dict]:
