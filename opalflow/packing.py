@@ -50,9 +50,9 @@ from opalflow.lammps.syntax import num
 from opalflow.neighbors import pairs_within, separations
 
 CHUNK_STEPS = 200
-MAX_STEPS = 40_000
+FIRE_MAX_STEPS = 40_000
 #: packing relaxations (``packing.method``): LAMMPS's FIRE, the paper's generator (module docstring)
-METHODS = ("fire", "musen")
+PACKING_METHODS = ("fire", "musen")
 #: ``push_apart`` gives up after this many steps
 PUSH_MAX_STEPS = 400_000
 
@@ -125,7 +125,7 @@ min_modify integrator verlet tmax 5
                 lmp.command(f"pair_coeff {a + 1} {b + 1} 1.0 {num(0.5 * (sizes[a] + sizes[b]))}")
         lmp.create_atoms(n, np.arange(1, n + 1).tolist(), (kind + 1).tolist(), x.ravel().tolist())
         steps, worst = 0, math.inf
-        while steps < MAX_STEPS:
+        while steps < FIRE_MAX_STEPS:
             lmp.command(f"minimize 0 0 {CHUNK_STEPS} {10 * CHUNK_STEPS}")
             steps += CHUNK_STEPS
             x = np.array(lmp.gather_atoms("x", 1, 3), dtype=np.float64).reshape(n, 3)
@@ -137,7 +137,7 @@ min_modify integrator verlet tmax 5
                 return x, worst, steps
     finally:
         lmp.close()
-    raise PackingError(f"packing did not reach overlaps < {max_overlap:g} d after {MAX_STEPS} FIRE "
+    raise PackingError(f"packing did not reach overlaps < {max_overlap:g} d after {FIRE_MAX_STEPS} FIRE "
                        f"steps (largest {worst:.3g} d); lower packing.solid_fraction")
 
 
@@ -206,7 +206,7 @@ def _largest_overlap(x, r, pairs, tile):
 
 
 #: ``packing.method`` -> the tile's relaxation
-RELAXATIONS = {"fire": relax_tile, "musen": push_apart}
+TILE_RELAXATIONS = {"fire": relax_tile, "musen": push_apart}
 
 
 def max_pair_overlap(x: np.ndarray, diameters: np.ndarray, box: np.ndarray,
@@ -245,7 +245,7 @@ def dense_random_packing(box: np.ndarray, diameter: float, solid_fraction: float
     seed : random seed; the same arguments give the same bytes.
     tile_nm : edge of the periodic tile (0: the whole box is one tile).
     coprime_with : tile counts along x and y are made coprime with these numbers.
-    method : the tile's relaxation, one of :data:`METHODS` (module docstring).
+    method : the tile's relaxation, one of :data:`PACKING_METHODS` (module docstring).
     """
     box = np.asarray(box, dtype=float)
     rng = np.random.default_rng(seed)
@@ -264,7 +264,7 @@ def dense_random_packing(box: np.ndarray, diameter: float, solid_fraction: float
     d_tile = sample_diameters(n_tile, diameter, std, size_bins, rng)
     if tile_nm:  # the free z edge makes the tile hold exactly phi for the sampled diameters
         tile[2] = np.sum(np.pi / 6 * d_tile**3) / (solid_fraction * tile[0] * tile[1])
-    x, worst, steps = RELAXATIONS[method](tile / diameter, d_tile / diameter, rng, max_overlap, progress)
+    x, worst, steps = TILE_RELAXATIONS[method](tile / diameter, d_tile / diameter, rng, max_overlap, progress)
     x *= diameter
     counts = (nx, ny, math.ceil(box[2] / tile[2] - 1e-9))
     grid = np.stack(np.meshgrid(*[np.arange(c) for c in counts], indexing="ij"), -1).reshape(-1, 3)

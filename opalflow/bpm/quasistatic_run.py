@@ -359,3 +359,9 @@ def _report(spec, info, summary, result, loading, sample, plots: bool) -> str:
               plots_line(plots, "stress_strain.png, fracture.png", spec.compression.plots) + " Data: results.h5 "
               "(group `quasistatic`), fracture.peak.dump and fracture.end.dump (OVITO), summary.json."]
     return "\n".join(lines) + "\n"
+
+
+def price(spec: BpmWorkflow, s) -> dict:
+    """What :mod:`opalflow.runs.plan` prices a quasi-static run by: the measured runs with its breaking rule and
+    event tolerance (or, where none, its first solve)."""
+    return {"solver": "amg", "breaking": spec.bonds.breaking, "event_tolerance": spec.compression.event_tolerance}

@@ -22,7 +22,7 @@ DYNAMIC, STATIC, QUASISTATIC, TENSOR = "dynamic", "static", "quasistatic", "tens
 LOADED = (DYNAMIC, STATIC, QUASISTATIC)           # a loaded sample (not the periodic tensor)
 BREAKING = (DYNAMIC, QUASISTATIC)                 # bonds that break: a strength
 SOLVED = (STATIC, TENSOR)                         # one linear solve
-ALL = (*LOADED, TENSOR)
+EVERY_CASE = (*LOADED, TENSOR)
 #: the strength's name by loading (bending: the flexural stress 3FL / (2bh^2) at the peak, ASTM D790)
 STRENGTH = {"plate": "compressive", "glued": "compressive", "tension": "tensile", "bending": "flexural"}
 

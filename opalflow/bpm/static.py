@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from opalflow.analysis.elasticity import VOIGT
 from opalflow.bpm.loading import Supports
 from opalflow.bpm.spec import STATIC_SOLVERS as SOLVERS
 from opalflow.bpm.stiffness import BondNetwork, bond_force
@@ -206,10 +207,6 @@ def solve_compression(net: BondNetwork, positions: np.ndarray, supports: Support
                         iterations=iterations, residual=true_res,
                         seconds=seconds, setup_seconds=setup, peak_memory_MiB=peak, solver=solver, history=history,
                         loose=int(loose.sum()))
-
-
-#: Voigt order of the stiffness tensor: xx yy zz yz xz xy (engineering shear strains)
-VOIGT = ((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))
 
 
 @dataclass

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from opalflow.analysis import compression as mech
-from opalflow.analysis.elasticity import isotropic_average
+from opalflow.analysis.elasticity import VOIGT, isotropic_average
 from opalflow.bpm.deck import bond_model, loaded_sample
 from opalflow.bpm.loading import LOADINGS
 from opalflow.bpm.methods import METHODS
@@ -29,8 +29,8 @@ from opalflow.bpm.report import network_inputs, plots_line, sample_lines, struct
 from opalflow.bpm.result import CompressionResult
 from opalflow.bpm.scene import scene_of, solid_fraction
 from opalflow.bpm.spec import BpmWorkflow
-from opalflow.bpm.static import (VOIGT, LooseParticlesError, StaticResult, loose_message, loose_particles,
-                                  solve_compression, solve_tensor)
+from opalflow.bpm.static import (LooseParticlesError, StaticResult, auto_solver, loose_message,
+                                  loose_particles, solve_compression, solve_tensor)
 from opalflow.bpm.stiffness import BondNetwork, stiffness_network
 from opalflow.lammps.datafile import write_data
 from opalflow.runs.record import RunRecord, finish
@@ -65,7 +65,8 @@ def network_run(spec: BpmWorkflow, s, out: Path, t0: float, *, launcher: str, re
     bonded structure, height, cross-section and top layer; no deck: :func:`opalflow.bpm.deck.loaded_sample`),
     its linear network (loose particles refused before anything is written, unless
     ``compression.drop_loose``), data.lmp and the run record, begun (``resume``: the state file a session
-    continues from).  Returns (sample, network, info, record)."""
+    continues from).  Returns (sample, network, info, record, written): ``written`` is the future of data.lmp,
+    written on a thread of its own while the solve runs (:func:`_behind`)."""
     c = spec.compression
     timings = {"structure": time.perf_counter() - t0}
     sample = loaded_sample(spec, s)
@@ -297,3 +298,9 @@ def run_tensor(spec: BpmWorkflow, s, out: Path, t0: float, say=print) -> dict:
     tensor = h5_bytes(fill)
     return finish(out, summary, "\n".join(lines), files=lambda stage: stage("results.h5").write_bytes(tensor),
                   started=t0)
+
+
+def price(spec: BpmWorkflow, s) -> dict:
+    """What :mod:`opalflow.runs.plan` prices a static solve of structure ``s`` by: its solver."""
+    solver = spec.compression.solver
+    return {"solver": auto_solver(s.n_particles, s.n_bonds) if solver == "auto" else solver}

@@ -240,8 +240,6 @@ def structure_statistics(s: Structure) -> dict:
     return stats
 
 
-
-
 def _describe(stats: dict) -> str:
     return (f"{stats['n_particles']} particles, {stats['n_bonds']} bonds, porosity {stats['porosity']:.3f}, "
             f"{stats['particles_per_um3']:.0f} particles/um^3, {stats['bonds_per_um3']:.0f} bonds/um^3; "

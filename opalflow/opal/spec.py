@@ -6,7 +6,7 @@ import math
 from dataclasses import dataclass, field
 
 from opalflow.bpm.spec import BoundarySpec, BpmWorkflow, check_material
-from opalflow.packing import METHODS as PACKING_METHODS
+from opalflow.packing import PACKING_METHODS
 from opalflow.spec import SpecError, check
 
 ARRANGEMENTS = ("fcc", "random", "none")

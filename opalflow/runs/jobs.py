@@ -60,7 +60,8 @@ class Outcome:
     @classmethod
     def finished(cls, folder: str | os.PathLike, kind: str, summary: dict) -> Outcome:
         """A finished job: its summary read back as ``kind``'s result class."""
-        return cls("finished", str(folder), (registry.get(kind).result_class() if kind else Result).from_summary(summary))
+        result_class = registry.get(kind).result_class() if kind else Result
+        return cls("finished", str(folder), result_class.from_summary(summary))
 
     @property
     def ok(self) -> bool:

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 from opalflow.spec import SpecError, check, check_name, convert
 
-EXECUTORS = ("local", "dask", "slurm")
+EXECUTOR_TYPES = ("local", "dask", "slurm")
 ADDRESS_RE = re.compile(r"(tcp|tls|inproc|ucx)://[A-Za-z0-9_.\-\[\]:]+")
 
 
@@ -41,7 +41,7 @@ class ExecutorSpec:
     poll_s: float = 2.0          # slurm: seconds between looks at the queue (squeue)
 
     def validate(self) -> None:
-        check(self.type in EXECUTORS, "executor.type", self.type, f"must be one of {', '.join(EXECUTORS)}")
+        check(self.type in EXECUTOR_TYPES, "executor.type", self.type, f"must be one of {', '.join(EXECUTOR_TYPES)}")
         check(self.workers >= 0, "executor.workers", self.workers, "must be >= 0 (jobs at once; 0: as many as fit)")
         check(self.address == "" or bool(ADDRESS_RE.fullmatch(self.address)), "executor.address", self.address,
               "must be a Dask scheduler address such as 'tcp://10.0.0.5:8786' (or '' for a LocalCluster)")

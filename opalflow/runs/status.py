@@ -18,7 +18,7 @@ from opalflow.store import DamagedFile, lock_owner, process_alive, read_json
 
 #: the record's states (opalflow.runs.record.STATES, built shown as pending) and what status sees besides:
 #: died (running, its process gone) and damaged (the record cannot be read)
-STATES = ("pending", "running", "requeued", "interrupted", "died", "finished", "failed", "damaged")
+SHOWN = ("pending", "running", "requeued", "interrupted", "died", "finished", "failed", "damaged")
 
 
 def _number(x) -> bool:
@@ -138,7 +138,7 @@ def status_lines(folder: str | Path, tail: int = 8) -> list[str]:
             rows.append(f"  {state:<9} {label}: {said or 'starting'}{_sessions(job)}" + (f" [{where}]" if where else ""))
         else:
             rows.append(f"  pending   {label}")
-    head = f"{folder}: {len(jobs)} job(s): " + ", ".join(f"{counts[s]} {s}" for s in STATES if counts[s])
+    head = f"{folder}: {len(jobs)} job(s): " + ", ".join(f"{counts[s]} {s}" for s in SHOWN if counts[s])
     if lefts and all(x is not None for x in lefts):
         head += f"; running jobs done in ~{max(lefts):.0f} s"
     return [head, *rows]

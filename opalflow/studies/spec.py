@@ -3,10 +3,10 @@ from __future__ import annotations
 
 from dataclasses import MISSING, dataclass, field, fields
 
-from opalflow.aerogel.spec import LOOP_MODELS
-from opalflow.bpm.spec import METHODS
+from opalflow.bpm.methods import METHODS
 from opalflow.runs.spec import ExecutorSpec
 from opalflow.spec import WorkflowSpec, check, check_name
+from opalflow.vocabulary import LOOP_MODELS
 
 
 @dataclass(frozen=True)

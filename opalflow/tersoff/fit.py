@@ -25,7 +25,7 @@ from opalflow.resources import DATA, resource
 from opalflow.tersoff.model import DiamondModel
 from opalflow.tersoff.parameters import COLUMNS, TersoffParameters
 
-PROPERTY_KEYS = ("Ec_eV", "B_GPa", "Cprime_GPa", "C11_GPa", "C12_GPa", "C44_0_GPa", "C44_GPa")
+FIT_KEYS = ("Ec_eV", "B_GPa", "Cprime_GPa", "C11_GPa", "C12_GPa", "C44_0_GPa", "C44_GPa")
 
 
 def zhuravlev2021() -> dict:
@@ -90,7 +90,7 @@ class Loss:
 
 def default_weights() -> dict[str, float]:
     """Eq. 13 as printed: every term weight 1 (w_Ec = w_grad = 1, the six moduli 1)."""
-    return {"grad": 1.0, **{k: 1.0 for k in PROPERTY_KEYS}}
+    return {"grad": 1.0, **{k: 1.0 for k in FIT_KEYS}}
 
 
 @dataclass

@@ -28,7 +28,7 @@ from opalflow.tersoff.parameters import TersoffParameters, write_tersoff
 
 SI_MASS = 28.0855      # g/mol (metal units)
 POTENTIAL_FILE = "potential.tersoff"
-PROPERTY_KEYS = ("B_GPa", "Cprime_GPa", "C11_GPa", "C12_GPa", "C44_0_GPa", "C44_GPa")
+MODULI_KEYS = ("B_GPa", "Cprime_GPa", "C11_GPa", "C12_GPa", "C44_0_GPa", "C44_GPa")
 
 # strain paths: F(e) as (xx, yy, zz, xy) increments; relax = atoms minimised in the strained box
 PATHS = {
@@ -144,7 +144,7 @@ def evaluate(params: TersoffParameters, folder: str | Path, *, strain: float = 1
             table[h] = constants(d2, omega)
             times[h] = time.perf_counter() - t
     near = [h for h in strains if strain / 10.0 <= h <= strain * 10.0]
-    spread = {k: max(table[h][k] for h in near) - min(table[h][k] for h in near) for k in PROPERTY_KEYS}
+    spread = {k: max(table[h][k] for h in near) - min(table[h][k] for h in near) for k in MODULI_KEYS}
     return Evaluation(a0_A=a, Ec_eV=e0, values=table[strain], strain=strain, spread=spread,
                       scan=table if scan else {}, scan_s=times if scan else {},
                       seconds=time.perf_counter() - t0)

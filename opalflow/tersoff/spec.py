@@ -57,7 +57,7 @@ class TersoffWorkflow(WorkflowSpec):
     def validate(self) -> None:
         """The [tersoff] and [stability] sections; the potential file is read and checked."""
         super().validate()
-        from opalflow.tersoff.fit import DEFAULT_BOUNDS, PROPERTY_KEYS
+        from opalflow.tersoff.fit import DEFAULT_BOUNDS, FIT_KEYS
         from opalflow.tersoff.parameters import COLUMNS, load_parameters
 
         t = self.tersoff
@@ -70,11 +70,11 @@ class TersoffWorkflow(WorkflowSpec):
         check(4.0 <= t.lattice_target_A <= 7.0, "tersoff.lattice_target_A", t.lattice_target_A,
               "must be in [4, 7] A (diamond-structure lattice constant)")
         for key, value in t.targets.items():
-            check(key in PROPERTY_KEYS, f"tersoff.targets.{key}", value, f"unknown target; allowed: {', '.join(PROPERTY_KEYS)}")
+            check(key in FIT_KEYS, f"tersoff.targets.{key}", value, f"unknown target; allowed: {', '.join(FIT_KEYS)}")
             check(is_number(value) and value != 0, f"tersoff.targets.{key}", value, "must be a non-zero number (errors are relative)")
         for key, value in t.weights.items():
-            check(key in PROPERTY_KEYS or key == "grad", f"tersoff.weights.{key}", value,
-                  f"unknown weight; allowed: grad, {', '.join(PROPERTY_KEYS)}")
+            check(key in FIT_KEYS or key == "grad", f"tersoff.weights.{key}", value,
+                  f"unknown weight; allowed: grad, {', '.join(FIT_KEYS)}")
             check(is_number(value) and value >= 0, f"tersoff.weights.{key}", value, "must be a number >= 0")
         for i, name in enumerate(t.fixed):
             check(name in COLUMNS, f"tersoff.fixed[{i}]", name, f"must be a parameter: {', '.join(COLUMNS)}")

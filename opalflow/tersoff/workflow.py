@@ -21,7 +21,7 @@ from opalflow.tersoff import stability as stab
 from opalflow.tersoff.model import DiamondModel, neighbor_radius
 from opalflow.tersoff.parameters import (COLUMNS, REFERENCE_POTENTIAL, TersoffParameters, load_parameters,
                                          read_tersoff, write_tersoff)
-from opalflow.tersoff.properties import PROPERTY_KEYS as MODULI, evaluate
+from opalflow.tersoff.properties import MODULI_KEYS as MODULI, evaluate
 from opalflow.tersoff.result import TersoffResult
 from opalflow.tersoff.spec import TersoffWorkflow
 from opalflow.version import __version__

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from opalflow.analysis.elasticity import VOIGT
 from opalflow.progress import Progress
 from opalflow.runs.record import RunRecord, finish
 from opalflow.store import h5_bytes, new_figure, read_json, save_figure, write_json_atomic
@@ -32,7 +33,6 @@ REFERENCE = {"youngs_modulus_GPa": 160.0, "poisson_ratio": 0.22, "wave_speed_pla
              "wave_speed_rod_m_s": 8290.0, "wave_speed_shear_m_s": 5280.0}
 SOURCE = ("Zhuravlev, Abgaryan, Reviznikov, Multiscale Discrete Element Modeling, Symmetry 13, 219 (2021), "
           "doi:10.3390/sym13020219, section 3")
-VOIGT = ((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))
 
 
 def setup(spec: PolycrystalWorkflow, out: Path) -> tuple:

@@ -10,9 +10,9 @@ from dataclasses import dataclass, field
 from opalflow.spec import WorkflowSpec, check
 from opalflow.tersoff.spec import TersoffSpec
 
-RELAXATIONS = ("minimize", "md")
+SAMPLE_RELAXATIONS = ("minimize", "md")
 WAVES = ("plate", "rod", "shear")
-METHODS = ("dynamic", "static")
+TENSION_METHODS = ("dynamic", "static")
 
 
 @dataclass
@@ -73,7 +73,7 @@ class PolycrystalWorkflow(WorkflowSpec):
         check(1 <= len(s.seeds) <= 100, "samples.seeds", s.seeds, "must hold 1 to 100 seeds")
         for i, seed in enumerate(s.seeds):
             check(isinstance(seed, int) and seed >= 0, f"samples.seeds[{i}]", seed, "must be an integer >= 0")
-        check(s.relaxation in RELAXATIONS, "samples.relaxation", s.relaxation, f"must be one of {', '.join(RELAXATIONS)}")
+        check(s.relaxation in SAMPLE_RELAXATIONS, "samples.relaxation", s.relaxation, f"must be one of {', '.join(SAMPLE_RELAXATIONS)}")
         check(1e-8 <= s.force_tol_eV_A <= 1e-2, "samples.force_tol_eV_A", s.force_tol_eV_A, "must be in [1e-8, 1e-2] eV/A")
         check(0 <= s.lammps_check <= 100, "samples.lammps_check", s.lammps_check, "must be in [0, 100]")
 
@@ -103,7 +103,7 @@ class TensionWorkflow(PolycrystalWorkflow):
         for i, h in enumerate(t.cube_nm):
             check(1.0 <= h <= 1e6, f"tension.cube_nm[{i}]", h, "must be in [1, 1e6] nm (an element holds a "
                   "1.1 nm sample)")
-        check(t.method in METHODS, "tension.method", t.method, f"must be one of {', '.join(METHODS)}")
+        check(t.method in TENSION_METHODS, "tension.method", t.method, f"must be one of {', '.join(TENSION_METHODS)}")
         check(0 < t.max_strain <= 0.02, "tension.max_strain", t.max_strain, "must be in (0, 0.02] (elastic range)")
         check(0 < t.strain_step <= t.max_strain, "tension.strain_step", t.strain_step,
               f"must be in (0, max_strain = {t.max_strain:g}]")
