@@ -13,6 +13,7 @@ import sys
 
 from opalflow import STARTED, api, registry
 from opalflow.spec import InputError
+from opalflow.store import RESULTS, SUMMARY
 from opalflow.version import __version__
 
 
@@ -177,7 +178,7 @@ def parser() -> argparse.ArgumentParser:
     b.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                    help="override a spec field (repeatable)")
     b.set_defaults(func=cmd_build)
-    r = sub.add_parser("run", help="build, run LAMMPS, analyze: results.h5, summary.json, report.md, plots")
+    r = sub.add_parser("run", help=f"build, run LAMMPS, analyze: {RESULTS}, {SUMMARY}, report.md, plots")
     r.add_argument("workflow", nargs="?", default=None, help="workflow file or name (not with --resume)")
     r.add_argument("--out", required=True, help="run folder")
     r.add_argument("--np", type=int, default=1, help="MPI processes (runs 'lmp' under mpiexec)")

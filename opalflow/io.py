@@ -19,9 +19,11 @@ import numpy as np
 
 from opalflow.analysis import compression as mech
 from opalflow.lammps.datafile import read_data
+from opalflow import registry
 from opalflow.runs.record import RunRecord
+from opalflow.runs.result import Result
 from opalflow.spec import SpecError
-from opalflow.store import read_json
+from opalflow.store import RESULTS, SUMMARY, read_json
 from opalflow.structure import Structure
 
 ANGSTROM_PER_NM = 10.0
@@ -31,12 +33,21 @@ AMU_PER_AG = 1e-21 / 1.66053906660e-27     # attogram in unified atomic mass uni
 @dataclass
 class Results:
     """What a run wrote: ``summary`` (summary.json), ``data`` (every dataset of results.h5 by its path)
-    and ``attrs`` (the attributes of each dataset and group by path: ``units``, ``columns``, ...)."""
+    and ``attrs`` (the attributes of each dataset and group by path: ``units``, ``columns``, ...).
+    :attr:`result`: the summary as the run's kind's result class (``res.result.youngs_modulus_GPa``)."""
 
     folder: Path
     summary: dict
     data: dict[str, np.ndarray] = field(default_factory=dict)
     attrs: dict[str, dict] = field(default_factory=dict)
+
+    @property
+    def result(self) -> Result:
+        """The summary read back as its kind's result class (:attr:`opalflow.registry.Kind.result`; the generic
+        :class:`opalflow.runs.result.Result` where the folder has no readable run record)."""
+        record = RunRecord.read_or_none(self.folder)
+        kind = registry.get(record.kind).result_class() if record is not None else Result
+        return kind.from_summary(self.summary)
 
     def __getitem__(self, path: str):
         """A dataset of results.h5 by its path (``"curve/stress_MPa"``), else a key of summary.json
@@ -45,7 +56,7 @@ class Results:
             return self.data[path]
         if path in self.summary:
             return self.summary[path]
-        raise KeyError(f"{path!r} is neither a dataset of results.h5 nor a key of summary.json (datasets: "
+        raise KeyError(f"{path!r} is neither a dataset of {RESULTS} nor a key of {SUMMARY} (datasets: "
                        f"{', '.join(sorted({k.split('/')[0] + '/...' for k in self.data})) or 'none'})")
 
     def __contains__(self, path: str) -> bool:
@@ -87,12 +98,12 @@ def _attr(value):
 def load_results(folder: str | Path) -> Results:
     """The results of a finished run folder (any kind): summary.json and results.h5 (where there is one)."""
     folder = Path(folder)
-    path = folder / "summary.json"
+    path = folder / SUMMARY
     if not path.exists():
-        raise SpecError("folder", str(folder), "has no summary.json: not a finished run folder")
+        raise SpecError("folder", str(folder), f"has no {SUMMARY}: not a finished run folder")
     res = Results(folder, read_json(path, "the run's summary", "run `python -m opalflow analyze` on the folder "
                                     "to write it again"))
-    if (folder / "results.h5").exists():
+    if (folder / RESULTS).exists():
         import h5py
 
         def visit(name, obj):
@@ -100,7 +111,7 @@ def load_results(folder: str | Path) -> Results:
             if isinstance(obj, h5py.Dataset):
                 res.data[name] = obj[()]
 
-        with h5py.File(folder / "results.h5", "r") as h:
+        with h5py.File(folder / RESULTS, "r") as h:
             res.attrs[""] = {k: _attr(v) for k, v in h.attrs.items()}
             h.visititems(visit)
     return res

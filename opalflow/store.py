@@ -19,6 +19,8 @@ import numpy as np
 from opalflow.spec import InputError
 
 LOCK_FILE = ".opalflow.lock"
+#: a run folder's files that opalflow reads back: its record, its summary (the mark of a finished run), its data
+RECORD, SUMMARY, RESULTS = "run.json", "summary.json", "results.h5"
 
 #: fault injection (tests/test_rundir.py): ``OPALFLOW_FAILPOINT=N`` kills the process that imported opalflow with
 #: it set (SIGKILL: no handler, no cleanup) at its N-th write point, a temporary file written and not yet renamed;
@@ -207,7 +209,7 @@ def folder_lock(folder: str | os.PathLike, field: str = "--out"):
                          "can write to") from None
     finally:
         mine.unlink(missing_ok=True)
-    if (folder / "run.json").exists():          # a run folder (never a user's own folder given as --out)
+    if (folder / RECORD).exists():          # a run folder (never a user's own folder given as --out)
         for left in (*folder.glob(".staged.*"), *folder.glob("*.tmp"), *folder.glob("*.tmp.*")):
             left.unlink(missing_ok=True)        # a killed writer's temporary files: the lock says it is gone
     try:

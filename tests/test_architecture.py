@@ -206,3 +206,20 @@ def test_the_docs_name_the_run_record_schema_the_code_writes():
     from opalflow.runs.record import SCHEMA
 
     assert f"`schema` {SCHEMA})" in (PACKAGE.parent / "docs" / "usage.md").read_text()
+
+
+def test_a_run_folders_files_are_named_in_one_module():
+    """``run.json``, ``summary.json`` and ``results.h5`` are spelled in code only in opalflow/store.py (RECORD,
+    SUMMARY, RESULTS); docstrings may name them to the reader."""
+    spelled = {}
+    for path in PACKAGE.rglob("*.py"):
+        tree = ast.parse(path.read_text())
+        docs = {id(n.body[0].value) for n in ast.walk(tree)
+                if isinstance(n, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
+                and n.body and isinstance(n.body[0], ast.Expr) and isinstance(n.body[0].value, ast.Constant)}
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docs:
+                for name in ("run.json", "summary.json", "results.h5"):
+                    if name in node.value:
+                        spelled.setdefault(name, set()).add(str(path.relative_to(PACKAGE)))
+    assert spelled == {name: {"store.py"} for name in ("run.json", "summary.json", "results.h5")}

@@ -21,7 +21,7 @@ from opalflow.aerogel.scene import coordination, make_aggregate, periodic_struct
 from opalflow.aerogel.spec import AggregationWorkflow
 from opalflow.lammps.datafile import write_data
 from opalflow.runs.record import finish
-from opalflow.store import h5_bytes, new_figure, put, save_figure
+from opalflow.store import RESULTS, h5_bytes, new_figure, put, save_figure
 from opalflow.version import __version__
 
 #: literature values of D_f (BRIEF section 2, with sources)
@@ -151,7 +151,7 @@ def run_aggregation(spec: AggregationWorkflow, out: Path, say=print) -> dict:
 
     def files(stage):
         write_data(stage("aggregate.lmp"), s, title=f"opalflow {__version__} {spec.name}")
-        stage("results.h5").write_bytes(results)
+        stage(RESULTS).write_bytes(results)
         plot_fractal(fits, stage("fractal.png"))
         plot_network(agg, z, stage("network.png"))
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from opalflow.store import new_figure, read_json, save_figure
+from opalflow.store import RESULTS, SUMMARY, new_figure, read_json, save_figure
 
 
 def frames_at_peak_and_after(snapshots: list[dict], strain_at_peak: float) -> list[tuple[str, dict]]:
@@ -129,9 +129,9 @@ def load_frames(folder: Path) -> tuple[list[tuple[str, dict]], list, float]:
 
     folder = Path(folder)
     info = RunRecord.read(folder).facts()
-    summary = read_json(folder / "summary.json", "the run's summary", "run `python -m opalflow analyze` on the folder")
+    summary = read_json(folder / SUMMARY, "the run's summary", "run `python -m opalflow analyze` on the folder")
     snapshots = []
-    with h5py.File(folder / "results.h5", "r") as h:
+    with h5py.File(folder / RESULTS, "r") as h:
         for step in sorted(h.get("snapshots", {}), key=int):
             g = h[f"snapshots/{step}"]
             snapshots.append({"strain": float(g.attrs["strain"]), **{k: g[k][()] for k in (

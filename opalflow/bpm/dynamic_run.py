@@ -25,7 +25,7 @@ from opalflow.lammps.engine import EngineError, run_in_process, run_subprocess, 
 from opalflow.runs import launch
 from opalflow.runs.record import RunRecord, finish
 from opalflow.spec import SpecError
-from opalflow.store import h5_bytes, new_figure, put, save_figure
+from opalflow.store import RECORD, RESULTS, h5_bytes, new_figure, put, save_figure
 
 
 #: the last LAMMPS release known to have lammps/lammps#4990 (patch 30 Mar 2026, as its report says; the
@@ -220,7 +220,7 @@ def analyze(out: Path, started: float | None = None, lammps_s: float | None = No
     plots = METHODS["dynamic"].draws_plots(info["spec"]["compression"].get("plots", "auto"))
 
     def files(stage):
-        stage("results.h5").write_bytes(h5_bytes(lambda h: _fill_h5(
+        stage(RESULTS).write_bytes(h5_bytes(lambda h: _fill_h5(
             h, info, curve, strain, stress, stress_plate, stress_substrate, broken, snapshots, histograms, result)))
         if not plots:
             return
@@ -313,8 +313,8 @@ def _plots(stage, strain, stress, stress_plate, stress_substrate, fit, snapshots
 
 def analyze_folder(out: Path) -> dict:
     """The results of a run folder whose deck ran outside opalflow (``bash run.sh``)."""
-    if not (out / "run.json").exists() or not (out / "curve.txt").exists():
-        raise SpecError("folder", str(out), "needs run.json and curve.txt (a built folder after 'bash run.sh')")
+    if not (out / RECORD).exists() or not (out / "curve.txt").exists():
+        raise SpecError("folder", str(out), f"needs {RECORD} and curve.txt (a built folder after 'bash run.sh')")
     return analyze(out)
 
 

@@ -34,7 +34,7 @@ from opalflow.runs.record import finish
 from opalflow.progress import note
 from opalflow.lammps.engine import Interrupted, Preempted, stop_requested
 from opalflow.spec import SpecError
-from opalflow.store import (DamagedFile, atomic_path, h5_bytes, new_figure, put, read_json, save_figure,
+from opalflow.store import (RESULTS, SUMMARY, DamagedFile, atomic_path, h5_bytes, new_figure, put, read_json, save_figure,
                             write_json_atomic)
 
 STATE = "quasistatic_state.json"
@@ -150,7 +150,7 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
     plots = METHODS["quasistatic"].draws_plots(c.plots)
 
     def files(stage):
-        stage("results.h5").write_bytes(h5_bytes(lambda h: _fill_h5(h, res, data, result, sample, info,
+        stage(RESULTS).write_bytes(h5_bytes(lambda h: _fill_h5(h, res, data, result, sample, info,
                                                                           spec.bonds.breaking)))
         if plots:
             _plot_curve(stage("stress_strain.png"), res, summary)
@@ -356,8 +356,8 @@ def _report(spec, info, summary, result, loading, sample, plots: bool) -> str:
               + (f"; {q['settled_locally']} events settled by the local step alone (local_rtol {q['local_rtol']:g})"
                  if q["local_rtol"] else "")
               + f"; {structure_cost(info)}; wall {summary['wall_s']:.1f} s.", "",
-              plots_line(plots, "stress_strain.png, fracture.png", spec.compression.plots) + " Data: results.h5 "
-              "(group `quasistatic`), fracture.peak.dump and fracture.end.dump (OVITO), summary.json."]
+              plots_line(plots, "stress_strain.png, fracture.png", spec.compression.plots) + f" Data: {RESULTS} "
+              f"(group `quasistatic`), fracture.peak.dump and fracture.end.dump (OVITO), {SUMMARY}."]
     return "\n".join(lines) + "\n"
 
 

@@ -15,6 +15,7 @@ from functools import lru_cache
 from opalflow.analysis import compression as mech
 from opalflow.bpm.loading import LOADINGS
 from opalflow.resources import DATA, ROOT
+from opalflow.store import RECORD, RESULTS, SUMMARY
 
 
 def reference_errors(summary: dict, references: dict) -> dict:
@@ -119,7 +120,7 @@ def _inputs(info: dict, summary: dict) -> list[str]:
                      f"kr {min(t['kr_pN'] for t in types):.4g}-{max(t['kr_pN'] for t in types):.4g} pN, "
                      f"kb {min(t['kb_pN_nm'] for t in types):.4g}-{max(t['kb_pN_nm'] for t in types):.4g} pN nm, "
                      f"critical normal force {min(t['fr_c_pN'] for t in types):.4g}-"
-                     f"{max(t['fr_c_pN'] for t in types):.4g} pN (all in run.json)"))
+                     f"{max(t['fr_c_pN'] for t in types):.4g} pN (all in {RECORD})"))
     contacts = spec["contacts"]
     rows.append(("contacts", f"{'Hertz-Mindlin (hertz/material, mindlin)' if contacts['model'] == 'hertz' else 'linear'}"
                  f" between unbonded particles" if contacts["enabled"] else "none (bonds only)"))
@@ -188,7 +189,7 @@ def compression_report(info: dict, summary: dict, result, fit, fracture: bool, p
                   "coloured by their broken bonds (top) and sigma_zz (bottom), near the peak and after it:", "",
                   *figure(True, "fracture", "fracture.png")]
     lines += ["## Files", "",
-              "- `summary.json`: the numbers above (keys with units); `results.h5`: curves, snapshots and histograms, "
+              f"- `{SUMMARY}`: the numbers above (keys with units); `{RESULTS}`: curves, snapshots and histograms, "
               "every dataset with `units` (tables with `columns`); `opalflow.load_results(folder)` reads both.",
               "- `data.lmp` (bonds, image flags), `in.lmp`, `resume.lmp`, `run.sh`: the deck, runnable without opalflow.",
               "- `snapshots/particles.STEP.dump`: LAMMPS dumps (id, type, x y z, image flags, radius, sigma_xx ... "

@@ -34,7 +34,7 @@ from opalflow.bpm.static import (LooseParticlesError, StaticResult, auto_solver,
 from opalflow.bpm.stiffness import BondNetwork, stiffness_network
 from opalflow.lammps.datafile import write_data
 from opalflow.runs.record import RunRecord, finish
-from opalflow.store import h5_bytes, new_figure, put, save_figure
+from opalflow.store import RESULTS, SUMMARY, h5_bytes, new_figure, put, save_figure
 from opalflow.version import __version__
 
 #: the strain of the solve (any: the answer is linear; small keeps the reported displacements physical)
@@ -164,7 +164,7 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
 
     def files(stage):
         t = time.perf_counter()
-        _write_h5(stage("results.h5"), data, res, sigma_unit, strain_unit, snapshots, result, info)
+        _write_h5(stage(RESULTS), data, res, sigma_unit, strain_unit, snapshots, result, info)
         if plots:
             _plots(stage, data, res, snapshots, strain_unit, c.snapshot_strains)
         result.timings_s["files"] = time.perf_counter() - t
@@ -235,7 +235,7 @@ def _report(spec: BpmWorkflow, info: dict, summary: dict, result, res: StaticRes
               f"{structure_cost(info)}; wall {summary['wall_s']:.1f} s.", ""]
     lines += mech.stress_table(summary["stress_by_material"], digits=2)
     lines += ["", plots_line(plots, "displacement.png, stress_hist.png, bond_strain.png", spec.compression.plots)
-              + " Data: results.h5 (group `static`), summary.json."]
+              + f" Data: {RESULTS} (group `static`), {SUMMARY}."]
     return "\n".join(lines) + "\n"
 
 
@@ -296,7 +296,7 @@ def run_tensor(spec: BpmWorkflow, s, out: Path, t0: float, say=print) -> dict:
         result.h5_attrs(h, info)
         put(h, "stiffness_tensor_GPa", C, "GPa", voigt, rows=voigt)
     tensor = h5_bytes(fill)
-    return finish(out, summary, "\n".join(lines), files=lambda stage: stage("results.h5").write_bytes(tensor),
+    return finish(out, summary, "\n".join(lines), files=lambda stage: stage(RESULTS).write_bytes(tensor),
                   started=t0)
 
 

@@ -23,6 +23,7 @@ from opalflow.progress import note
 from opalflow.runs.record import RunRecord, finished_summary, run_kind, spec_digest
 from opalflow.runs.result import Result
 from opalflow.spec import WorkflowSpec
+from opalflow.store import RECORD
 
 
 def spec_hash(spec: WorkflowSpec) -> str:
@@ -162,7 +163,7 @@ def _run_job(folder: Path, np_: int) -> Outcome:
     _stop_on_signals()
     try:
         if rec is None:
-            raise RuntimeError(f"{folder} holds no job (no readable run.json): run its study again")
+            raise RuntimeError(f"{folder} holds no job (no readable {RECORD}): run its study again")
         rec.state, rec.error, rec.log_tail = "running", "", ""
         rec.attempts, rec.attempted = rec.attempts + 1, time.time()
         rec.write(folder)

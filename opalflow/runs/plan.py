@@ -32,6 +32,7 @@ from opalflow.resources import ROOT
 from opalflow.runs.jobs import Job, job_record
 from opalflow.runs.record import read_summary
 from opalflow.spec import SpecError
+from opalflow.store import RECORD
 
 LAWS = ROOT / "bench" / "results" / "cost_laws.json"
 SOLVERS = ROOT / "bench" / "results" / "static_quickstart.json"
@@ -172,8 +173,8 @@ def plan(spec, *, ranks: int = 1, sample: int = 3, against: Path | None = None, 
     the others are interpolated between them) and return rows and totals."""
     if isinstance(sample, bool) or not isinstance(sample, int) or sample < 0:
         raise SpecError("--sample", sample, "must be an integer >= 0 (0: build every job)")
-    if against is not None and not (Path(against).is_dir() and (Path(against) / "run.json").exists()):
-        raise SpecError("--measured", str(against), "is not a run or study folder (it has no run.json)")
+    if against is not None and not (Path(against).is_dir() and (Path(against) / RECORD).exists()):
+        raise SpecError("--measured", str(against), f"is not a run or study folder (it has no {RECORD})")
     law = laws()
     kind = registry.get(spec.kind)
     jobs = jobs_of(spec)

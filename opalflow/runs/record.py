@@ -31,7 +31,7 @@ from importlib import metadata
 from pathlib import Path
 
 from opalflow.spec import InputError, SpecError
-from opalflow.store import DamagedFile, json_text, read_json, staged_files, write_json_atomic
+from opalflow.store import RECORD, SUMMARY, DamagedFile, json_text, read_json, staged_files, write_json_atomic
 
 #: version of the run.json layout; :meth:`RunRecord.read` upgrades older files (schema 2: a study job's state
 #: in job.json beside it)
@@ -39,10 +39,8 @@ SCHEMA = 3
 #: where a run stands: pending (a job not started), built (its inputs written), running, finished, failed,
 #: interrupted (Ctrl-C, SIGTERM: it resumes) and requeued (stopped by its scheduler, it goes on by itself)
 STATES = ("pending", "built", "running", "finished", "failed", "interrupted", "requeued")
-RECORD = "run.json"
 #: schema 2's file of a study job's state (read once to upgrade a record, never written)
 OLD_JOB_FILE = "job.json"
-SUMMARY = "summary.json"
 REPORT = "report.md"
 
 
@@ -133,7 +131,7 @@ class RunRecord:
         """The record of ``folder``; SpecError (one line) when there is none or it is damaged."""
         path = Path(folder) / RECORD
         if not path.exists():
-            raise SpecError(field_name, str(folder), "no run.json: this folder holds no prepared run")
+            raise SpecError(field_name, str(folder), f"no {RECORD}: this folder holds no prepared run")
         old = Path(folder) / OLD_JOB_FILE
         try:
             raw = read_json(path, "the run's record", "")
@@ -146,7 +144,7 @@ class RunRecord:
         try:
             return cls.from_dict(raw, job)
         except (KeyError, TypeError, AttributeError, ValueError) as exc:
-            raise SpecError(field_name, str(folder), f"run.json is damaged ({type(exc).__name__}: {exc}); build "
+            raise SpecError(field_name, str(folder), f"{RECORD} is damaged ({type(exc).__name__}: {exc}); build "
                             "the folder again") from None
 
     @classmethod
@@ -259,11 +257,11 @@ def write_build_summary(folder: str | os.PathLike, summary: dict) -> None:
 def refuse_finished(folder: str | os.PathLike) -> None:
     """One line, before anything is written, where ``folder`` already holds a finished run."""
     if is_finished(folder):
-        raise SpecError("--out", str(folder), "holds a finished run (summary.json, results): write into another "
+        raise SpecError("--out", str(folder), f"holds a finished run ({SUMMARY}, results): write into another "
                         "folder or remove it first")
     record = RunRecord.read_or_none(folder)
     if record is not None and record.state == "finished":
-        raise SpecError("--out", str(folder), "holds a finished run (run.json) whose summary.json is missing or "
+        raise SpecError("--out", str(folder), f"holds a finished run ({RECORD}) whose {SUMMARY} is missing or "
                         f"damaged: 'python -m opalflow analyze {folder}' writes it again; or write into another "
                         "folder")
 

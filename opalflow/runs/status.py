@@ -14,7 +14,7 @@ from pathlib import Path
 from opalflow import registry
 from opalflow.runs.record import RunRecord, is_finished, read_summary
 from opalflow.spec import InputError, SpecError
-from opalflow.store import DamagedFile, lock_owner, process_alive, read_json
+from opalflow.store import RECORD, SUMMARY, DamagedFile, lock_owner, process_alive, read_json
 
 #: the record's states (opalflow.runs.record.STATES, built shown as pending) and what status sees besides:
 #: died (running, its process gone) and damaged (the record cannot be read)
@@ -106,10 +106,10 @@ def status_lines(folder: str | Path, tail: int = 8) -> list[str]:
     folder = Path(folder)
     if not folder.is_dir():
         raise SpecError("folder", str(folder), "is not a folder")
-    jobs = sorted(p.parent for p in folder.glob("jobs/*/run.json"))
+    jobs = sorted(p.parent for p in folder.glob(f"jobs/*/{RECORD}"))
     if not jobs:
         if not RunRecord.exists(folder):
-            raise SpecError("folder", str(folder), "holds neither a study (jobs/*/run.json) nor a run (run.json)")
+            raise SpecError("folder", str(folder), f"holds neither a study (jobs/*/{RECORD}) nor a run ({RECORD})")
         jobs = [folder]
     rows, counts, lefts = [], Counter(), []
     for job in jobs:
@@ -121,7 +121,7 @@ def status_lines(folder: str | Path, tail: int = 8) -> list[str]:
         if state == "finished":
             s = read_summary(job)
             if s is None or not isinstance(s.get("headline"), str):
-                rows.append(f"  finished  {label}: its summary.json is missing or damaged: `python -m opalflow "
+                rows.append(f"  finished  {label}: its {SUMMARY} is missing or damaged: `python -m opalflow "
                             f"analyze {job}` writes it again")
                 continue
             wall = s.get("wall_s")

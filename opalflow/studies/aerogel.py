@@ -20,7 +20,7 @@ import numpy as np
 from opalflow.analysis.fits import fit_power_law
 from opalflow.bpm.methods import METHODS
 from opalflow.resources import DATA, resource
-from opalflow.store import new_figure, save_figure
+from opalflow.store import RESULTS, new_figure, save_figure
 from opalflow.studies.spec import StudyWorkflow
 from opalflow.studies.sweep import Job, fmt_value, job_spec, label_number, sweep
 
@@ -36,7 +36,7 @@ def _curve(out: Path, job: Job) -> tuple[np.ndarray, np.ndarray] | None:
     """Strain and stress of a finished dynamic job (its results.h5)."""
     import h5py
 
-    path = job.folder(out) / "results.h5"
+    path = job.folder(out) / RESULTS
     if not path.exists():
         return None
     with h5py.File(path, "r") as h:

@@ -14,6 +14,7 @@ from opalflow.resources import WORKFLOWS
 from opalflow.runs.executors import run_jobs
 from opalflow.runs.jobs import Job, job_record
 from opalflow.spec import SpecError, WorkflowSpec
+from opalflow.store import RECORD
 
 __all__ = ["Job", "job_spec", "study_set", "sweep", "failed_jobs", "fmt_value", "label_number"]
 
@@ -50,7 +51,7 @@ def failed_jobs(out: Path, since: float) -> dict[str, dict]:
     """label -> {error, log_tail, folder} of the study's jobs that failed in a run started at ``since``
     (time.time()), read from each job's folder."""
     failed = {}
-    for path in sorted(Path(out).glob("jobs/*/run.json")):
+    for path in sorted(Path(out).glob(f"jobs/*/{RECORD}")):
         rec = job_record(path.parent)
         if rec is not None and rec.state == "failed" and (rec.attempted or 0) >= since:
             failed[rec.label or path.parent.name] = {"error": rec.error, "log_tail": rec.log_tail,

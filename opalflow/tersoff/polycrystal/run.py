@@ -16,7 +16,7 @@ import numpy as np
 from opalflow.analysis.elasticity import VOIGT
 from opalflow.progress import Progress
 from opalflow.runs.record import RunRecord, finish
-from opalflow.store import h5_bytes, new_figure, read_json, save_figure, write_json_atomic
+from opalflow.store import RESULTS, h5_bytes, new_figure, read_json, save_figure, write_json_atomic
 from opalflow.tersoff.parameters import load_parameters
 from opalflow.tersoff.polycrystal.crystal import check_sample_hessian, longitudinal_speed_nm_ps, single_crystal
 from opalflow.tersoff.polycrystal.dynamics import M_PER_S, Polycrystal, polycrystal_bounds, speeds
@@ -205,7 +205,7 @@ def run_tension(spec: TensionWorkflow, out: Path, say=print, resume: bool = Fals
             i, pc = next(iter(last.items()))
             plot_mesh(stage("mesh.png"), pc, f"{pc.mesh.elements} elements at strain {t.max_strain:g} "
                       f"(seed {spec.samples.seeds[-1]})")
-        stage("results.h5").write_bytes(_tension_h5(jobs))
+        stage(RESULTS).write_bytes(_tension_h5(jobs))
         summary["wall_s"] = time.perf_counter() - t0
 
     return finish(out, summary, lambda: _tension_report(spec, summary, jobs), files=files)
@@ -465,7 +465,7 @@ def run_waves(spec: WavesWorkflow, out: Path, say=print, resume: bool = False) -
         if states:
             name, pc = next(iter(states.items()))
             plot_mesh(stage("mesh.png"), pc, f"{name} wave: {pc.mesh.elements} elements at the end of the run")
-        stage("results.h5").write_bytes(_waves_h5(jobs))
+        stage(RESULTS).write_bytes(_waves_h5(jobs))
         summary["wall_s"] = time.perf_counter() - t0
 
     return finish(out, summary, lambda: _waves_report(spec, summary, jobs), files=files)
