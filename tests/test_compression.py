@@ -219,13 +219,14 @@ def test_opal_run_carries_its_structure_statistics(tmp_path, quick_spec, quick_s
     """Studies plot E against porosity and density: prepare stores them for the run summary."""
     from opalflow.opal.scene import structure_statistics
     from opalflow.bpm.pipeline import prepare
-    from opalflow.opal.scene import STRUCTURE_KEYS
+    from opalflow.opal.result import OpalResult
 
     _, record = prepare(quick_spec, tmp_path)
     info = RunRecord.read(tmp_path).facts()
     assert info == json.loads(json.dumps(record.facts(), default=float))    # the record the run holds is the file
     stats = structure_statistics(quick_structure)
-    assert info["structure"] == pytest.approx({k: stats[k] for k in STRUCTURE_KEYS})
+    assert info["structure"] == pytest.approx({k: stats[k] for k in OpalResult.facts()})
+    assert OpalResult.facts() == ("porosity", "total_porosity", "density_kg_m3")
     assert 0.3 < info["structure"]["porosity"] < 0.9
 
 
