@@ -17,6 +17,7 @@ from opalflow.analysis import compression as mech
 from opalflow.analysis import fracture
 from opalflow.bpm import report
 from opalflow.bpm.deck import CompressionDeck, compression_deck
+from opalflow.bpm.facts import RunFacts, SampleFacts
 from opalflow.bpm.methods import METHODS
 from opalflow.bpm.pipeline import prepare
 from opalflow.bpm.result import CompressionResult
@@ -89,7 +90,7 @@ def execute(out: Path, record: RunRecord, *, np_: int = 1, resume: bool = False,
     """Run the deck of a prepared folder (its ``record``) with the launcher for ``np_`` ranks
     (:mod:`opalflow.runs.launch`); returns LAMMPS wall seconds.  The record's new session says where it started
     (restart file, step) and how it was launched; a resume says so (and the steps it runs again)."""
-    info = record.deck
+    sample = SampleFacts.read(record)
     launcher = launch.choose(np_)
     first, restart = 0, ""
     if resume:
@@ -99,16 +100,16 @@ def execute(out: Path, record: RunRecord, *, np_: int = 1, resume: bool = False,
         mech.trim_curve(out / "curve.txt", step)     # LAMMPS reads the newest restart file
         first, restart = step, f"restart.{step}.bin"
         reached = record.sessions[-1].last_step if record.sessions else None
-        say(f"{label}resuming from {restart} (step {step} of {info['steps']})"
+        say(f"{label}resuming from {restart} (step {step} of {sample.steps})"
             + (f"; the run had reached step {reached}: steps {step}-{reached} run again" if reached and reached > step
                else ""))
     record.begin(out, launcher=launcher.describe(), restart=restart, first_step=first)
     if not launcher.in_process:
-        return run_subprocess(out, np=np_, total_steps=info["steps"], resume=resume, label=label, suffix=suffix,
+        return run_subprocess(out, np=np_, total_steps=sample.steps, resume=resume, label=label, suffix=suffix,
                               env=launcher.env())
     script = (out / ("resume.lmp" if resume else "in.lmp")).read_text()
-    return run_in_process(out, script, every=info["output_every_steps"],
-                          strain_per_step=info["plate_speed_m_s"] * info["timestep_s"] * 1e9 / info["height_nm"],
+    return run_in_process(out, script, every=sample.output_every_steps,
+                          strain_per_step=sample.plate_speed_m_s * sample.timestep_s * 1e9 / sample.height_nm,
                           suffix=suffix, label=label)
 
 
@@ -151,12 +152,12 @@ def boundary_stresses(curve: dict, area: float, sense: int = 1) -> tuple[np.ndar
     return -sense * curve["plate_fz_pN"] / area, -sense * curve["substrate_fz_pN"] / area
 
 
-def curve_strain_stress(curve: dict, info: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def curve_strain_stress(curve: dict, sample: SampleFacts) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Strain of the wall, mean stress, plate and substrate stresses of a curve, positive in the
     loading's sense (``loading_sense`` of the deck facts; +1 before there were tension loadings)."""
-    sense = info.get("loading_sense", 1)
-    plate, substrate = boundary_stresses(curve, info["area_nm2"], sense)
-    return -sense * curve["plate_dz_nm"] / info["height_nm"], 0.5 * (plate + substrate), plate, substrate
+    sense = sample.loading_sense
+    plate, substrate = boundary_stresses(curve, sample.area_nm2, sense)
+    return -sense * curve["plate_dz_nm"] / sample.height_nm, 0.5 * (plate + substrate), plate, substrate
 
 
 def analyze(out: Path, started: float | None = None, lammps_s: float | None = None,
@@ -168,47 +169,45 @@ def analyze(out: Path, started: float | None = None, lammps_s: float | None = No
     ``record``: the run's, held since it was prepared (else read: a folder run by ``bash run.sh``)."""
     wall_s = None if started is None else time.perf_counter() - started
     record = record or RunRecord.read(out)
-    info = record.facts()
+    run = RunFacts.of(record)
+    sample, spec = run.sample, run.spec
     try:
         mech.tidy_curve(out / "curve.txt")
         curve = mech.read_curve(out / "curve.txt")
     except ValueError as exc:                    # (UnicodeDecodeError too: a binary file in its place)
         raise SpecError("folder", str(out), f"curve.txt is damaged or empty ({str(exc).splitlines()[0]})") from None
-    height = info["height_nm"]
-    strain, stress, stress_plate, stress_substrate = curve_strain_stress(curve, info)
+    strain, stress, stress_plate, stress_substrate = curve_strain_stress(curve, sample)
     fit = mech.fit_elastic(strain, stress)
     # specimen strain: mean displacement of the top particle layer (no plate indentation)
-    strain_top = info.get("loading_sense", 1) * (info["top_z0_nm"] - curve["top_z_nm"]) / height
+    strain_top = sample.loading_sense * (sample.top_z0_nm - curve["top_z_nm"]) / sample.height_nm
     fit_top = mech.fit_elastic(strain_top, stress)
     peak = int(np.argmax(stress))
-    n_bonds0 = info["n_bonds"]
-    broken = n_bonds0 - curve["intact_bonds"]
+    broken = sample.n_bonds - curve["intact_bonds"]
 
-    snapshots, histograms = read_snapshots(out, info, curve, strain)
+    snapshots, histograms = read_snapshots(out, sample, curve, strain)
 
-    breakable = info["spec"]["bonds"]["breakable"]
+    breakable = spec.bonds.breakable
     result = CompressionResult.of(
-        info["spec"]["kind"], info.get("structure", {}), workflow=info["workflow"], method="dynamic",
-        loading=info["spec"]["compression"]["loading"],
+        spec.kind, sample.structure or {}, workflow=spec.name, method="dynamic", loading=spec.compression.loading,
         youngs_modulus_GPa=fit.modulus_MPa / 1e3, youngs_modulus_specimen_GPa=fit_top.modulus_MPa / 1e3,
         elastic_window_strain=list(fit.window), elastic_fit_r2=fit.r2,
         # the peak of a loading that breaks nothing is not a strength
         strength_MPa=float(stress[peak]) if breakable else None,
         peak_stress_MPa=None if breakable else float(stress[peak]),
         strain_at_peak=float(strain[peak]), strain_at_peak_specimen=float(strain_top[peak]),
-        timestep_s=info["timestep_s"], steps=int(curve["step"][-1]),
+        timestep_s=sample.timestep_s, steps=int(curve["step"][-1]),
         # the last averaged row lies within one output interval of the last step of a whole run
-        complete=bool(curve["step"][-1] > info["steps"] - info["output_every_steps"]),
-        steps_planned=info["steps"], lammps_s=lammps_s, wall_s=wall_s,
-        broken_bonds=int(broken[-1]), n_particles=info["n_particles"], n_bonds=n_bonds0,
+        complete=bool(curve["step"][-1] > sample.steps - sample.output_every_steps),
+        steps_planned=sample.steps, lammps_s=lammps_s, wall_s=wall_s,
+        broken_bonds=int(broken[-1]), n_particles=sample.n_particles, n_bonds=sample.n_bonds,
         stress_by_material={f"{v['strain']:.4f}": v["by_material"] for v in snapshots.values()},
-        solid_fraction=info["solid_fraction"], bond_stiffness_error_max=info["bond_stiffness_error_max"],
-        timestep_estimate_s=info["timestep_estimate_s"], build_timings_s=info.get("build_timings_s"),
-        statistics=info.get("statistics", {}), rate_check=rate_check)
-    result.headline = report.headline(result.summary(), info.get("references", {}), breakable)
-    result.refer(info.get("references", {}))
+        solid_fraction=sample.solid_fraction, bond_stiffness_error_max=sample.bond_stiffness_error_max,
+        timestep_estimate_s=sample.timestep_estimate_s, build_timings_s=sample.build_timings_s,
+        statistics=sample.statistics or {}, rate_check=rate_check)
+    result.headline = report.headline(result.summary(), run.references, breakable)
+    result.refer(run.references)
     if not result.complete:
-        result.headline = f"INCOMPLETE run (stopped at step {result.steps} of {info['steps']}): {result.headline}"
+        result.headline = f"INCOMPLETE run (stopped at step {result.steps} of {sample.steps}): {result.headline}"
     frames = fracture.frames_at_peak_and_after(list(snapshots.values()), result.strain_at_peak)
     if record.sessions:          # run by opalflow (not 'bash run.sh' + analyze): what each session did
         record.sessions[-1].last_step = result.steps
@@ -217,30 +216,29 @@ def analyze(out: Path, started: float | None = None, lammps_s: float | None = No
         result.sessions = [dataclasses.asdict(x) for x in record.sessions]
         result.requeues = record.requeues
     summary = result.summary()
-    plots = METHODS["dynamic"].draws_plots(info["spec"]["compression"].get("plots", "auto"))
+    plots = METHODS["dynamic"].draws_plots(spec.compression.plots)
 
     def files(stage):
         stage(RESULTS).write_bytes(h5_bytes(lambda h: _fill_h5(
-            h, info, curve, strain, stress, stress_plate, stress_substrate, broken, snapshots, histograms, result)))
+            h, run, curve, strain, stress, stress_plate, stress_substrate, broken, snapshots, histograms, result)))
         if not plots:
             return
         _plots(stage, strain, stress, stress_plate, stress_substrate, fit, snapshots, histograms,
-               info["type_names"])
+               sample.type_names)
         if frames:
-            fracture.plot_fracture(stage("fracture.png"), frames, info["box_nm"], info["mean_diameter_nm"],
-                                   title=f"{info['workflow']} ({'open' if not info['periodic'][0] else 'periodic'} "
-                                         "sides)")
+            fracture.plot_fracture(stage("fracture.png"), frames, sample.box_nm, sample.mean_diameter_nm,
+                                   title=f"{run.workflow} ({sample.sides} sides)")
 
     # all results or none (a full disk leaves the earlier set whole); summary.json is renamed last
-    return finish(out, summary, lambda: report.compression_report(info, summary, result, fit, bool(frames), plots),
+    return finish(out, summary, lambda: report.compression_report(run, summary, result, fit, bool(frames), plots),
                   files=files, record=record, started=started)
 
 
-def read_snapshots(out: Path, info: dict, curve: dict, strain: np.ndarray) -> tuple[dict, dict]:
+def read_snapshots(out: Path, sample: SampleFacts, curve: dict, strain: np.ndarray) -> tuple[dict, dict]:
     """The run's snapshots, by step: particles (positions, radii, types, the stress of eq. 21 and its means by
     material, bonds broken so far) and the histograms of the bonds' strains (Fig. 7), each at its strain."""
     # curve rows are averages over the preceding `every` steps: they belong to the middle step
-    mid_step = curve["step"] - (info["output_every_steps"] - 1) / 2
+    mid_step = curve["step"] - (sample.output_every_steps - 1) / 2
     snapshots = {}
     for step, path in (mech.snapshot_files(out, "particles", "dump") or mech.snapshot_files(out, "stress")).items():
         dump = mech.read_dump_custom(path)
@@ -250,7 +248,7 @@ def read_snapshots(out: Path, info: dict, curve: dict, strain: np.ndarray) -> tu
                            "position_nm": np.column_stack([dump["x"], dump["y"], dump["z"]]),
                            "radius_nm": dump["radius"], "type": types, "sigma_MPa": sigma,
                            "broken_bonds": dump.get("broken_bonds", np.zeros(len(types))).astype(np.int32),
-                           "by_material": mech.stress_by_material(sigma, types, info["type_names"])}
+                           "by_material": mech.stress_by_material(sigma, types, sample.type_names)}
     bond_strains = {step: mech.bond_strains(mech.read_dump_local(path))
                     for step, path in mech.snapshot_files(out, "bonds").items()}
     edges = mech.strain_bins(list(bond_strains.values()))
@@ -260,14 +258,14 @@ def read_snapshots(out: Path, info: dict, curve: dict, strain: np.ndarray) -> tu
     return snapshots, histograms
 
 
-def _fill_h5(h, info, curve, strain, stress, stress_plate, stress_substrate, broken, snapshots, histograms,
+def _fill_h5(h, run: RunFacts, curve, strain, stress, stress_plate, stress_substrate, broken, snapshots, histograms,
              result):
     for k, v in curve.items():
         put(h, f"curve/{k}", v, mech.CURVE_UNITS[k])
     for k, v, unit in (("strain", strain, "1"), ("stress_MPa", stress, "MPa"),
                        ("stress_plate_MPa", stress_plate, "MPa"), ("stress_substrate_MPa", stress_substrate, "MPa"),
                        ("broken_bonds", broken, "1"),
-                       ("strain_specimen", (info["top_z0_nm"] - curve["top_z_nm"]) / info["height_nm"], "1")):
+                       ("strain_specimen", (run.sample.top_z0_nm - curve["top_z_nm"]) / run.sample.height_nm, "1")):
         put(h, f"curve/{k}", v, unit)
     h["curve"].attrs["description"] = ("averages over each output interval of the plate's displacement and force, "
                                        "the substrate's force, intact bonds, kinetic energy and the top layer's "
@@ -276,7 +274,7 @@ def _fill_h5(h, info, curve, strain, stress, stress_plate, stress_substrate, bro
         g = h.create_group(f"snapshots/{step}")
         g.attrs["strain"] = snap["strain"]
         put(g, "id", snap["id"], "1")
-        put(g, "type", snap["type"], "1", type_names=info["type_names"])
+        put(g, "type", snap["type"], "1", type_names=run.sample.type_names)
         put(g, "position_nm", snap["position_nm"], "nm", ["x", "y", "z"])
         put(g, "radius_nm", snap["radius_nm"], "nm")
         put(g, "sigma_MPa", snap["sigma_MPa"], "MPa", mech.STRESS_COLUMNS,
@@ -287,7 +285,7 @@ def _fill_h5(h, info, curve, strain, stress, stress_plate, stress_substrate, bro
         g.attrs["strain"] = hist["strain"]
         put(g, "fraction", hist["fraction"], "1", description="fraction of intact bonds per bin")
         put(g, "edges", hist["edges"], "1", description="bin edges of the bond strain r / r0 - 1")
-    result.h5_attrs(h, info)
+    result.h5_attrs(h, run)
 
 
 def _plots(stage, strain, stress, stress_plate, stress_substrate, fit, snapshots, histograms, type_names):
@@ -348,7 +346,7 @@ def run_dynamic(spec: BpmWorkflow, out: Path, *, np_: int = 1, resume: bool = Fa
         lammps_s += execute(sub, half_record, np_=np_, label=f"{spec.name} (half speed): ", suffix=suffix)
         slow = analyze(sub, record=half_record)
         fast_curve = mech.read_curve(out / "curve.txt")
-        fast_strain, fast_stress, _, _ = curve_strain_stress(fast_curve, record.deck)
+        fast_strain, fast_stress, _, _ = curve_strain_stress(fast_curve, SampleFacts.read(record))
         fast_fit = mech.fit_elastic(fast_strain, fast_stress)
         fast_strength = float(np.max(fast_stress))
         rate_check = {

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from opalflow.bpm.deck import CompressionDeck, compression_deck, particle_material
+from opalflow.bpm.facts import SampleFacts
 from opalflow.bpm.scene import scene_of, solid_fraction
 from opalflow.bpm.spec import BpmWorkflow
 from opalflow.lammps.datafile import write_data
@@ -48,19 +49,18 @@ def prepare(spec: BpmWorkflow, out: Path, progress=None) -> tuple[CompressionDec
     write_text_atomic(out / "resume.lmp", deck.resume_lmp)
     write_text_atomic(out / "run.sh", run_script_sh())
     (out / "run.sh").chmod(0o755)
-    info = {"type_names": deck.structure.type_names, "n_particles": s.n_particles, "n_bonds": s.n_bonds,
-            "solid_fraction": solid_fraction(s), "build_s": build_s,
-            "mean_diameter_nm": float(np.mean(s.diameters)), "box_nm": s.box_lengths.tolist(),
-            "periodic": s.periodic.tolist(), "source": s.meta.get("source", ""),
-            "materials": {n: material(particle_material(n, spec.material), spec.materials)
-                          for n in dict.fromkeys(particle_material(t, spec.material) for t in s.type_names)},
-            **deck.info()}
+    facts = SampleFacts.from_dict({
+        "type_names": deck.structure.type_names, "n_particles": s.n_particles, "n_bonds": s.n_bonds,
+        "solid_fraction": solid_fraction(s), "build_s": build_s, "mean_diameter_nm": float(np.mean(s.diameters)),
+        "box_nm": s.box_lengths.tolist(), "periodic": s.periodic.tolist(), "source": s.meta.get("source", ""),
+        "materials": {n: material(particle_material(n, spec.material), spec.materials)
+                      for n in dict.fromkeys(particle_material(t, spec.material) for t in s.type_names)},
+        **deck.info()})
     if scene.statistics:        # what build's summary.json says of the structure, for the run's summary too
-        stats = scene.statistics_of(deck.source)
-        info["statistics"] = stats
-        info["structure"] = {k: stats[k] for k in scene.run_keys}
-    info["build_timings_s"] = dict(deck.structure.meta.get("timings_s", {}))
-    record = RunRecord.new(spec, deck=info, folder=out)
+        facts.statistics = scene.statistics_of(deck.source)
+        facts.structure = {k: facts.statistics[k] for k in scene.run_keys}
+    facts.build_timings_s = dict(deck.structure.meta.get("timings_s", {}))
+    record = RunRecord.new(spec, deck=facts.to_dict(), folder=out)
     record.write(out)
     return deck, record
 

@@ -20,6 +20,7 @@ import numpy as np
 from opalflow.analysis import fracture
 from opalflow.bpm.contacts import Contacts, contact_elements, describe as describe_contacts
 from opalflow.bpm.deck import particle_material
+from opalflow.bpm.facts import RunFacts
 from opalflow.bpm.loading import LOADINGS
 from opalflow.materials import contact_properties
 from opalflow.bpm.quasistatic import CHECKS, Event, Stopped, Strengths, solve_fracture, summary_of
@@ -102,8 +103,8 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
     state = resumed_state(out, tell) if resume else None
     s = scene_of(spec).structure(spec, tell)
     loading = LOADINGS[c.loading]
-    sample, net, info, record, written = network_run(spec, s, out, t0, launcher="in-process (quasi-static)",
-                                                   resume=STATE if resume else "")
+    sample, net, run, record, written = network_run(spec, s, out, t0, launcher="in-process (quasi-static)",
+                                                  resume=STATE if resume else "")
     data = sample.structure
     contacts = contacts_of(spec, data)
     tell(f"quasi-static ({loading.title}): {s.n_particles} particles, {s.n_bonds} bonds, to strain {c.strain_max:g}"
@@ -130,27 +131,27 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
     by_material = {m: int(np.sum(broken & (materials == m))) for m in sorted(set(sample.bins.materials))}
     E = got["youngs_modulus_GPa"]
     result = CompressionResult.of(
-        spec.kind, info.get("structure", {}), workflow=spec.name, method="quasistatic", loading=loading.name,
+        spec.kind, run.sample.structure or {}, workflow=spec.name, method="quasistatic", loading=loading.name,
         youngs_modulus_GPa=E, youngs_modulus_specimen_GPa=E,
         strength_MPa=got["strength_MPa"], strain_at_peak=got["strain_at_peak"],
         broken_bonds=got["broken_bonds"], broken_bonds_by_material=by_material,
         broken_bonds_at_peak=got.get("broken_bonds_at_peak", 0),
         broken_bonds_by_check=broken_by_check(res, sample, spec.bonds.breaking, peak_only=False),
         broken_bonds_by_check_at_peak=broken_by_check(res, sample, spec.bonds.breaking, peak_only=True),
-        n_particles=s.n_particles, n_bonds=s.n_bonds, solid_fraction=info["solid_fraction"],
-        build_s=info["build_s"], quasistatic=_event_facts(spec, res, got["events"], contacts),
+        n_particles=s.n_particles, n_bonds=s.n_bonds, solid_fraction=run.sample.solid_fraction,
+        build_s=run.sample.build_s, quasistatic=_event_facts(spec, res, got["events"], contacts),
         headline=f"E = {E:.4g} GPa, strength = {got['strength_MPa']:.4g} MPa (strain at peak "
                  f"{got['strain_at_peak']:.4f}; quasi-static, {got['events']} events, {got['broken_bonds']} "
                  f"bonds broken)" if got["events"] else
                  f"E = {E:.4g} GPa, no strength: no bond reached its limit up to strain {c.strain_max:g} "
                  "(quasi-static)",
-    ).refer(info["references"])
+    ).refer(run.references)
     summary = result.summary()
     record.sessions[-1].last_step = got["events"]
     plots = METHODS["quasistatic"].draws_plots(c.plots)
 
     def files(stage):
-        stage(RESULTS).write_bytes(h5_bytes(lambda h: _fill_h5(h, res, data, result, sample, info,
+        stage(RESULTS).write_bytes(h5_bytes(lambda h: _fill_h5(h, res, data, result, sample, run,
                                                                           spec.bonds.breaking)))
         if plots:
             _plot_curve(stage("stress_strain.png"), res, summary)
@@ -161,7 +162,7 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
         for tag, (_, snap) in zip(("peak", "end"), frames):
             _write_dump(stage(f"fracture.{tag}.dump"), data, snap)
 
-    summary = finish(out, summary, lambda: _report(spec, info, summary, result, loading, sample, plots), files=files,
+    summary = finish(out, summary, lambda: _report(run, summary, result, loading, sample, plots), files=files,
                      record=record, started=t0)
     (out / STATE).unlink(missing_ok=True)
     (out / PEAK).unlink(missing_ok=True)
@@ -277,8 +278,8 @@ def _write_dump(path: Path, data, snap: dict) -> None:
         np.savetxt(f, rows, fmt=["%d", "%d", "%.6f", "%.6f", "%.6f", "%.6f", "%d"])
 
 
-def _fill_h5(h, res, data, result, sample, info, rule: str) -> None:
-    result.h5_attrs(h, info)
+def _fill_h5(h, res, data, result, sample, run: RunFacts, rule: str) -> None:
+    result.h5_attrs(h, run)
     g = h.create_group("quasistatic")
     ev = res.events
     put(g, "strain", np.array([e.strain for e in ev]), "1", description="strain of each event (the next bond's limit)")
@@ -332,14 +333,15 @@ def _check_table(summary) -> list[str]:
     return lines
 
 
-def _report(spec, info, summary, result, loading, sample, plots: bool) -> str:
+def _report(run: RunFacts, summary, result, loading, sample, plots: bool) -> str:
+    spec, facts = run.spec, run.sample
     q = summary["quasistatic"]
     lines = [f"# {spec.name}: quasi-static {loading.title}", "",
-             f"{info['n_particles']} particles, {info['n_bonds']} bonds; the bond network linearised from LAMMPS's "
+             f"{facts.n_particles} particles, {facts.n_bonds} bonds; the bond network linearised from LAMMPS's "
              f"bpm/rotational, bonds broken one event at a time by {BREAKING_RULES[spec.bonds.breaking]} at full "
-             f"load (as `smooth no`; opalflow/bpm/quasistatic.py); {loading.held_text(info['top_layer_particles'])}.",
+             f"load (as `smooth no`; opalflow/bpm/quasistatic.py); {loading.held_text(facts.top_layer_particles)}.",
              "",
-             *sample_lines(info), *network_inputs(info, sample), "## Results", "",
+             *sample_lines(facts), *network_inputs(run, sample), "## Results", "",
              *([f"Contacts (`contacts.quasistatic = \"{q['contacts']}\"`, opalflow/bpm/contacts.py): "
                 f"{q['contact_pairs']} touching pairs, linear Hertz-Mindlin springs at "
                 f"{100 * spec.contacts.reference_strain:g} % overlap, in compression only; pressing just before the "
@@ -355,7 +357,7 @@ def _report(spec, info, summary, result, loading, sample, plots: bool) -> str:
                                                          else "")
               + (f"; {q['settled_locally']} events settled by the local step alone (local_rtol {q['local_rtol']:g})"
                  if q["local_rtol"] else "")
-              + f"; {structure_cost(info)}; wall {summary['wall_s']:.1f} s.", "",
+              + f"; {structure_cost(facts)}; wall {summary['wall_s']:.1f} s.", "",
               plots_line(plots, "stress_strain.png, fracture.png", spec.compression.plots) + f" Data: {RESULTS} "
               f"(group `quasistatic`), fracture.peak.dump and fracture.end.dump (OVITO), {SUMMARY}."]
     return "\n".join(lines) + "\n"

@@ -13,6 +13,7 @@ import tomllib
 from functools import lru_cache
 
 from opalflow.analysis import compression as mech
+from opalflow.bpm.facts import RunFacts, SampleFacts
 from opalflow.bpm.loading import LOADINGS
 from opalflow.resources import DATA, ROOT
 from opalflow.store import RECORD, RESULTS, SUMMARY
@@ -73,71 +74,71 @@ def why(key: str, error: float, diameter_nm: float) -> str:
     return ""
 
 
-def stress_area(info: dict) -> str:
+def stress_area(sample: SampleFacts) -> str:
     """The area the stress is taken on, and which: the box across periodic sides, the footprint across open."""
-    return (f"{info['area_nm2']:.4g} nm^2 ("
-            f"{'the box' if info['periodic'][0] else 'the particles footprint: open sides'})")
+    return (f"{sample.area_nm2:.4g} nm^2 ("
+            f"{'the box' if sample.periodic[0] else 'the particles footprint: open sides'})")
 
 
-def sample_lines(info: dict) -> list[str]:
+def sample_lines(sample: SampleFacts) -> list[str]:
     """What the static and quasi-static reports say of the sample: the data file read (where one was) and the
     area the stress is taken on."""
-    lines = [f"Data file: {info['source']}.", ""] if info.get("source") else []
-    return lines + [f"Stress on {stress_area(info)}.", ""]
+    lines = [f"Data file: {sample.source}.", ""] if sample.source else []
+    return lines + [f"Stress on {stress_area(sample)}.", ""]
 
 
-def _inputs(info: dict, summary: dict) -> list[str]:
-    spec = info["spec"]
-    c = spec["compression"]
-    box = info["box_nm"]
-    sides = "periodic" if info["periodic"][0] else "open"
-    structure = info.get("structure", {})
-    rows = [("scene", f"{spec['kind']}: {spec.get('description') or spec['name']}"),
-            ("sample", f"{box[0]:.0f} x {box[1]:.0f} nm (x, y; sides {sides}), {info['height_nm']:.0f} nm high above "
-                       f"the fixed substrate; stress on {stress_area(info)}"),
-            ("particles", f"{info['n_particles']}, mean diameter d = {info['mean_diameter_nm']:.3g} nm"),
-            ("bonds", f"{info['n_bonds']} ({info['n_bonds'] / max(1, info['n_particles']):.1f} per particle, the paper's "
-                      f"measure; coordination {2 * info['n_bonds'] / max(1, info['n_particles']):.1f}), "
-                      + ("from the data file, " if info.get("source") else
-                         f"cutoff {spec['bonds']['cutoff_factor']:g} d, ") + f"model {spec['bonds']['model']}, "
-                      f"{'breakable' if spec['bonds']['breakable'] else 'unbreakable'}"),
-            *fraction_rows(info, structure)]
-    if info.get("source"):
-        rows.insert(1, ("data file", info["source"]))
+def _inputs(run: RunFacts, summary: dict) -> list[str]:
+    spec, sample = run.spec, run.sample
+    c, b = spec.compression, spec.bonds
+    box = sample.box_nm
+    structure = sample.structure or {}
+    n, bonds = sample.n_particles, sample.n_bonds
+    rows = [("scene", f"{spec.kind}: {spec.description or spec.name}"),
+            ("sample", f"{box[0]:.0f} x {box[1]:.0f} nm (x, y; sides {sample.sides}), {sample.height_nm:.0f} nm high "
+                       f"above the fixed substrate; stress on {stress_area(sample)}"),
+            ("particles", f"{n}, mean diameter d = {sample.mean_diameter_nm:.3g} nm"),
+            ("bonds", f"{bonds} ({bonds / max(1, n):.1f} per particle, the paper's measure; coordination "
+                      f"{2 * bonds / max(1, n):.1f}), "
+                      + ("from the data file, " if sample.source else f"cutoff {b.cutoff_factor:g} d, ")
+                      + f"model {b.model}, {'breakable' if b.breakable else 'unbreakable'}"),
+            *fraction_rows(sample)]
+    if sample.source:
+        rows.insert(1, ("data file", sample.source))
     if "porosity" in structure:
         rows.append(("porosity", f"{structure['porosity']:.4f} (macro-pores; with the packing's voids "
                                  f"{structure['total_porosity']:.4f})"))
     if "density_kg_m3" in structure:
         rows.append(("density", f"{structure['density_kg_m3']:.0f} kg/m^3"))
-    for name, m in info["materials"].items():
+    for name, m in sample.materials.items():
         rows.append((f"material {name}", f"bond E_b {m['bond_youngs_modulus_GPa']:g} GPa, nu "
                      f"{m['bond_poisson_ratio']:g}, strength {m['bond_strength_MPa']:g} MPa, density "
                      f"{m['density_kg_m3']:g} kg/m^3 ({m.get('source', 'workflow')})"))
-    types = info["bond_types"]
-    if types and "kr_pN" in types[0]:
+    types = sample.bond_types
+    if types and types[0].kr_pN is not None:
         rows.append(("bond coefficients", f"{len(types)} types (material x length bin, bpm/rotational normalize yes): "
-                     f"L0 {min(t['length_nm'] for t in types):.3g}-{max(t['length_nm'] for t in types):.3g} nm, "
-                     f"kr {min(t['kr_pN'] for t in types):.4g}-{max(t['kr_pN'] for t in types):.4g} pN, "
-                     f"kb {min(t['kb_pN_nm'] for t in types):.4g}-{max(t['kb_pN_nm'] for t in types):.4g} pN nm, "
-                     f"critical normal force {min(t['fr_c_pN'] for t in types):.4g}-"
-                     f"{max(t['fr_c_pN'] for t in types):.4g} pN (all in {RECORD})"))
-    contacts = spec["contacts"]
-    rows.append(("contacts", f"{'Hertz-Mindlin (hertz/material, mindlin)' if contacts['model'] == 'hertz' else 'linear'}"
-                 f" between unbonded particles" if contacts["enabled"] else "none (bonds only)"))
-    rows.append(("loading", f"{c['loading']} at {info['plate_speed_m_s']:g} m/s to strain {c['strain_max']:g}; "
-                 f"snapshots at {', '.join(f'{e:g}' for e in c['snapshot_strains']) or 'none'}"))
-    ran = (f"{info['steps']} steps, the curve's last row at step {summary['steps']}" if summary["complete"] else
-           f"stopped at step {summary['steps']} of {info['steps']}")
-    rows.append(("time step", f"{info['timestep_s']:.3g} s ({ran}; stability "
-                 f"limit {info['timestep_estimate_s']['limit']:.3g} s, stiffest: {info['timestep_estimate_s']['stiffest_mode']}); "
-                 f"global damping {c['global_damping']:g}"))
+                     f"L0 {min(t.length_nm for t in types):.3g}-{max(t.length_nm for t in types):.3g} nm, "
+                     f"kr {min(t.kr_pN for t in types):.4g}-{max(t.kr_pN for t in types):.4g} pN, "
+                     f"kb {min(t.kb_pN_nm for t in types):.4g}-{max(t.kb_pN_nm for t in types):.4g} pN nm, "
+                     f"critical normal force {min(t.fr_c_pN for t in types):.4g}-"
+                     f"{max(t.fr_c_pN for t in types):.4g} pN (all in {RECORD})"))
+    contacts = spec.contacts
+    rows.append(("contacts", f"{'Hertz-Mindlin (hertz/material, mindlin)' if contacts.model == 'hertz' else 'linear'}"
+                 f" between unbonded particles" if contacts.enabled else "none (bonds only)"))
+    rows.append(("loading", f"{c.loading} at {sample.plate_speed_m_s:g} m/s to strain {c.strain_max:g}; "
+                 f"snapshots at {', '.join(f'{e:g}' for e in c.snapshot_strains) or 'none'}"))
+    ran = (f"{sample.steps} steps, the curve's last row at step {summary['steps']}" if summary["complete"] else
+           f"stopped at step {summary['steps']} of {sample.steps}")
+    estimate = sample.timestep_estimate_s
+    rows.append(("time step", f"{sample.timestep_s:.3g} s ({ran}; stability limit {estimate['limit']:.3g} s, "
+                 f"stiffest: {estimate['stiffest_mode']}); global damping {c.global_damping:g}"))
     return ["## Inputs", "", "| input | value |", "|---|---|", *[f"| {k} | {v} |" for k, v in rows], ""]
 
 
-def fraction_rows(info: dict, structure: dict) -> list[tuple[str, str]]:
+def fraction_rows(sample: SampleFacts) -> list[tuple[str, str]]:
     """The packing fraction (the spheres' packing before pores, what the deck's ``solid_fraction`` holds) and,
     where pores were cut, the sample's own solid fraction (1 - total porosity): two numbers, each named."""
-    rows = [("packing fraction", f"{info['solid_fraction']:.4f} (the spheres' packing before pores)")]
+    rows = [("packing fraction", f"{sample.solid_fraction:.4f} (the spheres' packing before pores)")]
+    structure = sample.structure or {}
     if "total_porosity" in structure:
         rows.append(("solid fraction", f"{1 - structure['total_porosity']:.4f} of the sample volume (after pores)"))
     return rows
@@ -150,22 +151,22 @@ def _session_row(k: int, x: dict) -> str:
             f"{wall} | {x['ended'] or 'running'} |")
 
 
-def compression_report(info: dict, summary: dict, result, fit, fracture: bool, plots: bool = True) -> str:
+def compression_report(run: RunFacts, summary: dict, result, fit, fracture: bool, plots: bool = True) -> str:
     """The text of report.md (sections :data:`SECTIONS`) of a dynamic run: ``summary`` as written (with its wall
     time), ``result`` its :class:`opalflow.bpm.result.CompressionResult` (the Results table); ``plots``: the
     figures were drawn (``compression.plots``)."""
-    spec = info["spec"]
-    lines = [f"# {info['workflow']}: {LOADINGS[result.loading].title}", ""]
+    spec, sample = run.spec, run.sample
+    lines = [f"# {run.workflow}: {LOADINGS[result.loading].title}", ""]
     if not summary["complete"]:
-        c = spec["compression"]
-        lines += [f"**Incomplete run**: the output stops at step {summary['steps']} of {info['steps']} "
-                  f"(strain {summary['steps'] / info['steps'] * c['strain_max']:.4f} of {c['strain_max']:g}); the "
+        c = spec.compression
+        lines += [f"**Incomplete run**: the output stops at step {summary['steps']} of {sample.steps} "
+                  f"(strain {summary['steps'] / sample.steps * c.strain_max:.4f} of {c.strain_max:g}); the "
                   "figures below cover only that part. `python -m opalflow run --out DIR --resume` continues it "
                   "from its newest restart file.", ""]
-    lines += _inputs(info, summary)
-    lines += ["## Results", "", *result.results_table(info["mean_diameter_nm"])]
+    lines += _inputs(run, summary)
+    lines += ["## Results", "", *result.results_table(sample.mean_diameter_nm)]
     lines += ["", f"Elastic window: strain {fit.window[0]:.4f} - {fit.window[1]:.4f}, R^2 = {fit.r2:.5f} "
-              f"({fit.points} points). Bond stiffness error from {spec['bonds']['length_bins']} length bins: max "
+              f"({fit.points} points). Bond stiffness error from {spec.bonds.length_bins} length bins: max "
               f"{100 * summary['bond_stiffness_error_max']:.2f} %."]
     if "rate_check" in summary:
         rc = summary["rate_check"]
@@ -176,7 +177,7 @@ def compression_report(info: dict, summary: dict, result, fit, fracture: bool, p
     lines += ["", *figure(plots, "stress-strain", "stress_strain.png")]
     if not plots:
         lines += [plots_line(False, "stress_strain.png, stress_hist.png, bond_strain.png, fracture.png",
-                             spec["compression"]["plots"]), ""]
+                             spec.compression.plots), ""]
     lines += ["## Particle stresses", ""]
     table = mech.stress_table(summary["stress_by_material"])
     lines += (table + [""] + (["Histograms at every snapshot (rows), mean +- std per material in the legends:", "",
@@ -202,9 +203,9 @@ def compression_report(info: dict, summary: dict, result, fit, fracture: bool, p
         done = summary["steps"] - (sessions[-1]["first_step"] if sessions else 0)
         cost = (f"this session: wall {summary['wall_s']:.1f} s, of which LAMMPS {summary['lammps_s']:.1f} s, steps "
                 f"{sessions[-1]['first_step'] if sessions else 0}-{summary['steps']} ({done} steps)")
-    lines += ["## Cost", "", f"{cost}; {summary['steps']} steps in all of {info['timestep_s']:.3g} s for "
-              f"{info['n_particles']} particles and {info['n_bonds']} bonds; structure built in "
-              f"{info['build_s']:.1f} s.", ""]
+    lines += ["## Cost", "", f"{cost}; {summary['steps']} steps in all of {sample.timestep_s:.3g} s for "
+              f"{sample.n_particles} particles and {sample.n_bonds} bonds; structure built in "
+              f"{sample.build_s:.1f} s.", ""]
     if len(sessions) > 1 or summary.get("requeues"):
         lines += [f"Sessions ({len(sessions)}; SLURM requeues: {summary.get('requeues', 0)}):", "",
                   "| # | started | launcher | continued from | steps | wall (s) | ended |", "|---|---|---|---|---|---|---|"]
@@ -221,18 +222,20 @@ def git_commit() -> str:
         return "unknown"
 
 
-def provenance_group(h, info: dict) -> None:
+def provenance_group(h, run: RunFacts) -> None:
     """results.h5's ``provenance`` group, every method's: the spec, LAMMPS's version, opalflow's commit, the
-    seeds and the run's facts (``info``: the spec under ``"spec"``, the rest JSON)."""
+    seeds and the run's facts (:meth:`opalflow.bpm.facts.RunFacts.provenance`: the spec apart, the rest JSON)."""
     from opalflow.lammps.engine import lammps_version
 
+    facts = run.provenance()
+    spec = facts.pop("spec")
     p = h.create_group("provenance")
-    p.attrs["spec"] = json.dumps(info["spec"])
+    p.attrs["spec"] = json.dumps(spec)
     p.attrs["lammps_version"] = lammps_version()
     p.attrs["git_commit"] = git_commit()
-    p.attrs["seeds"] = json.dumps({name: section["seed"] for name, section in info["spec"].items()
+    p.attrs["seeds"] = json.dumps({name: section["seed"] for name, section in spec.items()
                                    if isinstance(section, dict) and "seed" in section})
-    p.attrs["run"] = json.dumps({k: v for k, v in info.items() if k != "spec"}, default=float)
+    p.attrs["run"] = json.dumps(facts, default=float)
 
 
 def plots_line(drawn: bool, names: str, setting: str) -> str:
@@ -247,51 +250,52 @@ def figure(drawn: bool, alt: str, name: str) -> list[str]:
     return [f"![{alt}]({name})", ""] if drawn else []
 
 
-def structure_cost(info: dict) -> str:
+def structure_cost(sample: SampleFacts) -> str:
     """How the structure came: built, or read from the cache (and what its first build cost)."""
-    if info.get("structure_cache"):
-        return (f"structure read from the cache in {info['build_s']:.1f} s (first built in "
-                f"{info['structure_first_build_s']:.1f} s)")
-    return f"structure built in {info['build_s']:.1f} s"
+    if sample.structure_cache:
+        return (f"structure read from the cache in {sample.build_s:.1f} s (first built in "
+                f"{sample.structure_first_build_s:.1f} s)")
+    return f"structure built in {sample.build_s:.1f} s"
 
 
-def network_inputs(info: dict, sample) -> list[str]:
+def network_inputs(run: RunFacts, loaded) -> list[str]:
     """The Inputs table of the static and quasi-static reports: scene, sample, particles, bonds, materials,
-    contacts, loading, breaking rule and re-solves (from the spec in ``info`` and the loaded sample)."""
+    contacts, loading, breaking rule and re-solves (from the run's spec and facts and the loaded sample,
+    :class:`opalflow.bpm.deck.LoadedSample`)."""
     from opalflow.bpm.spec import BREAKING_RULES
     from opalflow.materials import material
 
-    spec = info["spec"]
-    c, b = spec["compression"], spec["bonds"]
-    data = sample.structure
+    spec, sample = run.spec, run.sample
+    c, b = spec.compression, spec.bonds
+    data = loaded.structure
     box = data.box_lengths
     d = float(data.diameters.mean())
-    structure = info.get("structure", {})
-    rows = [("scene", f"{spec['kind']}: {spec.get('description') or spec['name']}"),
-            ("sample", f"{box[0]:.0f} x {box[1]:.0f} nm (x, y; sides {'periodic' if info['periodic'][0] else 'open'}), "
-                       f"{info['height_nm']:.0f} nm high above the fixed substrate; stress on {stress_area(info)}"),
-            ("particles", f"{info['n_particles']}, mean diameter d = {d:.3g} nm; top layer "
-                          f"{info['top_layer_particles']}"),
-            ("bonds", f"{info['n_bonds']} ({info['n_bonds'] / max(1, info['n_particles']):.1f} per particle), "
-                      + ("from the data file, " if info.get("source") else f"cutoff {b['cutoff_factor']:g} d, ")
-                      + f"model {b['model']}, {len(sample.bins.lengths)} length bins"),
-            *fraction_rows(info, structure)]
-    if info.get("source"):
-        rows.insert(1, ("data file", info["source"]))
+    structure = sample.structure or {}
+    n, bonds = sample.n_particles, sample.n_bonds
+    rows = [("scene", f"{spec.kind}: {spec.description or spec.name}"),
+            ("sample", f"{box[0]:.0f} x {box[1]:.0f} nm (x, y; sides {sample.sides}), {sample.height_nm:.0f} nm high "
+                       f"above the fixed substrate; stress on {stress_area(sample)}"),
+            ("particles", f"{n}, mean diameter d = {d:.3g} nm; top layer {sample.top_layer_particles}"),
+            ("bonds", f"{bonds} ({bonds / max(1, n):.1f} per particle), "
+                      + ("from the data file, " if sample.source else f"cutoff {b.cutoff_factor:g} d, ")
+                      + f"model {b.model}, {len(loaded.bins.lengths)} length bins"),
+            *fraction_rows(sample)]
+    if sample.source:
+        rows.insert(1, ("data file", sample.source))
     if "porosity" in structure:
         rows.append(("porosity", f"{structure['porosity']:.4f} (macro-pores)"))
-    for name in sorted(set(sample.bins.materials)):
-        m = material(name, spec["materials"])
+    for name in sorted(set(loaded.bins.materials)):
+        m = material(name, spec.materials)
         rows.append((f"material {name}", f"bond E_b {m['bond_youngs_modulus_GPa']:g} GPa, nu "
                      f"{m['bond_poisson_ratio']:g}, strength {m['bond_strength_MPa']:g} MPa "
                      f"({m.get('source', 'workflow')})"))
-    rows.append(("loading", f"{c['loading']}, to strain {c['strain_max']:g} ({c['method']})"))
-    if c["method"] == "quasistatic":
-        rows.append(("breaking rule", f"`{b['breaking']}`: {BREAKING_RULES[b['breaking']]}"))
-        rows.append(("contacts", f"`contacts.quasistatic = \"{spec['contacts']['quasistatic']}\"`"))
-        rows.append(("re-solves", f"`compression.resolver = \"{c['resolver']}\"`, event tolerance "
-                     f"{c['event_tolerance']:g}, local_rtol {c['local_rtol']:g}"))
+    rows.append(("loading", f"{c.loading}, to strain {c.strain_max:g} ({c.method})"))
+    if c.method == "quasistatic":
+        rows.append(("breaking rule", f"`{b.breaking}`: {BREAKING_RULES[b.breaking]}"))
+        rows.append(("contacts", f"`contacts.quasistatic = \"{spec.contacts.quasistatic}\"`"))
+        rows.append(("re-solves", f"`compression.resolver = \"{c.resolver}\"`, event tolerance "
+                     f"{c.event_tolerance:g}, local_rtol {c.local_rtol:g}"))
     else:
-        rows.append(("solver", f"`compression.solver = \"{c['solver']}\"`"))
+        rows.append(("solver", f"`compression.solver = \"{c.solver}\"`"))
     cell = [(k, v.replace("|", "\\|")) for k, v in rows]           # (|F_s| in a table cell)
     return ["## Inputs", "", "| input | value |", "|---|---|", *[f"| {k} | {v} |" for k, v in cell], ""]

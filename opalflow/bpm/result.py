@@ -130,12 +130,13 @@ class CompressionResult(Result):
         self.reference = reference_errors(self.summary(), references)
         return self
 
-    def h5_attrs(self, h, info: dict) -> None:
-        """results.h5's file attributes (method, modulus, the summary as JSON) and its provenance group."""
+    def h5_attrs(self, h, run) -> None:
+        """results.h5's file attributes (method, modulus, the summary as JSON) and its provenance group (the
+        run's facts, :class:`opalflow.bpm.facts.RunFacts`)."""
         h.attrs["method"] = self.method
         h.attrs["youngs_modulus_GPa"] = self.youngs_modulus_GPa
         h.attrs["summary"] = json.dumps(self.summary(), default=float)
-        provenance_group(h, info)
+        provenance_group(h, run)
 
     def results_table(self, diameter_nm: float) -> list[str]:
         """report.md's Results table: each labelled key of this method with its reference, error and, where

@@ -23,6 +23,7 @@ import numpy as np
 from opalflow.analysis import compression as mech
 from opalflow.analysis.elasticity import VOIGT, isotropic_average
 from opalflow.bpm.deck import bond_model, loaded_sample
+from opalflow.bpm.facts import RunFacts, SampleFacts
 from opalflow.bpm.loading import LOADINGS
 from opalflow.bpm.methods import METHODS
 from opalflow.bpm.report import network_inputs, plots_line, sample_lines, structure_cost
@@ -65,7 +66,8 @@ def network_run(spec: BpmWorkflow, s, out: Path, t0: float, *, launcher: str, re
     bonded structure, height, cross-section and top layer; no deck: :func:`opalflow.bpm.deck.loaded_sample`),
     its linear network (loose particles refused before anything is written, unless
     ``compression.drop_loose``), data.lmp and the run record, begun (``resume``: the state file a session
-    continues from).  Returns (sample, network, info, record, written): ``written`` is the future of data.lmp,
+    continues from).  Returns (sample, network, the run's facts, record, written): ``written`` is the future of
+    data.lmp,
     written on a thread of its own while the solve runs (:func:`_behind`)."""
     c = spec.compression
     timings = {"structure": time.perf_counter() - t0}
@@ -82,21 +84,19 @@ def network_run(spec: BpmWorkflow, s, out: Path, t0: float, *, launcher: str, re
     out.mkdir(parents=True, exist_ok=True)
     written = _behind(timings, "data_file", write_data, out / "data.lmp", data,
                       title=f"opalflow {__version__} {spec.name} ({c.method})")
-    info = {"timings_s": timings, "workflow": spec.name, "method": c.method, "spec": spec.to_dict(),
-            "opalflow_version": __version__,
-            "type_names": data.type_names, "n_particles": s.n_particles, "n_bonds": s.n_bonds,
-            "solid_fraction": solid_fraction(s), "build_s": build_s, "references": spec.references(),
-            "height_nm": sample.height_nm, "area_nm2": sample.area_nm2, "top_layer_particles": int(sample.top_layer.sum()),
-            "loading": sample.loading, "loading_sense": sample.loading_sense, "periodic": data.periodic.tolist(),
-            "source": data.meta.get("source", ""), "structure_cache": s.meta.get("cache", ""),
-            "structure_first_build_s": s.meta.get("build_s", build_s)}
+    facts = SampleFacts(
+        n_particles=s.n_particles, n_bonds=s.n_bonds, type_names=data.type_names, solid_fraction=solid_fraction(s),
+        build_s=build_s, periodic=data.periodic.tolist(), loading=sample.loading, loading_sense=sample.loading_sense,
+        height_nm=sample.height_nm, area_nm2=sample.area_nm2, source=data.meta.get("source", ""), method=c.method,
+        top_layer_particles=int(sample.top_layer.sum()), structure_cache=s.meta.get("cache", ""),
+        structure_first_build_s=s.meta.get("build_s", build_s), timings_s=timings)
     scene = scene_of(spec)
     if scene.run_keys:
         stats = scene.statistics_of(sample.source)
-        info["structure"] = {k: stats[k] for k in scene.run_keys}
-    record = RunRecord.read(out) if resume else _record(spec, info, out)
+        facts.structure = {k: stats[k] for k in scene.run_keys}
+    record = RunRecord.read(out) if resume else RunRecord.new(spec, deck=facts.to_dict(), folder=out)
     record.begin(out, launcher=launcher, restart=resume or "")
-    return sample, net, info, record, written
+    return sample, net, RunFacts(spec, facts, spec.references()), record, written
 
 
 def _behind(timings: dict, key: str, work, *args, **kwargs) -> Future:
@@ -121,8 +121,8 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
     s = scene_of(spec).structure(spec, say)
     if np.all(s.periodic):
         return run_tensor(spec, s, out, t0, say)
-    sample, net, info, _, written = network_run(spec, s, out, t0, launcher="in-process (static solve)")
-    build_s = info["build_s"]
+    sample, net, run, _, written = network_run(spec, s, out, t0, launcher="in-process (static solve)")
+    facts = run.sample
     data = sample.structure
     say(f"static solve ({c.solver}): {s.n_particles} particles, {s.n_bonds} bonds, {6 * s.n_particles} dofs")
     res = solve_compression(net, data.positions, LOADINGS[c.loading].supports(sample), strain=STRAIN,
@@ -143,46 +143,41 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
         snapshots[e] = {"sigma_MPa": sigma,
                         "by_material": mech.stress_by_material(sigma, types, data.type_names)}
     result = CompressionResult.of(
-        spec.kind, info.get("structure", {}), workflow=spec.name, method="static", loading=c.loading,
+        spec.kind, facts.structure or {}, workflow=spec.name, method="static", loading=c.loading,
         youngs_modulus_GPa=E_GPa, youngs_modulus_specimen_GPa=E_GPa,
-        n_particles=s.n_particles, n_bonds=s.n_bonds, solid_fraction=info["solid_fraction"],
+        n_particles=s.n_particles, n_bonds=s.n_bonds, solid_fraction=facts.solid_fraction,
         solver=res.solver, iterations=res.iterations, relative_residual=res.residual,
         setup_s=res.setup_seconds, solve_s=res.seconds - res.setup_seconds,
         static_s=res.seconds, peak_memory_MiB=res.peak_memory_MiB,
         # where the time went: the run's steps (set-up: assembly and AMG or factor; analysis: particle stresses and
         # bond strains; files: results.h5 and the plots), the whole in wall_s
-        timings_s={**info["timings_s"], "setup": res.setup_seconds, "solve": res.seconds - res.setup_seconds,
+        timings_s={**facts.timings_s, "setup": res.setup_seconds, "solve": res.seconds - res.setup_seconds,
                    "analysis": time.perf_counter() - t},
-        build_s=build_s, loose_particles_left_out=res.loose, energy_split=energy_split,
+        build_s=facts.build_s, loose_particles_left_out=res.loose, energy_split=energy_split,
         stress_by_material={f"{e:.4f}": v["by_material"] for e, v in snapshots.items()},
         bond_strain_per_strain={"mean": float(strain_unit.mean()), "std": float(strain_unit.std()),
                                 "min": float(strain_unit.min()), "max": float(strain_unit.max())},
         headline=f"E = {E_GPa:.4g} GPa (static, {res.solver}: {res.iterations} iterations, residual "
-                 f"{res.residual:.1e}, {res.seconds:.1f} s)").refer(info["references"])
+                 f"{res.residual:.1e}, {res.seconds:.1f} s)").refer(run.references)
     summary = result.summary()
     plots = METHODS["static"].draws_plots(c.plots)
 
     def files(stage):
         t = time.perf_counter()
-        _write_h5(stage(RESULTS), data, res, sigma_unit, strain_unit, snapshots, result, info)
+        _write_h5(stage(RESULTS), data, res, sigma_unit, strain_unit, snapshots, result, run)
         if plots:
             _plots(stage, data, res, snapshots, strain_unit, c.snapshot_strains)
         result.timings_s["files"] = time.perf_counter() - t
 
     sides = "periodic" if s.periodic[0] else "open"       # the structure's, whatever section set it
-    return finish(out, summary, lambda: _report(spec, info, summary, result, res, sides, sample, plots), files=files,
+    return finish(out, summary, lambda: _report(run, summary, result, res, sides, sample, plots), files=files,
                   started=t0)
 
 
-def _record(spec: BpmWorkflow, info: dict, out: Path) -> RunRecord:
-    """The run record of a static solve: its facts without what the record holds itself."""
-    return RunRecord.new(spec, deck={k: v for k, v in info.items()
-                                     if k not in ("workflow", "spec", "references", "opalflow_version")}, folder=out)
-
-
-def _write_h5(path: Path, data, res: StaticResult, sigma_unit, strain_unit, snapshots, result, info) -> None:
+def _write_h5(path: Path, data, res: StaticResult, sigma_unit, strain_unit, snapshots, result,
+              run: RunFacts) -> None:
     def fill(h):
-        result.h5_attrs(h, info)
+        result.h5_attrs(h, run)
         g = h.create_group("static")
         g.attrs["strain"] = res.strain
         put(g, "position_nm", data.positions, "nm", ["x", "y", "z"])
@@ -216,15 +211,15 @@ def _plots(stage, data, res: StaticResult, snapshots, strain_unit, strains) -> N
             f"strain {100 * e:.2f} %": mech.histogram_fraction(strain_unit * e, edges) for e in strains})
 
 
-def _report(spec: BpmWorkflow, info: dict, summary: dict, result, res: StaticResult, sides: str, sample,
-            plots: bool) -> str:
+def _report(run: RunFacts, summary: dict, result, res: StaticResult, sides: str, sample, plots: bool) -> str:
+    spec, facts = run.spec, run.sample
     loading = LOADINGS[spec.compression.loading]
     lines = [f"# {spec.name}: static {loading.title}", "",
-             f"{info['n_particles']} particles, {info['n_bonds']} bonds; the bond network linearised from LAMMPS's "
-             f"bpm/rotational (opalflow/bpm/stiffness.py); {loading.held_text(info['top_layer_particles'])}, by "
-             f"strain {res.strain:g} x H (H = {info['height_nm']:.1f} nm); sides {sides}. Contacts carry no load at "
-             "the reference state and bonds do not break: no strength.", "", *sample_lines(info),
-             *network_inputs(info, sample), "## Results", "",
+             f"{facts.n_particles} particles, {facts.n_bonds} bonds; the bond network linearised from LAMMPS's "
+             f"bpm/rotational (opalflow/bpm/stiffness.py); {loading.held_text(facts.top_layer_particles)}, by "
+             f"strain {res.strain:g} x H (H = {facts.height_nm:.1f} nm); sides {sides}. Contacts carry no load at "
+             "the reference state and bonds do not break: no strength.", "", *sample_lines(facts),
+             *network_inputs(run, sample), "## Results", "",
              *result.results_table(float(sample.structure.diameters.mean()))]
     if summary.get("energy_split"):
         lines += ["", "Strain energy of the bonds by mode: " + ", ".join(
@@ -232,7 +227,7 @@ def _report(spec: BpmWorkflow, info: dict, summary: dict, result, res: StaticRes
     lines += ["", f"Solver `{res.solver}`: {res.iterations} iterations to relative residual {res.residual:.1e}; "
               f"set-up {res.setup_seconds:.1f} s, iterations {res.seconds - res.setup_seconds:.1f} s, peak memory "
               f"{res.peak_memory_MiB:.0f} MiB; "
-              f"{structure_cost(info)}; wall {summary['wall_s']:.1f} s.", ""]
+              f"{structure_cost(facts)}; wall {summary['wall_s']:.1f} s.", ""]
     lines += mech.stress_table(summary["stress_by_material"], digits=2)
     lines += ["", plots_line(plots, "displacement.png, stress_hist.png, bond_strain.png", spec.compression.plots)
               + f" Data: {RESULTS} (group `static`), {SUMMARY}."]
@@ -252,13 +247,13 @@ def run_tensor(spec: BpmWorkflow, s, out: Path, t0: float, say=print) -> dict:
     S = np.linalg.inv(C)
     E = 1.0 / np.diag(S)[:3]
     iso = isotropic_average(C)
-    info = {"workflow": spec.name, "method": "static", "loading": "periodic", "spec": spec.to_dict(),
-            "opalflow_version": __version__, "type_names": data.type_names, "n_particles": s.n_particles,
-            "n_bonds": s.n_bonds, "solid_fraction": solid_fraction(s), "build_s": build_s,
-            "references": spec.references(), "volume_nm3": volume}
+    run = RunFacts(spec, SampleFacts(
+        n_particles=s.n_particles, n_bonds=s.n_bonds, type_names=data.type_names, solid_fraction=solid_fraction(s),
+        build_s=build_s, periodic=data.periodic.tolist(), loading="periodic", method="static", volume_nm3=volume),
+        spec.references())
     out.mkdir(parents=True, exist_ok=True)
     write_data(out / "data.lmp", data, title=f"opalflow {__version__} {spec.name} (static, periodic)")
-    _record(spec, info, out).begin(out, launcher="in-process (static solve)")
+    RunRecord.new(spec, deck=run.sample.to_dict(), folder=out).begin(out, launcher="in-process (static solve)")
     result = CompressionResult.of(
         spec.kind, {}, workflow=spec.name, method="static", loading="periodic", stiffness_tensor_GPa=C.tolist(),
         youngs_modulus_GPa=float(E[2]), youngs_moduli_GPa={"x": float(E[0]), "y": float(E[1]), "z": float(E[2])},
@@ -270,7 +265,7 @@ def run_tensor(spec: BpmWorkflow, s, out: Path, t0: float, say=print) -> dict:
         build_s=build_s, loose_particles_left_out=res.loose,
         headline=f"E_z = {E[2]:.4g} GPa, C11 = {C[0, 0]:.4g}, C12 = {C[0, 1]:.3g}, C44 = {C[3, 3]:.4g} GPa "
                  f"(static, periodic, {res.solver}: {sum(res.iterations)} iterations, {res.seconds:.1f} s)",
-    ).refer(info["references"])
+    ).refer(run.references)
     summary = result.summary()
     names = [f"{'xyz'[a]}{'xyz'[b]}" for a, b in VOIGT]
     lines = [f"# {spec.name}: static stiffness tensor", "",
@@ -293,7 +288,7 @@ def run_tensor(spec: BpmWorkflow, s, out: Path, t0: float, say=print) -> dict:
     voigt = result.voigt_order.split()
 
     def fill(h):
-        result.h5_attrs(h, info)
+        result.h5_attrs(h, run)
         put(h, "stiffness_tensor_GPa", C, "GPa", voigt, rows=voigt)
     tensor = h5_bytes(fill)
     return finish(out, summary, "\n".join(lines), files=lambda stage: stage(RESULTS).write_bytes(tensor),
