@@ -122,19 +122,25 @@ def test_newton_calibration_on_a_known_model(tmp_path, monkeypatch):
     for jacobian in ("decoupled", "full"):
         calls.clear()
         spec = load_spec(WORKFLOWS / "calibrate_silica.toml", [f'study.jacobian="{jacobian}"'])
-        summary, report = studies.calibration(spec, tmp_path, lambda m: None)
-        assert summary["converged"] and summary["dem_runs"] <= 8 and summary["dem_runs"] == len(calls)
-        assert abs(summary["youngs_modulus_GPa"] / 1.7 - 1) <= 0.005
-        assert abs(summary["strength_MPa"] / 41.3 - 1) <= 0.005
-        assert any("| 1 |" in line for line in report)
+        cal = studies.calibration(spec, tmp_path, lambda m: None)
+        assert cal.converged and cal.dem_runs <= 8 and cal.dem_runs == len(calls)
+        assert abs(cal.youngs_modulus_GPa / 1.7 - 1) <= 0.005
+        assert abs(cal.strength_MPa / 41.3 - 1) <= 0.005
+        assert any("| 1 |" in line for line in studies.calibration_render(spec, cal, tmp_path))
+        summary = studies.summary_of(cal)          # summary.json's keys, as before the result was a class
+        assert set(summary) == {"youngs_modulus_GPa", "strength_MPa", "dem_runs", "bond_E_GPa", "bond_strength_MPa",
+                                "converged", "history", "jacobian", "targets", "headline"}
+        assert set(summary["history"][0]) == {"iteration", "bond_E_GPa", "bond_strength_MPa", "youngs_modulus_GPa",
+                                              "strength_MPa", "error_E", "error_strength", "dem_runs", "fd_points",
+                                              "wall_s"}
 
 
 def test_study_specs_validate_and_build_their_jobs():
     spec = load_spec(WORKFLOWS / "porosity.toml")
-    job = studies.job_spec(spec, ['pores.arrangement="random"', "pores.porosity=0.49"])
+    job = studies.job_spec(spec, {"pores.arrangement": "random", "pores.porosity": 0.49})
     assert job.pores.cells_x == 2 and job.packing.diameter_nm == 110.0 and job.pores.porosity == 0.49
     paper = load_spec(WORKFLOWS / "calibrate_silica.toml", ["study.paper_scale=true"])
-    assert studies.job_spec(paper, []).packing.diameter_nm == 15.0
+    assert studies.job_spec(paper).packing.diameter_nm == 15.0
 
 
 @pytest.mark.parametrize("name", ["porosity", "porosity_strength", "coating_strength", "coating", "convergence",
@@ -147,9 +153,9 @@ def test_a_study_at_paper_scale_runs_the_papers_sample_not_the_coarse_one(name):
 
     spec = load_spec(WORKFLOWS / f"{name}.toml", ["study.paper_scale=true"])
     paper = load_spec(WORKFLOWS / "opal_fcc.toml")
-    coarse = studies.job_spec(load_spec(WORKFLOWS / f"{name}.toml"), [])
+    coarse = studies.job_spec(load_spec(WORKFLOWS / f"{name}.toml"))
     jobs = jobs_of(spec)                        # every job's spec made and validated
-    job = studies.job_spec(spec, [])
+    job = studies.job_spec(spec)
     assert (job.pores.cells_x, job.pores.cells_y) == (paper.pores.cells_x, paper.pores.cells_y)
     assert job.packing.diameter_nm == 15.0 != coarse.packing.diameter_nm
     if name not in ("bulk_silica", "convergence"):        # (these two set each job's diameter)

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from opalflow import registry
 from opalflow.bpm.spec import BpmWorkflow
 from opalflow.spec import InputError
+from opalflow.store import RECORD
 
 FACTS_VERSION = 1
 
@@ -95,7 +96,7 @@ class SampleFacts:
         names = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(raw) - names)
         if unknown:
-            raise InputError(f"run.json's deck: unknown facts {', '.join(unknown)} (facts version "
+            raise InputError(f"{RECORD}'s deck: unknown facts {', '.join(unknown)} (facts version "
                              f"{raw.get('facts_version', 1)}; this opalflow reads version {FACTS_VERSION})")
         out = cls(**raw)
         if out.bond_types is not None:

@@ -13,16 +13,17 @@ and silica-aerogel experiments (data/reference/aerogel_literature.toml).
 from __future__ import annotations
 
 import tomllib
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from opalflow.analysis.fits import fit_power_law
+from opalflow.analysis.fits import Fit, fit_power_law
 from opalflow.bpm.methods import METHODS
 from opalflow.resources import DATA, resource
 from opalflow.store import RESULTS, new_figure, save_figure
 from opalflow.studies.spec import StudyWorkflow
-from opalflow.studies.sweep import Job, fmt_value, job_spec, label_number, sweep
+from opalflow.studies.sweep import Job, fmt_value, job_spec, label_number
 
 COMBINATIONS = (("parallel", "hertz"), ("parallel", "linear"), ("contact", "hertz"), ("contact", "linear"))
 
@@ -48,67 +49,101 @@ def _mean_std(values: list[float]) -> tuple[float, float]:
     return (float(v.mean()), float(v.std(ddof=1)) if len(v) > 1 else 0.0) if len(v) else (float("nan"), 0.0)
 
 
+@dataclass
+class ModelRow:
+    """One bond model x contact law over the seeds: E and strength as mean and standard deviation (kPa)."""
+
+    bonds: str
+    contacts: str
+    runs: int
+    E_kPa: float
+    E_std_kPa: float
+    strength_kPa: float
+    strength_std_kPa: float
+    broken_bonds: float
+    wall_s: float
+
+
+@dataclass
+class RateCheck:
+    """The first combination and seed again at half the wall speed."""
+
+    speed_m_s: float
+    E_change: float
+    strength_change: float
+    quasi_static: bool
+
+
+@dataclass
+class Models:
+    rows: list[ModelRow]
+    static_E_kPa: float
+    static_E_std_kPa: float
+    rate_check: RateCheck | None
+    headline: str
+
+
 def aerogel_models_jobs(spec: StudyWorkflow) -> list[Job]:
     """Each bond model x contact law x seed, the static parallel-bond solve per seed and one half-speed twin
     (the rate check)."""
     st = spec.study
-    base = job_spec(spec, [])
+    base = job_spec(spec)
     jobs = [Job(f"{bond}_{contact}_s{s}", job_spec(
-                spec, [f'bonds.model="{bond}"', f'contacts.model="{contact}"', f"aggregate.seed={s}"]))
+                spec, {"bonds.model": bond, "contacts.model": contact, "aggregate.seed": s}))
             for bond, contact in COMBINATIONS for s in st.seeds]
-    jobs += [Job(f"static_s{s}", job_spec(spec, ['bonds.model="parallel"', "compression.method=static",
-                                                 f"aggregate.seed={s}"])) for s in st.seeds]
+    jobs += [Job(f"static_s{s}", job_spec(spec, {"bonds.model": "parallel", "compression.method": "static",
+                                                 "aggregate.seed": s})) for s in st.seeds]
     half = base.compression.plate_speed_m_s / 2
-    return jobs + [Job("half_speed", job_spec(spec, [
-        'bonds.model="parallel"', 'contacts.model="hertz"', f"aggregate.seed={st.seeds[0]}",
-        f"compression.plate_speed_m_s={label_number(half)}"]))]
+    return jobs + [Job("half_speed", job_spec(spec, {
+        "bonds.model": "parallel", "contacts.model": "hertz", "aggregate.seed": st.seeds[0],
+        "compression.plate_speed_m_s": float(label_number(half))}))]
 
 
-def aerogel_models(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
+def aerogel_models_analyse(spec: StudyWorkflow, jobs: list[Job], res: dict) -> Models | None:
+    """E and strength of each model over the seeds, the static E of the parallel-bond network, the rate check."""
     st = spec.study
-    jobs = {j.label: j for j in aerogel_models_jobs(spec)}
-    res = sweep(spec, out, list(jobs.values()), say)
-    rows, curves = [], {}
+    rows = []
     for bond, contact in COMBINATIONS:
         runs = [res[f"{bond}_{contact}_s{s}"] for s in st.seeds if f"{bond}_{contact}_s{s}" in res]
         E = _mean_std([r.youngs_modulus_GPa * 1e6 for r in runs])
         S = _mean_std([r.strength_MPa * 1e3 for r in runs])
-        rows.append({"bonds": bond, "contacts": contact, "runs": len(runs), "E_kPa": E[0], "E_std_kPa": E[1],
-                     "strength_kPa": S[0], "strength_std_kPa": S[1],
-                     "broken_bonds": _mean_std([r.broken_bonds for r in runs])[0],
-                     "wall_s": float(sum(r.wall_s for r in runs))})
-        curves[(bond, contact)] = [c for s in st.seeds if (c := _curve(out, jobs[f"{bond}_{contact}_s{s}"]))]
+        rows.append(ModelRow(bond, contact, len(runs), E[0], E[1], S[0], S[1],
+                             _mean_std([r.broken_bonds for r in runs])[0], float(sum(r.wall_s for r in runs))))
     static = _mean_std([res[f"static_s{s}"].youngs_modulus_GPa * 1e6 for s in st.seeds if f"static_s{s}" in res])
-    first = f"parallel_hertz_s{st.seeds[0]}"
-    rate = None
+    first, rate = f"parallel_hertz_s{st.seeds[0]}", None
     if first in res and "half_speed" in res:
         e1, e2 = res[first].youngs_modulus_GPa, res["half_speed"].youngs_modulus_GPa
         s1, s2 = res[first].strength_MPa, res["half_speed"].strength_MPa
-        rate = {"speed_m_s": job_spec(spec, []).compression.plate_speed_m_s, "E_change": e2 / e1 - 1,
-                "strength_change": s2 / s1 - 1, "quasi_static": abs(e2 / e1 - 1) < 0.02}
-    _plot_models(curves, out / "models.png")
+        rate = RateCheck(job_spec(spec).compression.plate_speed_m_s, e2 / e1 - 1, s2 / s1 - 1, abs(e2 / e1 - 1) < 0.02)
     ph = rows[0]
-    summary = {"rows": rows, "static_E_kPa": static[0], "static_E_std_kPa": static[1], "rate_check": rate,
-               "headline": (f"parallel+hertz E = {ph['E_kPa']:.4g} +- {ph['E_std_kPa']:.2g} kPa (static "
-                            f"{static[0]:.4g}), contact+hertz E = {rows[2]['E_kPa']:.3g} kPa; half speed changes "
-                            f"E by {rate['E_change']:+.2%}" if rate else "incomplete")}
-    report = [f"The same {len(st.seeds)} aggregates (seeds {', '.join(map(str, st.seeds))}) with each bond and "
-              "contact model; E (fit of the linear part) and strength (peak stress) as mean +- standard deviation "
-              "over the seeds.", "",
-              "| bonds | contacts | runs | E (kPa) | strength (kPa) | broken bonds | wall (s) |", "|---|---|---|---|---|---|---|"]
-    report += [f"| {r['bonds']} | {r['contacts']} | {r['runs']} | {r['E_kPa']:.4g} +- {r['E_std_kPa']:.2g} | "
-               f"{r['strength_kPa']:.4g} +- {r['strength_std_kPa']:.2g} | {r['broken_bonds']:.0f} | {r['wall_s']:.0f} |"
-               for r in rows]
-    report += ["", f"Static solver (parallel bonds, same glued slab, linear): E = {static[0]:.4g} +- {static[1]:.2g} kPa. "
-               "Contact bonds have no static stiffness: they carry no moment, so a tree-like network of them is a "
-               "mechanism held only by its loops and by contacts that form as it folds."]
+    return Models(rows, static[0], static[1], rate,
+                  f"parallel+hertz E = {ph.E_kPa:.4g} +- {ph.E_std_kPa:.2g} kPa (static {static[0]:.4g}), "
+                  f"contact+hertz E = {rows[2].E_kPa:.3g} kPa; half speed changes E by {rate.E_change:+.2%}"
+                  if rate else "incomplete")
+
+
+def aerogel_models_render(spec: StudyWorkflow, models: Models, out: Path) -> list[str]:
+    st = spec.study
+    jobs = {j.label: j for j in aerogel_models_jobs(spec)}
+    _plot_models({(b, c): [x for s in st.seeds if (x := _curve(out, jobs[f"{b}_{c}_s{s}"]))]
+                  for b, c in COMBINATIONS}, out / "models.png")
+    lines = [f"The same {len(st.seeds)} aggregates (seeds {', '.join(map(str, st.seeds))}) with each bond and "
+             "contact model; E (fit of the linear part) and strength (peak stress) as mean +- standard deviation "
+             "over the seeds.", "",
+             "| bonds | contacts | runs | E (kPa) | strength (kPa) | broken bonds | wall (s) |", "|---|---|---|---|---|---|---|"]
+    lines += [f"| {r.bonds} | {r.contacts} | {r.runs} | {r.E_kPa:.4g} +- {r.E_std_kPa:.2g} | "
+              f"{r.strength_kPa:.4g} +- {r.strength_std_kPa:.2g} | {r.broken_bonds:.0f} | {r.wall_s:.0f} |"
+              for r in models.rows]
+    lines += ["", f"Static solver (parallel bonds, same glued slab, linear): E = {models.static_E_kPa:.4g} +- "
+              f"{models.static_E_std_kPa:.2g} kPa. Contact bonds have no static stiffness: they carry no moment, so a "
+              "tree-like network of them is a mechanism held only by its loops and by contacts that form as it folds."]
+    rate = models.rate_check
     if rate:
-        report += ["", f"Quasi-static check (parallel + Hertz, seed {st.seeds[0]}): half the wall speed "
-                   f"({rate['speed_m_s'] / 2:g} m/s) changes E by {rate['E_change']:+.2%} and the strength by "
-                   f"{rate['strength_change']:+.2%} ({'quasi-static' if rate['quasi_static'] else 'NOT quasi-static'}: "
-                   "criterion |dE| < 2 %)."]
-    report += ["", "![stress-strain curves of the four models](models.png)"]
-    return summary, report
+        lines += ["", f"Quasi-static check (parallel + Hertz, seed {st.seeds[0]}): half the wall speed "
+                  f"({rate.speed_m_s / 2:g} m/s) changes E by {rate.E_change:+.2%} and the strength by "
+                  f"{rate.strength_change:+.2%} ({'quasi-static' if rate.quasi_static else 'NOT quasi-static'}: "
+                  "criterion |dE| < 2 %)."]
+    return lines + ["", "![stress-strain curves of the four models](models.png)"]
 
 
 def _plot_models(curves: dict, path: Path) -> None:
@@ -131,20 +166,60 @@ def _plot_models(curves: dict, path: Path) -> None:
     save_figure(fig, path)
 
 
-def _density_fits(runs: list[dict]) -> dict:
+@dataclass
+class DensityRun:
+    """One solid fraction x seed of one loop model: the static E, and the dynamic E and strength where run."""
+
+    loop_model: str
+    target_solid_fraction: float
+    seed: int
+    solid_fraction: float
+    density_kg_m3: float
+    E_kPa: float
+    mean_coordination: float | None
+    loops_per_10k: float | None
+    energy_split: dict
+    E_dynamic_kPa: float | None
+    strength_kPa: float | None
+    wall_s: float
+
+
+@dataclass
+class DensitySeries:
+    """A loop model's runs, its fits (E ~ rho^m; sigma ~ rho^n where three dynamic runs have a strength), the
+    largest E scatter between seeds, the network's coordination and loops, the bonds' energy by mode."""
+
+    runs: list[DensityRun]
+    fits: dict[str, Fit]
+    scatter_max_min: float
+    mean_coordination: float
+    loops_per_10k: float
+    energy_split: dict
+
+
+@dataclass
+class Density:
+    runs: list[DensityRun]
+    fits: dict[str, Fit]
+    models: dict[str, DensitySeries]
+    literature: dict
+    headline: str = ""
+
+
+def _density_fits(runs: list[DensityRun]) -> dict[str, Fit]:
     """E ~ rho^m (and sigma ~ rho^n where three dynamic runs have a strength) of one series."""
-    fits = {"E": fit_power_law([r["density_kg_m3"] for r in runs], [r["E_kPa"] for r in runs])}
-    dyn = [r for r in runs if r["strength_kPa"]]
+    fits = {"E": fit_power_law([r.density_kg_m3 for r in runs], [r.E_kPa for r in runs])}
+    dyn = [r for r in runs if r.strength_kPa]
     if len(dyn) >= 3:
-        fits["strength"] = fit_power_law([r["density_kg_m3"] for r in dyn], [r["strength_kPa"] for r in dyn])
+        fits["strength"] = fit_power_law([r.density_kg_m3 for r in dyn], [r.strength_kPa for r in dyn])
     return fits
 
 
-def _scatter(runs: list[dict]) -> float:
+def _scatter(runs: list[DensityRun]) -> float:
     """The largest max / min of E between seeds at one solid fraction."""
     worst = 1.0
-    for f in {r["target_solid_fraction"] for r in runs}:
-        e = [r["E_kPa"] for r in runs if r["target_solid_fraction"] == f and r["E_kPa"] > 0]
+    for f in {r.target_solid_fraction for r in runs}:
+        e = [r.E_kPa for r in runs if r.target_solid_fraction == f and r.E_kPa > 0]
         if len(e) >= 2:
             worst = max(worst, max(e) / min(e))
     return worst
@@ -160,105 +235,98 @@ def aerogel_density_jobs(spec: StudyWorkflow) -> list[Job]:
         prefix = f"{model}_" if many else ""
         for f in st.solid_fractions:
             for s in st.seeds:
-                common = [f"aggregate.solid_fraction={label_number(f)}", f"aggregate.seed={s}"]
-                if many:
-                    common.append(f'aggregate.loops="{model}"')
+                common = {"aggregate.solid_fraction": float(label_number(f)), "aggregate.seed": s,
+                          **({"aggregate.loops": model} if many else {})}
                 name = f"{prefix}phi{label_number(f)}_s{s}"
                 at = (model, f, s, name)
-                jobs.append(Job(f"{name}_static", job_spec(spec, [*common, "compression.method=static"]), at=at))
+                jobs.append(Job(f"{name}_static", job_spec(spec, {**common, "compression.method": "static"}), at=at))
                 if not METHODS[st.method].linear:     # study.method = "static": E only, no strength
                     jobs.append(Job(name, job_spec(spec, common), at=at))
     return jobs
 
 
-def aerogel_density(spec: StudyWorkflow, out: Path, say) -> tuple[dict, list[str]]:
-    st = spec.study
-    jobs = aerogel_density_jobs(spec)
-    keys = list(dict.fromkeys(j.at for j in jobs))
-    res = sweep(spec, out, jobs, say)
-    series: dict[str, list[dict]] = {m: [] for m in st.loop_models}
-    for model, f, s, name in keys:
-        a, b = f"{name}_static", name
-        if a not in res:
-            continue
-        static, dy = res[a], res.get(b)
-        r = {"loop_model": model, "target_solid_fraction": f, "seed": s, "solid_fraction": static.solid_fraction,
-             "density_kg_m3": static.density_kg_m3, "E_kPa": static.youngs_modulus_GPa * 1e6,
-             "mean_coordination": static.mean_coordination, "loops_per_10k": static.loops_per_10k,
-             "energy_split": static.energy_split or {},
-             "E_dynamic_kPa": dy.youngs_modulus_GPa * 1e6 if dy else None,
-             "strength_kPa": dy.strength_MPa * 1e3 if dy else None,
-             "wall_s": static.wall_s + (dy.wall_s if dy else 0.0)}
-        series[model].append(r)
+def _density_series(runs: list[DensityRun]) -> DensitySeries:
+    fits = _density_fits(runs)
+    split = {k: float(np.mean([r.energy_split[k] for r in runs if r.energy_split]))
+             for k in ("stretching", "shear", "bending", "twisting") if any(r.energy_split for r in runs)}
+    return DensitySeries(runs, fits, _scatter(runs), float(np.mean([r.mean_coordination or 0 for r in runs])),
+                         float(np.mean([r.loops_per_10k or 0 for r in runs])), split)
+
+
+def aerogel_density_analyse(spec: StudyWorkflow, jobs: list[Job], res: dict) -> Density | None:
+    """E ~ rho^m and sigma ~ rho^n with 95 % intervals for each loop model with two densities or more."""
+    series: dict[str, list[DensityRun]] = {m: [] for m in spec.study.loop_models}
+    for model, f, s, name in dict.fromkeys(j.at for j in jobs):
+        static, dy = res.get(f"{name}_static"), res.get(name)
+        if static is not None:
+            series[model].append(DensityRun(
+                model, f, s, static.solid_fraction, static.density_kg_m3, static.youngs_modulus_GPa * 1e6,
+                static.mean_coordination, static.loops_per_10k, static.energy_split or {},
+                dy.youngs_modulus_GPa * 1e6 if dy else None, dy.strength_MPa * 1e3 if dy else None,
+                static.wall_s + (dy.wall_s if dy else 0.0)))
+    models = {m: _density_series(runs) for m, runs in series.items() if len({r.density_kg_m3 for r in runs}) >= 2}
+    if not models:
+        return None
     ref = literature()["density_scaling"]
-    models = {}
-    for model, runs in series.items():
-        if len({r["density_kg_m3"] for r in runs}) < 2:
-            continue
-        fits = _density_fits(runs)
-        split = {k: float(np.mean([r["energy_split"][k] for r in runs if r["energy_split"]]))
-                 for k in ("stretching", "shear", "bending", "twisting") if any(r["energy_split"] for r in runs)}
-        models[model] = {"runs": runs, "fits": {k: v.as_dict() for k, v in fits.items()}, "scatter_max_min": _scatter(runs),
-                         "mean_coordination": float(np.mean([r["mean_coordination"] or 0 for r in runs])),
-                         "loops_per_10k": float(np.mean([r["loops_per_10k"] or 0 for r in runs])), "energy_split": split}
     first = models[next(iter(models))]
-    summary = {"runs": [r for m in models.values() for r in m["runs"]], "fits": first["fits"], "models": models,
-               "literature": ref}
+    study = Density([r for m in models.values() for r in m.runs], first.fits, models, ref)
+    n = first.fits.get("strength")
+    n_txt = f", n = {n.exponent:.2f} [{n.exponent_ci[0]:.2f}, {n.exponent_ci[1]:.2f}]" if n else ""
+    study.headline = ("E ~ rho^m with " + "; ".join(f"{_m_text(m.fits['E'])} ({name})" for name, m in models.items())
+                      + n_txt + f"; Ma et al. m = {ref['m_dlca_beams']}, experiments {ref['m_experiment_low']}-"
+                      f"{ref['m_experiment_high']}")
+    return study
 
-    def m_text(model):
-        f = models[model]["fits"]["E"]
-        return f"m = {f['exponent']:.2f} [{f['exponent_ci'][0]:.2f}, {f['exponent_ci'][1]:.2f}]"
 
-    n = first["fits"].get("strength")
-    n_txt = f", n = {n['exponent']:.2f} [{n['exponent_ci'][0]:.2f}, {n['exponent_ci'][1]:.2f}]" if n else ""
-    summary["headline"] = ("E ~ rho^m with " + "; ".join(f"{m_text(m)} ({m})" for m in models) + n_txt
-                           + f"; Ma et al. m = {ref['m_dlca_beams']}, experiments {ref['m_experiment_low']}-"
-                           f"{ref['m_experiment_high']}")
-    _plot_density(models, out / "density.png")
-    report = [f"Solid fractions {', '.join(map(str, st.solid_fractions))} x seeds {', '.join(map(str, st.seeds))} x "
-              f"loop models {', '.join(st.loop_models)}: E from the static solver (the slab glued between its bottom "
-              "layer and the wall, as the dynamic run), strength from the dynamic run; density = the slab's after "
-              "the cut.", "",
-              "| loop model | law | exponent | 95 % interval | prefactor | R^2 | E max/min between seeds | "
-              "coordination | loops per 10 000 | energy: bending / twisting / shear / stretching | reference |",
-              "|---|---|---|---|---|---|---|---|---|---|---|"]
-    for model, m in models.items():
-        for law, f in m["fits"].items():
-            e = m["energy_split"]
-            report.append(
-                f"| {model} | {'E = a rho^m' if law == 'E' else 'sigma = a rho^n'} (kPa) | {f['exponent']:.3f} | "
-                f"[{f['exponent_ci'][0]:.3f}, {f['exponent_ci'][1]:.3f}] | {f['prefactor']:.4g} | {f['r2']:.4f} | "
-                f"{m['scatter_max_min']:.1f} | {m['mean_coordination']:.2f} | {m['loops_per_10k']:.0f} | "
+def _m_text(f: Fit) -> str:
+    return f"m = {f.exponent:.2f} [{f.exponent_ci[0]:.2f}, {f.exponent_ci[1]:.2f}]"
+
+
+def aerogel_density_render(spec: StudyWorkflow, study: Density, out: Path) -> list[str]:
+    st, ref = spec.study, study.literature
+    _plot_density(study.models, out / "density.png")
+    lines = [f"Solid fractions {', '.join(map(str, st.solid_fractions))} x seeds {', '.join(map(str, st.seeds))} x "
+             f"loop models {', '.join(st.loop_models)}: E from the static solver (the slab glued between its bottom "
+             "layer and the wall, as the dynamic run), strength from the dynamic run; density = the slab's after "
+             "the cut.", "",
+             "| loop model | law | exponent | 95 % interval | prefactor | R^2 | E max/min between seeds | "
+             "coordination | loops per 10 000 | energy: bending / twisting / shear / stretching | reference |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for model, m in study.models.items():
+        for law, f in m.fits.items():
+            e = m.energy_split
+            lines.append(
+                f"| {model} | {'E = a rho^m' if law == 'E' else 'sigma = a rho^n'} (kPa) | {f.exponent:.3f} | "
+                f"[{f.exponent_ci[0]:.3f}, {f.exponent_ci[1]:.3f}] | {f.prefactor:.4g} | {f.r2:.4f} | "
+                f"{m.scatter_max_min:.1f} | {m.mean_coordination:.2f} | {m.loops_per_10k:.0f} | "
                 + (" / ".join(f"{100 * e[k]:.0f} %" for k in ("bending", "twisting", "shear", "stretching")) if e
                    else "-")
                 + (f" | m = {ref['m_dlca_beams']} ({ref['m_dlca_beams_source']}); {ref['m_experiment_low']}-"
                    f"{ref['m_experiment_high']} ({ref['m_experiment_source']}) |" if law == "E" else " | - |"))
-    report += ["", "| loop model | target solid fraction | seed | solid fraction | density (kg/m^3) | E static (kPa) | "
-               "E dynamic (kPa) | strength (kPa) | wall (s) |", "|---|---|---|---|---|---|---|---|---|"]
-    report += [f"| {r['loop_model']} | {r['target_solid_fraction']:g} | {r['seed']} | {r['solid_fraction']:.4f} | "
-               f"{r['density_kg_m3']:.1f} | {r['E_kPa']:.4g} | {fmt_value(r['E_dynamic_kPa'], '.4g')} | "
-               f"{fmt_value(r['strength_kPa'], '.4g')} | {r['wall_s']:.0f} |" for r in summary["runs"]]
-    report += ["", "![E and strength against density](density.png)"]
-    return summary, report
+    lines += ["", "| loop model | target solid fraction | seed | solid fraction | density (kg/m^3) | E static (kPa) | "
+              "E dynamic (kPa) | strength (kPa) | wall (s) |", "|---|---|---|---|---|---|---|---|---|"]
+    lines += [f"| {r.loop_model} | {r.target_solid_fraction:g} | {r.seed} | {r.solid_fraction:.4f} | "
+              f"{r.density_kg_m3:.1f} | {r.E_kPa:.4g} | {fmt_value(r.E_dynamic_kPa, '.4g')} | "
+              f"{fmt_value(r.strength_kPa, '.4g')} | {r.wall_s:.0f} |" for r in study.runs]
+    return lines + ["", "![E and strength against density](density.png)"]
 
 
-def _plot_density(models: dict, path: Path) -> None:
+def _plot_density(models: dict[str, DensitySeries], path: Path) -> None:
     """E (and strength) against density, one colour per loop model, each with its power-law fit."""
     fig, ax = new_figure(figsize=(6.8, 4.6))
     for k, (model, m) in enumerate(models.items()):
-        runs, fits = m["runs"], m["fits"]
-        rho = np.array([r["density_kg_m3"] for r in runs])
+        runs, fits = m.runs, m.fits
+        rho = np.array([r.density_kg_m3 for r in runs])
         grid = np.geomspace(rho.min(), rho.max(), 50)
         f = fits["E"]
-        ax.loglog(rho, [r["E_kPa"] for r in runs], "o", color=f"C{k}", ms=4, label=f"E (static), {model}")
-        ax.loglog(grid, f["prefactor"] * grid ** f["exponent"], "-", color=f"C{k}",
-                  label=f"{model}: m = {f['exponent']:.2f} [{f['exponent_ci'][0]:.2f}, {f['exponent_ci'][1]:.2f}]")
+        ax.loglog(rho, [r.E_kPa for r in runs], "o", color=f"C{k}", ms=4, label=f"E (static), {model}")
+        ax.loglog(grid, f.prefactor * grid ** f.exponent, "-", color=f"C{k}", label=f"{model}: {_m_text(f)}")
         if "strength" in fits:
-            dyn = [r for r in runs if r["strength_kPa"]]
+            dyn = [r for r in runs if r.strength_kPa]
             f = fits["strength"]
-            ax.loglog([r["density_kg_m3"] for r in dyn], [r["strength_kPa"] for r in dyn], "s", color=f"C{k}", mfc="none",
+            ax.loglog([r.density_kg_m3 for r in dyn], [r.strength_kPa for r in dyn], "s", color=f"C{k}", mfc="none",
                       label=f"strength (dynamic), {model}")
-            ax.loglog(grid, f["prefactor"] * grid ** f["exponent"], "--", color=f"C{k}", label=f"sigma ~ rho^{f['exponent']:.2f}")
+            ax.loglog(grid, f.prefactor * grid ** f.exponent, "--", color=f"C{k}", label=f"sigma ~ rho^{f.exponent:.2f}")
     ax.set_xlabel("density (kg/m^3)")
     ax.set_ylabel("kPa")
     ax.legend(fontsize=7)

@@ -11,40 +11,49 @@ from opalflow.vocabulary import LOOP_MODELS
 
 @dataclass(frozen=True)
 class StudyType:
-    """A study type: its runner, its jobs and the ``[study]`` fields it reads beside :data:`COMMON`.
+    """A study type: its steps, named ``"module:function"`` and imported when a study runs (this module stays light:
+    every workflow file's spec is read through it), and the ``[study]`` fields it reads beside :data:`COMMON`.
 
-    ``run``: ``"module:function"`` called as ``run(spec, out, say)`` -> (summary, report lines); ``jobs``:
-    ``"module:function"`` called as ``jobs(spec)`` -> the :class:`opalflow.runs.jobs.Job` list it runs (what
-    ``python -m opalflow plan`` prices; an iteration's first round where later ones depend on the results).
+    ``jobs(spec)`` -> the :class:`opalflow.runs.jobs.Job` list it runs (what ``python -m opalflow plan`` prices; an
+    iteration's first round where later ones depend on the results); ``analyse(spec, jobs, results)`` -> its result
+    dataclass (None where too few jobs finished); ``render(spec, result, out)`` -> report.md's lines (and the
+    figures they show, drawn into ``out``); ``iterate(spec, out, say)`` in place of jobs and analyse for a study
+    whose jobs depend on earlier results (the Newton calibration).
     """
 
     name: str
-    run: str
     jobs: str
+    analyse: str
+    render: str
     fields: tuple[str, ...] = ()
     summary: str = ""
+    iterate: str = ""
+
+
+def _type(name: str, module: str, fields: tuple[str, ...], summary: str, *, iterate: bool = False) -> StudyType:
+    """The study type ``name`` whose steps are ``NAME_jobs``, ``NAME_analyse`` (or ``NAME`` iterating) and
+    ``NAME_render`` of ``module``."""
+    return StudyType(name, f"{module}:{name}_jobs", "" if iterate else f"{module}:{name}_analyse",
+                     f"{module}:{name}_render", fields, summary, f"{module}:{name}" if iterate else "")
 
 
 #: the fields every study reads
 COMMON = ("type", "base", "paper_base", "paper_scale", "set", "paper_set", "np", "method")
 _RUN, _AEROGEL = "opalflow.studies.run", "opalflow.studies.aerogel"
 STUDY_TYPES = {t.name: t for t in (
-    StudyType("calibration", f"{_RUN}:calibration", f"{_RUN}:calibration_jobs",
-              ("target_E_GPa", "target_strength_MPa", "tolerance", "max_runs", "jacobian", "fd_step", "start_E_GPa",
-               "start_strength_MPa"), "Newton iteration on bond E_b and strength to E* and sigma* (eqs. 18-19)"),
-    StudyType("bulk", f"{_RUN}:bulk", f"{_RUN}:bulk_jobs", ("diameters_nm",),
-              "K_E = E_macro / E_b (eq. 20) of pore-free samples at each diameter"),
-    StudyType("coating", f"{_RUN}:coating", f"{_RUN}:coating_jobs", ("thicknesses_nm",),
-              "titania coatings at E_exp -+ std (Fig. 9)"),
-    StudyType("porosity", f"{_RUN}:porosity", f"{_RUN}:porosity_jobs", ("porosities", "seeds"),
-              "random pores: fits of eqs. 22, 23, 26 with 95 % intervals"),
-    StudyType("convergence", f"{_RUN}:convergence", f"{_RUN}:convergence_jobs", ("cells", "diameters_nm", "seeds"),
-              "cross-section and diameter x seeds: the resolution's effect"),
-    StudyType("sides", f"{_RUN}:sides", f"{_RUN}:sides_jobs", (), "periodic against open sides (section 3.1.3)"),
-    StudyType("aerogel_models", f"{_AEROGEL}:aerogel_models", f"{_AEROGEL}:aerogel_models_jobs", ("seeds",),
-              "bond model x contact law of the aerogel, with a static solve and a rate check"),
-    StudyType("aerogel_density", f"{_AEROGEL}:aerogel_density", f"{_AEROGEL}:aerogel_density_jobs",
-              ("solid_fractions", "loop_models", "seeds"), "E and strength against density: the scaling exponents"),
+    _type("calibration", _RUN, ("target_E_GPa", "target_strength_MPa", "tolerance", "max_runs", "jacobian", "fd_step",
+                                "start_E_GPa", "start_strength_MPa"),
+          "Newton iteration on bond E_b and strength to E* and sigma* (eqs. 18-19)", iterate=True),
+    _type("bulk", _RUN, ("diameters_nm",), "K_E = E_macro / E_b (eq. 20) of pore-free samples at each diameter"),
+    _type("coating", _RUN, ("thicknesses_nm",), "titania coatings at E_exp -+ std (Fig. 9)"),
+    _type("porosity", _RUN, ("porosities", "seeds"), "random pores: fits of eqs. 22, 23, 26 with 95 % intervals"),
+    _type("convergence", _RUN, ("cells", "diameters_nm", "seeds"),
+          "cross-section and diameter x seeds: the resolution's effect"),
+    _type("sides", _RUN, (), "periodic against open sides (section 3.1.3)"),
+    _type("aerogel_models", _AEROGEL, ("seeds",),
+          "bond model x contact law of the aerogel, with a static solve and a rate check"),
+    _type("aerogel_density", _AEROGEL, ("solid_fractions", "loop_models", "seeds"),
+          "E and strength against density: the scaling exponents"),
 )}
 STUDIES = tuple(STUDY_TYPES)
 

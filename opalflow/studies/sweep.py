@@ -5,6 +5,7 @@ its failure in its own folder (its run.json: the error and the log tail); the st
 jobs."""
 from __future__ import annotations
 
+import copy
 from pathlib import Path
 
 from opalflow import registry
@@ -13,25 +14,32 @@ from opalflow.bpm.result import CompressionResult
 from opalflow.resources import WORKFLOWS
 from opalflow.runs.executors import run_jobs
 from opalflow.runs.jobs import Job, job_record
-from opalflow.spec import SpecError, WorkflowSpec
+from opalflow.spec import SpecError, WorkflowSpec, apply_overrides, read_toml, set_value
 from opalflow.store import RECORD
 
 __all__ = ["Job", "job_spec", "study_set", "sweep", "failed_jobs", "fmt_value", "label_number"]
 
 
 # ----------------------------------------------------------------------------- a study's jobs
-def job_spec(spec, overrides: list[str]) -> WorkflowSpec:
-    """A study's (:class:`opalflow.studies.spec.StudyWorkflow`) base workflow with the study's and the
-    job's overrides: ``study.base`` and ``study.set``, or at paper scale ``study.paper_base`` and
-    ``study.paper_set``."""
+def job_spec(spec, values: dict | None = None) -> WorkflowSpec:
+    """A study's (:class:`opalflow.studies.spec.StudyWorkflow`) base workflow with the study's overrides
+    (``study.set``, or at paper scale ``study.paper_base`` and ``study.paper_set``: the user's ``--set`` text) and
+    the job's ``values`` ({"section.key": a Python value}, set as they are: no text is parsed)."""
     st = spec.study
     base = st.paper_base if st.paper_scale else st.base
     path = WORKFLOWS / f"{base}.toml"
     if not path.exists():
         raise SpecError("study.paper_base" if st.paper_scale else "study.base", base,
                         f"no workflow {path.name} in {WORKFLOWS}")
-    linear = [f"compression.method={st.method}", "compression.drop_loose=true"] if METHODS[st.method].linear else []
-    return registry.load_spec(path, [*linear, *study_set(st), *overrides])
+    raw = read_toml(path)
+    job = copy.deepcopy(raw)
+    if METHODS[st.method].linear:         # the study's method first: study.set may still change it
+        set_value(job, "compression.method", st.method)
+        set_value(job, "compression.drop_loose", True)
+    apply_overrides(job, study_set(st))
+    for key, value in (values or {}).items():
+        set_value(job, key, value)
+    return registry.spec_from_dict(job, raw)
 
 
 def study_set(st) -> list[str]:
