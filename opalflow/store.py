@@ -7,6 +7,7 @@ and what to do (:class:`DamagedFile`, exit 2: never a regression's 1, never a tr
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import signal
@@ -65,6 +66,8 @@ def read_json(path: str | os.PathLike, what: str, remedy: str, *, keys: tuple[st
 
 
 def _default(obj):
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):      # a typed result: its fields as a table
+        return dataclasses.asdict(obj)
     if isinstance(obj, np.ndarray):
         return obj.tolist()
     if isinstance(obj, np.generic):
@@ -118,7 +121,7 @@ def staged_files(folder: str | os.PathLike):
 
 
 def json_text(data: dict) -> str:
-    """``data`` as indented JSON (numpy arrays and scalars as lists and numbers)."""
+    """``data`` as indented JSON (numpy arrays and scalars as lists and numbers, dataclasses as tables)."""
     return json.dumps(data, indent=2, default=_default) + "\n"
 
 

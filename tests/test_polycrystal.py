@@ -142,7 +142,9 @@ def test_tension_workflow_static_and_dynamic(tmp_path):
     common = ["tension.cubes=[2]", "tension.cube_nm=[5.0]", "samples.seeds=[1, 2]", "samples.lammps_check=1",
               "tension.max_strain=0.001"]
     out, s = _run(tmp_path, "polycrystal_tension", *common)
-    for j in (json.loads(p.read_text()) for p in sorted((out / "jobs").glob("*.json"))):
+    runs = [json.loads(p.read_text()) for p in sorted((out / "jobs").glob("*/summary.json"))]
+    assert len(runs) == 2
+    for j in runs:
         b = j["bounds_realised"]
         assert b["reuss"]["E_GPa"] < j["youngs_modulus_GPa"] < b["voigt"]["E_GPa"]
     assert 0.20 < s["poisson_ratio"] < 0.24 and s["lammps_check"]["max_relative_forces"] < 1e-8
@@ -168,6 +170,42 @@ def test_tension_workflow_static_and_dynamic(tmp_path):
     assert main(["run", "--out", str(out), "--resume"]) == 0
     again = json.loads((out / "summary.json").read_text())
     assert again["youngs_modulus_GPa"] == s["youngs_modulus_GPa"] and again["wall_s"] < s["wall_s"]
+
+
+def test_the_experiments_are_jobs_keyed_by_their_spec_that_status_lists(tmp_path, capsys):
+    """Each experiment of a polycrystal run is a runs.jobs.Job: a folder named by its label and the hash of its own
+    spec (one mesh and seed), with its record and its result, so status lists them (it showed the run alone) and a
+    stored result is reused only for the same inputs: the hash of seed 1's experiment is not seed 2's, and a result
+    whose record names other inputs runs again on --resume."""
+    from opalflow.runs.jobs import spec_hash
+    from opalflow.tersoff.polycrystal.run import tension_jobs
+
+    common = ["tension.cubes=[2]", "tension.cube_nm=[5.0]", "samples.seeds=[1, 2]", "samples.lammps_check=0",
+              "tension.max_strain=0.001", 'tension.method="static"']
+    out, s = _run(tmp_path, "polycrystal_tension", *common)
+    spec = RunRecord.read(out).spec
+    from opalflow.registry import spec_from_dict
+
+    jobs = tension_jobs(spec_from_dict(spec))
+    assert [j.folder(out).name[:-13] for j in jobs] == ["tension_48el_5nm_seed1", "tension_48el_5nm_seed2"]
+    assert all(j.folder(out).is_dir() for j in jobs) and len({spec_hash(j.spec) for j in jobs}) == 2
+    capsys.readouterr()
+    assert main(["status", str(out)]) == 0
+    shown = capsys.readouterr().out
+    assert "tension_48el_5nm_seed1" in shown and "tension_48el_5nm_seed2" in shown and "2 finished" in shown
+    # the first experiment's record now names other inputs: --resume runs it again, keeps the second
+    record = RunRecord.read(out)
+    record.state = "running"
+    record.write(out)
+    (out / "summary.json").unlink()
+    first = RunRecord.read(jobs[0].folder(out))
+    first.spec_hash = "0" * 64
+    first.write(jobs[0].folder(out))
+    stamp = (jobs[1].folder(out) / "summary.json").stat().st_mtime_ns
+    assert main(["run", "--out", str(out), "--resume"]) == 0
+    assert RunRecord.read(jobs[0].folder(out)).spec_hash == jobs[0].key
+    assert (jobs[1].folder(out) / "summary.json").stat().st_mtime_ns == stamp
+    assert json.loads((out / "summary.json").read_text())["youngs_modulus_GPa"] == s["youngs_modulus_GPa"]
 
 
 def test_plate_wave_speed_within_the_bounds(tmp_path):

@@ -281,7 +281,7 @@ def command_run(folder: str | os.PathLike, started: float) -> None:
 def finish(folder: str | os.PathLike, summary: dict, report: str | Callable[[], str], *,
            files: Callable[[Callable[[str], Path]], None] | None = None, record: RunRecord | None = None,
            started: float | None = None) -> dict:
-    """Write a run's results all or none and mark it finished; returns the summary as written.
+    """Write a run's results all or none and mark it finished; returns the summary as written (JSON's types).
 
     ``files(stage)`` writes the other result files (results.h5, plots) to ``stage(name)``; report.md (``report``
     or, when it is a function, what it returns after ``files``) and then summary.json (the mark of a
@@ -306,7 +306,8 @@ def finish(folder: str | os.PathLike, summary: dict, report: str | Callable[[], 
         summary = {**summary, "state": "finished"}
         text = report() if callable(report) else report
         stage(REPORT).write_text(text if text.endswith("\n") else text + "\n")
-        stage(SUMMARY).write_text(json_text(summary))
+        written = json_text(summary)
+        stage(SUMMARY).write_text(written)
     if record is None and RunRecord.exists(folder):
         try:
             record = RunRecord.read(folder)
@@ -314,7 +315,7 @@ def finish(folder: str | os.PathLike, summary: dict, report: str | Callable[[], 
             record = None
     if record is not None:
         record.end(folder, "finished", wall_s=summary.get("wall_s"))
-    return summary
+    return json.loads(written)            # as written: typed parts (dataclasses, arrays) as their tables
 
 
 @contextmanager

@@ -18,6 +18,9 @@ Units: nm, ps, GPa, nN (1 GPa nm^2 = 1 nN); a (nm/ps^2) = 1e3 F (nN) / (rho (kg/
 """
 from __future__ import annotations
 
+import dataclasses
+from dataclasses import dataclass
+
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
@@ -43,7 +46,39 @@ def rotated_stiffness(c: np.ndarray, rotations: np.ndarray) -> np.ndarray:
     return np.einsum("eia,ejb,ekc,eld,abcd->eijkl", rotations, rotations, rotations, rotations, c, optimize=True)
 
 
-def polycrystal_bounds(c11: float, c12: float, c44: float, density_kg_m3: float) -> dict:
+@dataclass
+class WaveSpeeds:
+    """Plate (P wave), rod and shear wave speeds (m/s) of an isotropic solid."""
+
+    wave_speed_plate_m_s: float
+    wave_speed_rod_m_s: float
+    wave_speed_shear_m_s: float
+
+    def of(self, wave: str) -> float:
+        """The speed of the ``plate``, ``rod`` or ``shear`` wave."""
+        return getattr(self, f"wave_speed_{wave}_m_s")
+
+
+@dataclass
+class Isotropic(WaveSpeeds):
+    """An isotropic average of a cubic crystal: moduli (GPa), Poisson ratio and the wave speeds they imply."""
+
+    B_GPa: float = 0.0
+    G_GPa: float = 0.0
+    E_GPa: float = 0.0
+    nu: float = 0.0
+
+
+@dataclass
+class Bounds:
+    """The Voigt (uniform strain), Reuss (uniform stress) and Hill averages of a cubic crystal."""
+
+    voigt: Isotropic
+    reuss: Isotropic
+    hill: Isotropic
+
+
+def polycrystal_bounds(c11: float, c12: float, c44: float, density_kg_m3: float) -> Bounds:
     """Voigt, Reuss and Hill averages of a cubic crystal and the wave speeds they imply.
 
     B = (C11 + 2 C12)/3; G_V = (C11 - C12 + 3 C44)/5 (Voigt 1928), G_R = 5 (C11 - C12) C44 /
@@ -52,23 +87,21 @@ def polycrystal_bounds(c11: float, c12: float, c44: float, density_kg_m3: float)
     shear sqrt(G/rho) (m/s).
     """
     bulk = (c11 + 2.0 * c12) / 3.0
-    shear = {"voigt": (c11 - c12 + 3.0 * c44) / 5.0,
-             "reuss": 5.0 * (c11 - c12) * c44 / (4.0 * c44 + 3.0 * (c11 - c12))}
-    shear["hill"] = 0.5 * (shear["voigt"] + shear["reuss"])
-    out = {}
-    for name, g in shear.items():
-        e = 9.0 * bulk * g / (3.0 * bulk + g)
-        out[name] = {"B_GPa": bulk, "G_GPa": g, "E_GPa": e, "nu": (3.0 * bulk - 2.0 * g) / (2.0 * (3.0 * bulk + g)),
-                     **speeds(e, (3.0 * bulk - 2.0 * g) / (2.0 * (3.0 * bulk + g)), density_kg_m3)}
-    return out
+    g_voigt = (c11 - c12 + 3.0 * c44) / 5.0
+    g_reuss = 5.0 * (c11 - c12) * c44 / (4.0 * c44 + 3.0 * (c11 - c12))
+
+    def average(g: float) -> Isotropic:
+        e, nu = 9.0 * bulk * g / (3.0 * bulk + g), (3.0 * bulk - 2.0 * g) / (2.0 * (3.0 * bulk + g))
+        return Isotropic(**dataclasses.asdict(speeds(e, nu, density_kg_m3)), B_GPa=bulk, G_GPa=g, E_GPa=e, nu=nu)
+
+    return Bounds(average(g_voigt), average(g_reuss), average(0.5 * (g_voigt + g_reuss)))
 
 
-def speeds(e_gpa: float, nu: float, density_kg_m3: float) -> dict:
+def speeds(e_gpa: float, nu: float, density_kg_m3: float) -> WaveSpeeds:
     """Plate (P wave), rod and shear wave speeds (m/s) of an isotropic solid with E (GPa) and nu."""
     m = e_gpa * (1.0 - nu) / ((1.0 + nu) * (1.0 - 2.0 * nu))
     g = e_gpa / (2.0 * (1.0 + nu))
-    return {k: float(np.sqrt(v * 1e9 / density_kg_m3)) for k, v in
-            (("wave_speed_plate_m_s", m), ("wave_speed_rod_m_s", e_gpa), ("wave_speed_shear_m_s", g))}
+    return WaveSpeeds(*(float(np.sqrt(v * 1e9 / density_kg_m3)) for v in (m, e_gpa, g)))
 
 
 class Polycrystal:

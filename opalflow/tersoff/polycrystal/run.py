@@ -3,30 +3,34 @@
 Each run folder gets ``results.h5`` (every dataset with ``units``, tables with ``columns``),
 ``summary.json`` (``youngs_modulus_GPa``, ``poisson_ratio`` or the three ``wave_speed_*_m_s``,
 ``wall_s``; written last), ``report.md`` beside the references, the plots, ``.vtu`` meshes, and
-``jobs/`` with one JSON per finished job, so ``--resume`` skips what is done.
+``jobs/``: each experiment a :class:`opalflow.runs.jobs.Job` (its own spec, one mesh and seed, in a folder named by
+its label and spec hash, with its record and its result: :class:`TensionRun`, :class:`WaveRun`,
+:class:`Measured`), so ``--resume`` skips what is done with the same inputs, a changed experiment runs anew, and
+``status`` lists them.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from opalflow.analysis.elasticity import VOIGT
 from opalflow.progress import Progress
+from opalflow.runs.jobs import Job, job_record, prepare
 from opalflow.runs.record import RunRecord, finish
-from opalflow.store import RESULTS, h5_bytes, new_figure, read_json, save_figure, write_json_atomic
+from opalflow.store import RESULTS, h5_bytes, new_figure, save_figure
 from opalflow.tersoff.parameters import load_parameters
 from opalflow.tersoff.polycrystal.crystal import check_sample_hessian, longitudinal_speed_nm_ps, single_crystal
-from opalflow.tersoff.polycrystal.dynamics import M_PER_S, Polycrystal, polycrystal_bounds, speeds
+from opalflow.tersoff.polycrystal.dynamics import M_PER_S, Bounds, Polycrystal, WaveSpeeds, polycrystal_bounds, speeds
 from opalflow.tersoff.polycrystal.mesh import block
 from opalflow.tersoff.polycrystal.output import plot_mesh, write_vtu
 from opalflow.tersoff.polycrystal.samples import Samples, random_rotations, relax_md, relax_minimize
 from opalflow.tersoff.polycrystal.spec import PolycrystalWorkflow, TensionWorkflow, WavesWorkflow
 from opalflow.version import __version__
-
-REDO = "delete it and resume: the job runs again"
 
 #: seed 003, section 3: polycrystalline silicon (their ref. 30)
 REFERENCE = {"youngs_modulus_GPa": 160.0, "poisson_ratio": 0.22, "wave_speed_plate_m_s": 8850.0,
@@ -47,22 +51,131 @@ def setup(spec: PolycrystalWorkflow, out: Path) -> tuple:
 
 
 def start_folder(out: Path, spec: PolycrystalWorkflow) -> None:
-    """The run folder with ``run.json`` (the spec, for ``--resume``) and ``jobs/`` (one JSON per finished run)."""
+    """The run folder with ``run.json`` (the spec, for ``--resume``) and ``jobs/`` (one folder per experiment)."""
     (out / "jobs").mkdir(parents=True, exist_ok=True)
     RunRecord.new(spec, folder=out).begin(out)
 
 
-def finished(path: Path, job: dict) -> dict:
-    """Keep a finished run as ``jobs/NAME.json`` (what ``--resume`` re-uses) and return it."""
-    write_json_atomic(path, job)
-    return job
+@dataclass
+class Stats:
+    """Mean, standard deviation (n - 1), extremes and count of one quantity over runs."""
+
+    mean: float
+    std: float
+    min: float
+    max: float
+    n: int
+
+    @classmethod
+    def of(cls, values) -> Stats:
+        v = np.asarray(values, dtype=float)
+        return cls(float(v.mean()), float(v.std(ddof=1)) if len(v) > 1 else 0.0, float(v.min()), float(v.max()), len(v))
+
+
+@dataclass
+class Realised:
+    """E along x and nu of a finite set of orientations, by one of the two averages."""
+
+    E_GPa: float
+    nu: float
+
+
+@dataclass
+class TensionRun:
+    """One tension experiment (a mesh and an orientation seed): its moduli, the bounds of the orientations it drew,
+    the curve (columns in ``curve_columns``) and its cost."""
+
+    cubes: int
+    cube_nm: float
+    seed: int
+    elements: int
+    edge_nm: float
+    method: str
+    timestep_ps: float
+    damping_per_ps: float
+    deform_steps: int
+    macro_steps: int
+    evaluations: int
+    youngs_modulus_GPa: float
+    poisson_ratio: float
+    bounds_realised: dict[str, Realised]
+    wall_s: float
+    curve_columns: list[str]
+    curve: list
+    s_per_macro_step: float | None = None
+
+    @classmethod
+    def from_dict(cls, raw: dict) -> TensionRun:
+        run = cls(**raw)
+        run.bounds_realised = {k: Realised(**v) for k, v in raw["bounds_realised"].items()}
+        return run
+
+
+@dataclass
+class Measured(WaveSpeeds):
+    """E and nu of the same potential by a static tension, and the wave speeds they imply."""
+
+    youngs_modulus_GPa: float = 0.0
+    poisson_ratio: float = 0.0
+    elements: int = 0
+    seed: int = 0
+    wall_s: float = 0.0
+
+
+@dataclass
+class WaveRun:
+    """One wave experiment: the front's speed (least squares over the stations used) and what it took."""
+
+    experiment: str
+    elements: int
+    cubes: list[int]
+    cube_nm: float
+    length_nm: float
+    lateral: str
+    piston_m_s: float
+    timestep_ps: float
+    macro_steps: int
+    evaluations: int
+    speed_m_s: float
+    speed_stderr_m_s: float
+    stations_used: int
+    wall_s: float
+    s_per_macro_step: float
+    times_ps: list
+    stations_nm: list
+    arrival_ps: list
+    profile: list
+
+
+def experiment_job(spec: PolycrystalWorkflow, label: str, **sections) -> Job:
+    """An experiment as a job: the run's spec with the sections that make it one experiment (``tension``,
+    ``samples``, ``waves`` replaced), named by its label, so its spec hash is that of what it computes."""
+    one = dataclasses.replace(spec, name=label, description="", **sections)
+    return Job(label, one)
+
+
+def run_experiments(jobs: list[Job], out: Path, resume: bool, compute, read, say) -> dict:
+    """label -> each job's result: read from its folder where ``--resume`` finds it done with the same spec hash,
+    else ``compute(job)`` (its record running, then finished with the result as its summary)."""
+    done, todo = prepare(jobs, out)
+    if not resume:
+        todo, done = jobs, {}
+    results = {label: read({k: v for k, v in summary.items() if k != "state"}) for label, summary in done.items()}
+    for label in results:
+        say(f"{label}: done before (resume)")
+    for job in todo:
+        folder = job.folder(out)
+        (job_record(folder) or RunRecord.job(job.spec, job.label, job.key)).begin(folder, launcher="in-process")
+        results[job.label] = result = compute(job)
+        finish(folder, dataclasses.asdict(result), f"# {job.label}\n\nAn experiment of the run in {out} (its summary.json holds the result).")
+    return {j.label: results[j.label] for j in jobs}
 
 
 def constants(crystal: dict) -> tuple[float, float, float]:
     return crystal["C11_GPa"], crystal["C12_GPa"], crystal["C44_GPa"]
 
 
-def realised_bounds(pc: Polycrystal) -> dict:
+def realised_bounds(pc: Polycrystal) -> dict[str, Realised]:
     """Voigt and Reuss bounds of E_x and nu for the orientations this mesh actually drew.
 
     Voigt: uniform strain, <C> (volume average) inverted; Reuss: uniform stress, <C^-1>.
@@ -72,7 +185,7 @@ def realised_bounds(pc: Polycrystal) -> dict:
     w = pc.volume0 / pc.volume0.sum()
     s_voigt = np.linalg.inv(np.einsum("e,eab->ab", w, c6))
     s_reuss = np.einsum("e,eab->ab", w, np.linalg.inv(c6))
-    return {name: {"E_GPa": 1.0 / s[0, 0], "nu": -(s[0, 1] + s[0, 2]) / (2.0 * s[0, 0])}
+    return {name: Realised(1.0 / s[0, 0], -(s[0, 1] + s[0, 2]) / (2.0 * s[0, 0]))
             for name, s in (("voigt", s_voigt), ("reuss", s_reuss))}
 
 
@@ -83,7 +196,7 @@ def slope(x: np.ndarray, y: np.ndarray) -> float:
 
 # ---------------------------------------------------------------- tension
 def tension_job(spec: TensionWorkflow, samples: Samples, crystal: dict, cubes: int, cube_nm: float, seed: int,
-                say, label: str) -> tuple[dict, Polycrystal]:
+                say, label: str) -> tuple[TensionRun, Polycrystal]:
     """One tension experiment: periodic along x, free sides; stress-strain and volume-strain."""
     t = spec.tension
     t0 = time.perf_counter()
@@ -129,15 +242,12 @@ def tension_job(spec: TensionWorkflow, samples: Samples, crystal: dict, cubes: i
     strain, sxx, vol = curve[:, 0], curve[:, 1], curve[:, 7]
     e_mod = slope(strain, sxx)
     nu = 0.5 * (1.0 - slope(strain, vol - 1.0))
-    job = {"cubes": cubes, "cube_nm": cube_nm, "seed": seed, "elements": mesh.elements, "edge_nm": length,
-           "method": t.method, "timestep_ps": dt, "damping_per_ps": gamma, "deform_steps": deform, "macro_steps": steps,
-           "evaluations": pc.evaluations, "youngs_modulus_GPa": e_mod, "poisson_ratio": nu,
-           "bounds_realised": realised_bounds(pc), "wall_s": time.perf_counter() - t0,
-           "curve_columns": ["strain", "sxx_GPa", "syy_GPa", "szz_GPa", "syz_GPa", "sxz_GPa", "sxy_GPa",
-                             "volume_ratio", "residual", "relax_steps", "sample_evaluations"],
-           "curve": curve.tolist()}
-    job["s_per_macro_step"] = job["wall_s"] / max(steps, 1) if t.method == "dynamic" else None
-    return job, pc
+    wall = time.perf_counter() - t0
+    return TensionRun(cubes, cube_nm, seed, mesh.elements, length, t.method, dt, gamma, deform, steps, pc.evaluations,
+                      e_mod, nu, realised_bounds(pc), wall,
+                      ["strain", "sxx_GPa", "syy_GPa", "szz_GPa", "syz_GPa", "sxz_GPa", "sxy_GPa", "volume_ratio",
+                       "residual", "relax_steps", "sample_evaluations"], curve.tolist(),
+                      wall / max(steps, 1) if t.method == "dynamic" else None), pc
 
 
 def _stretch(pc: Polycrystal, length: float) -> None:
@@ -167,33 +277,42 @@ def relaxation_comparison(samples: Samples, seed: int, force_tol: float, count: 
             "max_stress_GPa": float(np.abs(mini.evaluation.stress).max())}
 
 
+def tension_jobs(spec: TensionWorkflow) -> list[Job]:
+    """Each mesh x orientation seed as a job (``at``: its index in ``tension.cubes``, cubes, cube edge, seed)."""
+    t, jobs = spec.tension, []
+    for i, (n, h) in enumerate(zip(t.cubes, t.cube_nm)):
+        for seed in spec.samples.seeds:
+            job = experiment_job(spec, f"tension_{6 * n ** 3}el_{h:g}nm_seed{seed}",
+                                 tension=dataclasses.replace(t, cubes=[n], cube_nm=[h]),
+                                 samples=dataclasses.replace(spec.samples, seeds=[seed], lammps_check=0))
+            job.at = (i, n, h, seed)
+            jobs.append(job)
+    return jobs
+
+
 def run_tension(spec: TensionWorkflow, out: Path, say=print, resume: bool = False) -> dict:
     t0 = time.perf_counter()
     params, crystal, samples, bounds = setup(spec, out)
     t = spec.tension
     say(f"polycrystal tension with {spec.tersoff.potential}: a0 = {crystal['a0_A']:.5f} A, C11 {crystal['C11_GPa']:.1f}, "
-        f"C12 {crystal['C12_GPa']:.1f}, C44 {crystal['C44_GPa']:.1f} GPa; Voigt E {bounds['voigt']['E_GPa']:.1f}, "
-        f"Reuss E {bounds['reuss']['E_GPa']:.1f} GPa")
+        f"C12 {crystal['C12_GPa']:.1f}, C44 {crystal['C44_GPa']:.1f} GPa; Voigt E {bounds.voigt.E_GPa:.1f}, "
+        f"Reuss E {bounds.reuss.E_GPa:.1f} GPa")
     check = _lammps_check(spec, params, samples, out)
     relax_cmp = relaxation_comparison(samples, spec.samples.seeds[0], spec.samples.force_tol_eV_A)
     say(f"relaxation: minimize {relax_cmp['minimize_evaluations']} evaluations, damped MD {relax_cmp['md_steps']} "
         f"steps; stresses differ by {relax_cmp['max_stress_difference_GPa']:.1e} GPa")
-    jobs, last = [], {}
-    total = len(t.cubes) * len(spec.samples.seeds)
-    for i, (n, h) in enumerate(zip(t.cubes, t.cube_nm)):
-        for seed in spec.samples.seeds:
-            name = f"tension_{6 * n ** 3}el_{h:g}nm_seed{seed}"
-            path = out / "jobs" / f"{name}.json"
-            label = f"[{len(jobs) + 1}/{total}] {6 * n ** 3} elements, edge {n * h:g} nm, seed {seed}"
-            if resume and path.exists():
-                jobs.append(read_json(path, "a finished job of the run", REDO))
-                say(f"{label}: done before (resume)")
-                continue
-            say(f"{label}: {t.method}")
-            job, last[i] = tension_job(spec, samples, crystal, n, h, seed, say, label)
-            jobs.append(finished(path, job))
-            say(f"{label}: E = {job['youngs_modulus_GPa']:.2f} GPa, nu = {job['poisson_ratio']:.4f} "
-                f"({job['macro_steps']} macro steps, {job['evaluations']} sample evaluations, {job['wall_s']:.1f} s)")
+    todo, last = tension_jobs(spec), {}
+
+    def compute(job: Job) -> TensionRun:
+        i, n, h, seed = job.at
+        label = f"[{todo.index(job) + 1}/{len(todo)}] {6 * n ** 3} elements, edge {n * h:g} nm, seed {seed}"
+        say(f"{label}: {t.method}")
+        run, last[i] = tension_job(spec, samples, crystal, n, h, seed, say, label)
+        say(f"{label}: E = {run.youngs_modulus_GPa:.2f} GPa, nu = {run.poisson_ratio:.4f} ({run.macro_steps} macro "
+            f"steps, {run.evaluations} sample evaluations, {run.wall_s:.1f} s)")
+        return run
+
+    jobs = list(run_experiments(todo, out, resume, compute, TensionRun.from_dict, say).values())
     summary = _tension_summary(spec, jobs, bounds, check, relax_cmp, crystal, samples)
 
     def files(stage):
@@ -218,49 +337,42 @@ def _lammps_check(spec: PolycrystalWorkflow, params, samples: Samples, out: Path
     return compare_with_lammps(samples, params, out / "lammps_check", count=spec.samples.lammps_check)
 
 
-def _stats(values) -> dict:
-    v = np.asarray(values, dtype=float)
-    return {"mean": float(v.mean()), "std": float(v.std(ddof=1)) if len(v) > 1 else 0.0,
-            "min": float(v.min()), "max": float(v.max()), "n": len(v)}
-
-
-def _tension_summary(spec, jobs, bounds, check, relax_cmp, crystal, samples) -> dict:
-    groups = {}
+def _tension_summary(spec, jobs: list[TensionRun], bounds: Bounds, check, relax_cmp, crystal, samples) -> dict:
+    groups: dict[tuple, list[TensionRun]] = {}
     for j in jobs:
-        groups.setdefault((j["cubes"], j["cube_nm"]), []).append(j)
+        groups.setdefault((j.cubes, j.cube_nm), []).append(j)
     experiments = [{"elements": 6 * n ** 3, "cubes": n, "cube_nm": h, "edge_nm": n * h,
-                    "youngs_modulus_GPa": _stats([j["youngs_modulus_GPa"] for j in js]),
-                    "poisson_ratio": _stats([j["poisson_ratio"] for j in js]),
-                    "wall_s": _stats([j["wall_s"] for j in js]),
-                    "s_per_macro_step": _stats([j["s_per_macro_step"] for j in js]) if js[0]["s_per_macro_step"] else None,
-                    "inside_realised_bounds": all(j["bounds_realised"]["reuss"]["E_GPa"] <= j["youngs_modulus_GPa"]
-                                                  <= j["bounds_realised"]["voigt"]["E_GPa"] for j in js)}
+                    "youngs_modulus_GPa": Stats.of([j.youngs_modulus_GPa for j in js]),
+                    "poisson_ratio": Stats.of([j.poisson_ratio for j in js]),
+                    "wall_s": Stats.of([j.wall_s for j in js]),
+                    "s_per_macro_step": Stats.of([j.s_per_macro_step for j in js]) if js[0].s_per_macro_step else None,
+                    "inside_realised_bounds": all(j.bounds_realised["reuss"].E_GPa <= j.youngs_modulus_GPa
+                                                  <= j.bounds_realised["voigt"].E_GPa for j in js)}
                    for (n, h), js in groups.items()]
-    e_all = _stats([j["youngs_modulus_GPa"] for j in jobs])
-    nu_all = _stats([j["poisson_ratio"] for j in jobs])
-    e, nu = e_all["mean"], nu_all["mean"]
+    e_all, nu_all = Stats.of([j.youngs_modulus_GPa for j in jobs]), Stats.of([j.poisson_ratio for j in jobs])
+    e, nu = e_all.mean, nu_all.mean
     return {"youngs_modulus_GPa": e, "poisson_ratio": nu, "youngs_modulus": e_all, "poisson": nu_all,
             "experiments": experiments, "reference": REFERENCE | {"source": SOURCE},
             "error_vs_reference": {"youngs_modulus_relative": (e - REFERENCE["youngs_modulus_GPa"]) / 160.0,
                                    "poisson_ratio_absolute": nu - REFERENCE["poisson_ratio"]},
-            "bounds": bounds, "inside_bounds": bounds["reuss"]["E_GPa"] <= e <= bounds["voigt"]["E_GPa"],
+            "bounds": bounds, "inside_bounds": bounds.reuss.E_GPa <= e <= bounds.voigt.E_GPa,
             "single_crystal": crystal, "density_kg_m3": samples.density_kg_m3, "lammps_check": check,
             "relaxation_comparison": relax_cmp, "potential": spec.tersoff.potential, "method": spec.tension.method,
             "opalflow_version": __version__, "spec": spec.to_dict(),
-            "headline": (f"E = {e:.2f} +- {e_all['std']:.2f} GPa ({100 * (e - 160.0) / 160.0:+.1f} % of 160; Voigt "
-                         f"{bounds['voigt']['E_GPa']:.1f}, Reuss {bounds['reuss']['E_GPa']:.1f}), nu = {nu:.4f} +- "
-                         f"{nu_all['std']:.4f} (0.22), {len(jobs)} runs")}
+            "headline": (f"E = {e:.2f} +- {e_all.std:.2f} GPa ({100 * (e - 160.0) / 160.0:+.1f} % of 160; Voigt "
+                         f"{bounds.voigt.E_GPa:.1f}, Reuss {bounds.reuss.E_GPa:.1f}), nu = {nu:.4f} +- "
+                         f"{nu_all.std:.4f} (0.22), {len(jobs)} runs")}
 
 
-def _plot_curves(stress_path: Path, volume_path: Path, jobs: list[dict]) -> None:
+def _plot_curves(stress_path: Path, volume_path: Path, jobs: list[TensionRun]) -> None:
     for path, col, ylabel, ref in ((stress_path, 1, "sigma_xx (GPa)", lambda e: REFERENCE["youngs_modulus_GPa"] * e),
                                    (volume_path, 7, "V / V0 - 1", lambda e: (1 - 2 * REFERENCE["poisson_ratio"]) * e)):
         fig, ax = new_figure(figsize=(6, 4.5))
         for j in jobs:
-            c = np.array(j["curve"])
+            c = np.array(j.curve)
             ax.plot(c[:, 0] * 100, c[:, col] - (1.0 if col == 7 else 0.0), "o-", ms=3, lw=1,
-                    label=f"{j['elements']} el, {j['edge_nm']:g} nm, seed {j['seed']}")
-        e = np.linspace(0, max(np.array(j["curve"])[:, 0].max() for j in jobs), 20)
+                    label=f"{j.elements} el, {j.edge_nm:g} nm, seed {j.seed}")
+        e = np.linspace(0, max(np.array(j.curve)[:, 0].max() for j in jobs), 20)
         ax.plot(e * 100, ref(e), "k--", label="linear elasticity, E = 160 GPa, nu = 0.22 (seed 003)")
         ax.set_xlabel("strain (%)")
         ax.set_ylabel(ylabel)
@@ -270,37 +382,37 @@ def _plot_curves(stress_path: Path, volume_path: Path, jobs: list[dict]) -> None
         save_figure(fig, path)
 
 
-def _tension_h5(jobs: list[dict]) -> bytes:
+def _tension_h5(jobs: list[TensionRun]) -> bytes:
     units = ["1", "GPa", "GPa", "GPa", "GPa", "GPa", "GPa", "1", "1", "1", "1"]
 
     def write(h):
         for j in jobs:
-            g = h.create_group(f"tension_{j['elements']}el_{j['cube_nm']:g}nm_seed{j['seed']}")
-            d = g.create_dataset("curve", data=np.array(j["curve"]))
-            d.attrs["columns"] = j["curve_columns"]
+            g = h.create_group(f"tension_{j.elements}el_{j.cube_nm:g}nm_seed{j.seed}")
+            d = g.create_dataset("curve", data=np.array(j.curve))
+            d.attrs["columns"] = j.curve_columns
             d.attrs["units"] = units
             for key, unit in (("youngs_modulus_GPa", "GPa"), ("poisson_ratio", "1"), ("timestep_ps", "ps"),
                               ("wall_s", "s")):
-                s = g.create_dataset(key, data=j[key])
+                s = g.create_dataset(key, data=getattr(j, key))
                 s.attrs["units"] = unit
     return h5_bytes(write)
 
 
-def _bounds_rows(bounds: dict) -> list[str]:
+def _bounds_rows(bounds: Bounds) -> list[str]:
     rows = ["| average | E (GPa) | nu | G (GPa) | plate (m/s) | rod (m/s) | shear (m/s) |", "|---|---|---|---|---|---|---|"]
     for name in ("voigt", "hill", "reuss"):
-        b = bounds[name]
-        rows.append(f"| {name.capitalize()} | {b['E_GPa']:.2f} | {b['nu']:.4f} | {b['G_GPa']:.2f} | "
-                    f"{b['wave_speed_plate_m_s']:.0f} | {b['wave_speed_rod_m_s']:.0f} | {b['wave_speed_shear_m_s']:.0f} |")
+        b = getattr(bounds, name)
+        rows.append(f"| {name.capitalize()} | {b.E_GPa:.2f} | {b.nu:.4f} | {b.G_GPa:.2f} | "
+                    f"{b.wave_speed_plate_m_s:.0f} | {b.wave_speed_rod_m_s:.0f} | {b.wave_speed_shear_m_s:.0f} |")
     return rows
 
 
-def _crystal_lines(summary: dict, spec) -> list[str]:
+def _crystal_lines(summary: dict, spec, bounds: Bounds) -> list[str]:
     c = summary["single_crystal"]
     lines = [f"Potential `{spec.tersoff.potential}`: a0 = {c['a0_A']:.5f} A, C11 = {c['C11_GPa']:.2f}, C12 = "
              f"{c['C12_GPa']:.2f}, C44 = {c['C44_GPa']:.2f} GPa (relaxed; C44^0 = {c['C44_0_GPa']:.2f}), sample density "
              f"{summary['density_kg_m3']:.1f} kg/m^3. Isotropic averages of this single crystal (the polycrystal's "
-             "bounds) and the speeds they imply:", "", *_bounds_rows(summary["bounds"]), ""]
+             "bounds) and the speeds they imply:", "", *_bounds_rows(bounds), ""]
     chk = summary.get("lammps_check")
     if chk:
         lines += [f"Batched Tersoff (JAX) against LAMMPS `pair_style tersoff` on {chk['samples']} random samples "
@@ -310,9 +422,9 @@ def _crystal_lines(summary: dict, spec) -> list[str]:
     return lines
 
 
-def _tension_report(spec, summary: dict, jobs: list[dict]) -> str:
+def _tension_report(spec, summary: dict, jobs: list[TensionRun]) -> str:
     t, s = spec.tension, spec.samples
-    e, nu = summary["youngs_modulus"], summary["poisson"]
+    e, nu, bounds = summary["youngs_modulus"], summary["poisson"], summary["bounds"]
     rc = summary["relaxation_comparison"]
     lines = [f"# Polycrystal tension ({spec.name})", "",
              f"Cubes split into 6 tetrahedra, each with a 64-atom Tersoff sample in a uniformly random orientation; "
@@ -322,13 +434,13 @@ def _tension_report(spec, summary: dict, jobs: list[dict]) -> str:
                 if t.method == "dynamic" else f"(static: modified Newton to residual {t.residual_tol:g})")
              + f". Samples relaxed by {s.relaxation} to a largest atomic force of {s.force_tol_eV_A:g} eV/A. E = slope of "
              "the volume-averaged sigma_xx against strain; nu = (1 - dV/V0/d strain) / 2 (seed 003, Figs. 3-4).", "",
-             *_crystal_lines(summary, spec),
+             *_crystal_lines(summary, spec, bounds),
              "## Result", "",
              "| quantity | this run | reference (seed 003) | error |", "|---|---|---|---|",
-             f"| E (GPa) | {e['mean']:.2f} +- {e['std']:.2f} | 160 | {100 * (e['mean'] - 160) / 160:+.2f} % |",
-             f"| nu | {nu['mean']:.4f} +- {nu['std']:.4f} | 0.22 | {nu['mean'] - 0.22:+.4f} |", "",
+             f"| E (GPa) | {e.mean:.2f} +- {e.std:.2f} | 160 | {100 * (e.mean - 160) / 160:+.2f} % |",
+             f"| nu | {nu.mean:.4f} +- {nu.std:.4f} | 0.22 | {nu.mean - 0.22:+.4f} |", "",
              f"E lies {'inside' if summary['inside_bounds'] else 'OUTSIDE'} the isotropic Reuss-Voigt interval of the "
-             f"potential ({summary['bounds']['reuss']['E_GPa']:.2f} - {summary['bounds']['voigt']['E_GPa']:.2f} GPa). "
+             f"potential ({bounds.reuss.E_GPa:.2f} - {bounds.voigt.E_GPa:.2f} GPa). "
              "The reference is measured polycrystalline silicon; the model can only give what its potential's single "
              "crystal bounds, and with one grain per element (constant strain in each) it sits near the Voigt (uniform "
              "strain) side. A finite set of orientations has its own bounds (columns 'realised'): they differ from the "
@@ -337,18 +449,16 @@ def _tension_report(spec, summary: dict, jobs: list[dict]) -> str:
              "| elements | edge (nm) | seed | E (GPa) | nu | realised Reuss - Voigt E (GPa) | macro steps | sample "
              "evaluations | dt (ps) | wall (s) |", "|---|---|---|---|---|---|---|---|---|---|"]
     for j in jobs:
-        b = j["bounds_realised"]
-        lines.append(f"| {j['elements']} | {j['edge_nm']:g} | {j['seed']} | {j['youngs_modulus_GPa']:.2f} | "
-                     f"{j['poisson_ratio']:.4f} | {b['reuss']['E_GPa']:.2f} - {b['voigt']['E_GPa']:.2f} | "
-                     f"{j['macro_steps']} | {j['evaluations']} | {j['timestep_ps']:.4f} | {j['wall_s']:.1f} |")
+        b = j.bounds_realised
+        lines.append(f"| {j.elements} | {j.edge_nm:g} | {j.seed} | {j.youngs_modulus_GPa:.2f} | "
+                     f"{j.poisson_ratio:.4f} | {b['reuss'].E_GPa:.2f} - {b['voigt'].E_GPa:.2f} | "
+                     f"{j.macro_steps} | {j.evaluations} | {j.timestep_ps:.4f} | {j.wall_s:.1f} |")
     lines += ["", "| elements | edge (nm) | E (GPa) mean +- std | nu mean +- std | wall per run (s) | s per macro step |",
               "|---|---|---|---|---|---|"]
     for x in summary["experiments"]:
-        sp = x["s_per_macro_step"]
-        lines.append(f"| {x['elements']} | {x['edge_nm']:g} | {x['youngs_modulus_GPa']['mean']:.2f} +- "
-                     f"{x['youngs_modulus_GPa']['std']:.2f} | {x['poisson_ratio']['mean']:.4f} +- "
-                     f"{x['poisson_ratio']['std']:.4f} | {x['wall_s']['mean']:.1f} | "
-                     + (f"{sp['mean']:.3f} |" if sp else "- |"))
+        sp, ex, px = x["s_per_macro_step"], x["youngs_modulus_GPa"], x["poisson_ratio"]
+        lines.append(f"| {x['elements']} | {x['edge_nm']:g} | {ex.mean:.2f} +- {ex.std:.2f} | {px.mean:.4f} +- "
+                     f"{px.std:.4f} | {x['wall_s'].mean:.1f} | " + (f"{sp.mean:.3f} |" if sp else "- |"))
     lines += ["", "## Steady state of the samples (eq. 8): minimisation against damped MD", "",
               f"{rc['elements']} elements strained by {rc['strain_rms']:g} rms in random directions: preconditioned "
               f"Newton minimisation {rc['minimize_evaluations']} force evaluations ({rc['minimize_s']:.2f} s), damped "
@@ -365,7 +475,8 @@ WAVE_AXIS = {"plate": 2, "rod": 2, "shear": 0}          # velocity component the
 WAVE_KEY = {"plate": "wave_speed_plate_m_s", "rod": "wave_speed_rod_m_s", "shear": "wave_speed_shear_m_s"}
 
 
-def wave_job(spec: WavesWorkflow, samples: Samples, crystal: dict, bounds: dict, name: str, say) -> tuple[dict, Polycrystal]:
+def wave_job(spec: WavesWorkflow, samples: Samples, crystal: dict, bounds: Bounds, name: str,
+             say) -> tuple[WaveRun, Polycrystal]:
     """A piston on z = 0 drives the column; the front is where the section-averaged velocity reaches half the
     piston's.
 
@@ -383,7 +494,7 @@ def wave_job(spec: WavesWorkflow, samples: Samples, crystal: dict, bounds: dict,
                      spec.samples.relaxation, spec.samples.force_tol_eV_A)
     dt = pc.stable_timestep(w.timestep_safety)
     length = w.cubes[2] * w.cube_nm
-    slowest = bounds["reuss"][WAVE_KEY[name]] / M_PER_S * 0.95
+    slowest = bounds.reuss.of(name) / M_PER_S * 0.95
     steps = int(math.ceil(w.travel * length / slowest / dt))
     layer = np.rint(mesh.vertices[:, 2] / w.cube_nm).astype(int)
     counts = np.bincount(layer)
@@ -415,14 +526,10 @@ def wave_job(spec: WavesWorkflow, samples: Samples, crystal: dict, bounds: dict,
         raise RuntimeError(f"{name} wave: the front reached {int(np.isfinite(arrival).sum())} stations; too few to fit")
     coef, cov = np.polyfit(arrival[use], stations[use], 1, cov=True)
     speed = coef[0] * M_PER_S
-    job = {"experiment": name, "elements": mesh.elements, "cubes": list(w.cubes), "cube_nm": w.cube_nm,
-           "length_nm": length, "lateral": "periodic" if lateral else "free", "piston_m_s": w.piston_m_s,
-           "timestep_ps": dt, "macro_steps": steps, "evaluations": pc.evaluations, "speed_m_s": speed,
-           "speed_stderr_m_s": float(np.sqrt(cov[0, 0])) * M_PER_S, "stations_used": int(use.sum()),
-           "wall_s": time.perf_counter() - t0, "s_per_macro_step": (time.perf_counter() - t0) / steps,
-           "times_ps": times.tolist(), "stations_nm": stations.tolist(), "arrival_ps": arrival.tolist(),
-           "profile": profile.tolist()}
-    return job, pc
+    wall = time.perf_counter() - t0
+    return WaveRun(name, mesh.elements, list(w.cubes), w.cube_nm, length, "periodic" if lateral else "free",
+                   w.piston_m_s, dt, steps, pc.evaluations, speed, float(np.sqrt(cov[0, 0])) * M_PER_S, int(use.sum()),
+                   wall, wall / steps, times.tolist(), stations.tolist(), arrival.tolist(), profile.tolist()), pc
 
 
 def run_waves(spec: WavesWorkflow, out: Path, say=print, resume: bool = False) -> dict:
@@ -432,29 +539,31 @@ def run_waves(spec: WavesWorkflow, out: Path, say=print, resume: bool = False) -
     say(f"polycrystal waves with {spec.tersoff.potential}: {', '.join(w.experiments)} in a {w.cubes[0]}x{w.cubes[1]}x"
         f"{w.cubes[2]} column of cubes ({6 * int(np.prod(w.cubes))} elements), edge {w.cube_nm:g} nm")
     check = _lammps_check(spec, params, samples, out)
-    measured_path = out / "jobs" / "static_tension.json"
-    if resume and measured_path.exists():
-        measured = read_json(measured_path, "a finished job of the run", REDO)
-    else:
+    tension = TensionWorkflow(name="moduli", kind="polycrystal_tension", tersoff=spec.tersoff,
+                              samples=dataclasses.replace(spec.samples, seeds=[w.seed], lammps_check=0))
+    tension.tension = dataclasses.replace(tension.tension, method="static", cubes=[4], cube_nm=[w.cube_nm])
+
+    def measure(job: Job) -> Measured:
         say("E and nu of the same potential: static tension of 384 elements")
-        tension = TensionWorkflow(name="moduli", kind="polycrystal_tension", tersoff=spec.tersoff, samples=spec.samples)
-        tension.tension.method = "static"
-        job, _ = tension_job(tension, samples, crystal, 4, w.cube_nm, w.seed, say, "static tension")
-        measured = {"youngs_modulus_GPa": job["youngs_modulus_GPa"], "poisson_ratio": job["poisson_ratio"],
-                    "elements": job["elements"], "seed": w.seed, "wall_s": job["wall_s"]}
-        measured.update(speeds(measured["youngs_modulus_GPa"], measured["poisson_ratio"], samples.density_kg_m3))
-        finished(measured_path, measured)
-    jobs, states = [], {}
-    for name in w.experiments:
-        path = out / "jobs" / f"wave_{name}.json"
-        if resume and path.exists():
-            jobs.append(read_json(path, "a finished job of the run", REDO))
-            say(f"{name} wave: done before (resume)")
-            continue
-        job, states[name] = wave_job(spec, samples, crystal, bounds, name, say)
-        jobs.append(finished(path, job))
-        say(f"{name} wave: {job['speed_m_s']:.0f} +- {job['speed_stderr_m_s']:.0f} m/s ({job['macro_steps']} macro steps, "
-            f"{job['wall_s']:.1f} s)")
+        run, _ = tension_job(tension, samples, crystal, 4, w.cube_nm, w.seed, say, "static tension")
+        return Measured(**dataclasses.asdict(speeds(run.youngs_modulus_GPa, run.poisson_ratio, samples.density_kg_m3)),
+                        youngs_modulus_GPa=run.youngs_modulus_GPa, poisson_ratio=run.poisson_ratio,
+                        elements=run.elements, seed=w.seed, wall_s=run.wall_s)
+
+    measured = next(iter(run_experiments([experiment_job(tension, "static_tension")], out, resume, measure,
+                                         lambda raw: Measured(**raw), say).values()))
+    states = {}
+
+    def wave(job: Job) -> WaveRun:
+        name = job.spec.waves.experiments[0]
+        run, states[name] = wave_job(spec, samples, crystal, bounds, name, say)
+        say(f"{name} wave: {run.speed_m_s:.0f} +- {run.speed_stderr_m_s:.0f} m/s ({run.macro_steps} macro steps, "
+            f"{run.wall_s:.1f} s)")
+        return run
+
+    todo = [experiment_job(spec, f"wave_{name}", waves=dataclasses.replace(w, experiments=[name]),
+                           samples=dataclasses.replace(spec.samples, lammps_check=0)) for name in w.experiments]
+    jobs = list(run_experiments(todo, out, resume, wave, lambda raw: WaveRun(**raw), say).values())
     summary = _waves_summary(spec, jobs, bounds, measured, check, crystal, samples)
 
     def files(stage):
@@ -471,32 +580,31 @@ def run_waves(spec: WavesWorkflow, out: Path, say=print, resume: bool = False) -
     return finish(out, summary, lambda: _waves_report(spec, summary, jobs), files=files)
 
 
-def _waves_summary(spec, jobs, bounds, measured, check, crystal, samples) -> dict:
+def _waves_summary(spec, jobs: list[WaveRun], bounds: Bounds, measured: Measured, check, crystal, samples) -> dict:
     out = {"bounds": bounds, "measured_moduli": measured, "single_crystal": crystal, "density_kg_m3": samples.density_kg_m3,
            "lammps_check": check, "reference": REFERENCE | {"source": SOURCE}, "potential": spec.tersoff.potential,
            "opalflow_version": __version__, "spec": spec.to_dict(), "experiments": {}}
     parts = []
     for j in jobs:
-        key = WAVE_KEY[j["experiment"]]
-        ref, pred = REFERENCE[key], measured[key]
-        out[key] = j["speed_m_s"]
-        out["experiments"][j["experiment"]] = {k: v for k, v in j.items() if k not in ("times_ps", "profile", "arrival_ps",
-                                                                                        "stations_nm")} | {
-            "error_vs_reference": (j["speed_m_s"] - ref) / ref, "error_vs_measured_moduli": (j["speed_m_s"] - pred) / pred}
-        parts.append(f"{j['experiment']} {j['speed_m_s']:.0f} m/s ({100 * (j['speed_m_s'] - ref) / ref:+.1f} % of {ref:.0f})")
+        ref, pred = REFERENCE[WAVE_KEY[j.experiment]], measured.of(j.experiment)
+        out[WAVE_KEY[j.experiment]] = j.speed_m_s
+        out["experiments"][j.experiment] = {
+            k: v for k, v in dataclasses.asdict(j).items() if k not in ("times_ps", "profile", "arrival_ps", "stations_nm")
+        } | {"error_vs_reference": (j.speed_m_s - ref) / ref, "error_vs_measured_moduli": (j.speed_m_s - pred) / pred}
+        parts.append(f"{j.experiment} {j.speed_m_s:.0f} m/s ({100 * (j.speed_m_s - ref) / ref:+.1f} % of {ref:.0f})")
     out["headline"] = "; ".join(parts)
     return out
 
 
-def _plot_fronts(path: Path, jobs: list[dict]) -> None:
+def _plot_fronts(path: Path, jobs: list[WaveRun]) -> None:
     fig, ax = new_figure(figsize=(6.5, 4.5))
     for j, colour in zip(jobs, ("C0", "C1", "C2")):
-        arr, st = np.array(j["arrival_ps"]), np.array(j["stations_nm"])
+        arr, st = np.array(j.arrival_ps, dtype=float), np.array(j.stations_nm)
         ok = np.isfinite(arr)
-        ax.plot(arr[ok], st[ok], "o", ms=3, color=colour, label=f"{j['experiment']}: {j['speed_m_s']:.0f} m/s")
-        ref = REFERENCE[WAVE_KEY[j["experiment"]]]
+        ax.plot(arr[ok], st[ok], "o", ms=3, color=colour, label=f"{j.experiment}: {j.speed_m_s:.0f} m/s")
+        ref = REFERENCE[WAVE_KEY[j.experiment]]
         t = np.linspace(0, np.nanmax(arr), 10)
-        ax.plot(t, ref * t * 1e-3, "--", color=colour, lw=1, label=f"{j['experiment']} reference {ref:.0f} m/s")
+        ax.plot(t, ref * t * 1e-3, "--", color=colour, lw=1, label=f"{j.experiment} reference {ref:.0f} m/s")
     ax.set_xlabel("time (ps)")
     ax.set_ylabel("wavefront position z (nm)")
     ax.set_title("Wavefront (half the piston velocity) against time")
@@ -505,59 +613,57 @@ def _plot_fronts(path: Path, jobs: list[dict]) -> None:
     save_figure(fig, path)
 
 
-def _plot_profiles(path: Path, jobs: list[dict]) -> None:
+def _plot_profiles(path: Path, jobs: list[WaveRun]) -> None:
     fig, axes = new_figure(1, len(jobs), figsize=(4.2 * len(jobs), 3.8), squeeze=False)
     for ax, j in zip(axes[0], jobs):
-        prof, times, st = np.array(j["profile"]), np.array(j["times_ps"]), np.array(j["stations_nm"])
+        prof, times, st = np.array(j.profile), np.array(j.times_ps), np.array(j.stations_nm)
         for frac in (0.33, 0.66, 1.0):
             i = int(frac * (len(times) - 1))
             ax.plot(st, prof[i], label=f"t = {times[i]:.1f} ps")
-            ref = REFERENCE[WAVE_KEY[j["experiment"]]] * times[i] * 1e-3
+            ref = REFERENCE[WAVE_KEY[j.experiment]] * times[i] * 1e-3
             ax.axvline(ref, color=ax.lines[-1].get_color(), ls=":", lw=1)
         ax.set_xlabel("z (nm)")
         ax.set_ylabel("section velocity / piston velocity")
-        ax.set_title(f"{j['experiment']} ({j['lateral']} sides); dotted: reference front")
+        ax.set_title(f"{j.experiment} ({j.lateral} sides); dotted: reference front")
         ax.legend(fontsize=7)
         ax.grid(alpha=0.3)
     save_figure(fig, path)
 
 
-def _waves_h5(jobs: list[dict]) -> bytes:
+def _waves_h5(jobs: list[WaveRun]) -> bytes:
     def write(h):
         for j in jobs:
-            g = h.create_group(f"wave_{j['experiment']}")
+            g = h.create_group(f"wave_{j.experiment}")
             for key, unit in (("times_ps", "ps"), ("stations_nm", "nm"), ("arrival_ps", "ps"), ("speed_m_s", "m/s"),
                               ("speed_stderr_m_s", "m/s"), ("timestep_ps", "ps")):
-                d = g.create_dataset(key, data=np.asarray(j[key]))
+                d = g.create_dataset(key, data=np.asarray(getattr(j, key), dtype=float))
                 d.attrs["units"] = unit
-            d = g.create_dataset("profile", data=np.array(j["profile"]))
+            d = g.create_dataset("profile", data=np.array(j.profile))
             d.attrs["units"] = "1 (section-averaged velocity / piston velocity)"
-            d.attrs["columns"] = [f"z = {z:g} nm" for z in j["stations_nm"]]
+            d.attrs["columns"] = [f"z = {z:g} nm" for z in j.stations_nm]
     return h5_bytes(write)
 
 
-def _waves_report(spec, summary: dict, jobs: list[dict]) -> str:
+def _waves_report(spec, summary: dict, jobs: list[WaveRun]) -> str:
     w = spec.waves
-    m = summary["measured_moduli"]
+    m, b = summary["measured_moduli"], summary["bounds"]
     lines = [f"# Polycrystal waves ({spec.name})", "",
              f"A column of {w.cubes[0]} x {w.cubes[1]} x {w.cubes[2]} cubes of {w.cube_nm:g} nm "
              f"({6 * int(np.prod(w.cubes))} tetrahedra, 64-atom samples, orientation seed {w.seed}); a piston on z = 0 moves "
              f"at {w.piston_m_s:g} m/s from t = 0 (held). Velocity Verlet on the vertices, no damping. Front = where the "
              "section-averaged velocity reaches half the piston's; speed = least-squares slope of station position "
              f"against arrival time over {w.fit_range[0]:g}-{w.fit_range[1]:g} of the length.", "",
-             *_crystal_lines(summary, spec),
-             f"E and nu measured on the same potential (static tension, {m['elements']} elements, seed {m['seed']}): "
-             f"E = {m['youngs_modulus_GPa']:.2f} GPa, nu = {m['poisson_ratio']:.4f}; the speeds they imply are the "
+             *_crystal_lines(summary, spec, b),
+             f"E and nu measured on the same potential (static tension, {m.elements} elements, seed {m.seed}): "
+             f"E = {m.youngs_modulus_GPa:.2f} GPa, nu = {m.poisson_ratio:.4f}; the speeds they imply are the "
              "'from measured E, nu' column.", "",
              "| wave | sides | speed (m/s) | reference (seed 003) | error | from measured E, nu | error | Reuss - Voigt "
              "| macro steps | wall (s) |", "|---|---|---|---|---|---|---|---|---|---|"]
     for j in jobs:
-        key = WAVE_KEY[j["experiment"]]
-        ref, pred = REFERENCE[key], m[key]
-        b = summary["bounds"]
-        lines.append(f"| {j['experiment']} | {j['lateral']} | {j['speed_m_s']:.0f} +- {j['speed_stderr_m_s']:.0f} | {ref:.0f} | "
-                     f"{100 * (j['speed_m_s'] - ref) / ref:+.2f} % | {pred:.0f} | {100 * (j['speed_m_s'] - pred) / pred:+.2f} % | "
-                     f"{b['reuss'][key]:.0f} - {b['voigt'][key]:.0f} | {j['macro_steps']} | {j['wall_s']:.1f} |")
+        ref, pred, v = REFERENCE[WAVE_KEY[j.experiment]], m.of(j.experiment), j.speed_m_s
+        lines.append(f"| {j.experiment} | {j.lateral} | {v:.0f} +- {j.speed_stderr_m_s:.0f} | {ref:.0f} | "
+                     f"{100 * (v - ref) / ref:+.2f} % | {pred:.0f} | {100 * (v - pred) / pred:+.2f} % | "
+                     f"{b.reuss.of(j.experiment):.0f} - {b.voigt.of(j.experiment):.0f} | {j.macro_steps} | {j.wall_s:.1f} |")
     lines += ["", "The references are measured polycrystalline silicon; the speeds the potential can give are bounded by "
               "its Reuss and Voigt averages.", "", "![wavefront](wavefront.png)", "", "![profiles](profiles.png)", "",
               "![mesh](mesh.png)", "", f"Wall time {summary['wall_s']:.1f} s on this machine. opalflow {__version__}."]
