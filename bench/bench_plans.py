@@ -39,7 +39,7 @@ def case(name: str, diameter: float, sample: int) -> dict:
         extra = [*paper.study.paper_set, f"packing.diameter_nm={diameter:g}"]
         sets.append(f"study.paper_set={json.dumps(extra)}")
     spec = load_spec(WORKFLOWS / f"{name}.toml", sets)
-    p = plan(spec, sample=sample, say=lambda m: print(m, flush=True))
+    p = plan(spec, sample=sample, say=lambda m: print(m, flush=True)).as_dict()
     return {"study": name, "diameter_nm": diameter, "command": "python -m opalflow plan " + name + " " + " ".join(
         f"--set '{s}'" for s in sets), "jobs": len(p["jobs"]), "core_hours": p["core_hours"],
         "longest_job_s": p["longest_job_s"], "peak_GiB": p["peak_MiB"] / 1024,

@@ -63,8 +63,8 @@ class Kind:
         (``python -m opalflow check``); "" if none.
     scene : ``"module:attribute"`` of the :class:`opalflow.bpm.scene.Scene` that the compression
         pipeline builds the structure with; "" for kinds that are not bonded-particle scenes.
-    cost : ``"module:function"`` called as ``cost(spec)`` -> {method, n_particles, n_bonds, steps, ...}: what
-        ``python -m opalflow plan`` prices a run by (:mod:`opalflow.runs.plan`); "" if it has none.
+    cost : ``"module:function"`` called as ``cost(spec)`` -> :class:`opalflow.runs.plan.CostFacts` (method,
+        particles, bonds, steps, ...): what ``python -m opalflow plan`` prices a run by; "" if it has none.
     jobs : ``"module:function"`` called as ``jobs(spec)`` -> the :class:`opalflow.runs.jobs.Job` list a kind that
         runs many jobs would run (``python -m opalflow plan`` prices each); "" for a kind that is one run.
     options : the names in :data:`OPTIONS` it takes.

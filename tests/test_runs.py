@@ -303,8 +303,10 @@ def test_plan_prices_a_study_without_running_it(tmp_path, capsys, monkeypatch):
     from opalflow.registry import load_spec
 
     p = plan(load_spec(WORKFLOWS / "opal_quick.toml"), say=lambda m: None)
-    (job,) = p["jobs"]
-    assert job["method"] == "dynamic" and job["steps"] > 100 and job["wall_s"] > job["build_s"]
+    (job,) = p.jobs
+    assert job.facts.method == "dynamic" and job.facts.steps > 100 and job.prediction.wall_s > job.facts.build_s
+    row = p.as_dict()["jobs"][0]                   # plan's table: facts and prediction side by side
+    assert row["method"] == "dynamic" and row["wall_s"] == job.prediction.wall_s and row["label"] == job.label
     capsys.readouterr()
     assert main(["plan", "opal_quick", "--set", "compression.method=quasistatic",
                  "--set", "compression.event_tolerance=0.05"]) == 0
@@ -317,20 +319,22 @@ def test_plan_prices_a_study_without_running_it(tmp_path, capsys, monkeypatch):
 def test_a_quasistatic_job_is_priced_by_the_runs_measured_with_its_rule():
     """At a measured size the plan gives the measured run (bench/results/quasistatic_scale.json: the paper's
     sample with the paper's rule, 143 events; with LAMMPS's, 667); between two sizes it lies between them."""
-    from opalflow.runs.plan import QUASISTATIC, laws, predict
+    from opalflow.runs.plan import QUASISTATIC, CostFacts, laws, predict
 
     rows = [r for r in json.loads(QUASISTATIC.read_text())["rows"] if r["diameter_nm"] == 15.0 and r.get("complete")
             and r["tolerance"] == 0.05]
     law = laws()
-    facts = {"method": "quasistatic", "solver": "amg", "event_tolerance": 0.05, "build_s": 0.0}
     for rule, events in (("musen", 143), ("lammps", 667)):
         (run,) = [r for r in rows if r.get("breaking", "lammps") == rule]
-        paper = predict({**facts, "breaking": rule, "n_bonds": run["n_bonds"]}, law)
-        assert paper["wall_s"] == pytest.approx(run["wall_s"], rel=1e-6) and paper["events"] == run["events"] == events
-        assert paper["peak_MiB"] == pytest.approx(1024 * run["peak_memory_GiB"], rel=1e-6)
-        d30 = predict({**facts, "breaking": rule, "n_bonds": 1810179}, law)
-        d20 = predict({**facts, "breaking": rule, "n_bonds": 6_000_000}, law)
-        assert d30["wall_s"] < d20["wall_s"] < paper["wall_s"] and d30["events"] <= d20["events"] <= events
+
+        def facts(bonds):
+            return CostFacts("quasistatic", 0, bonds, solver="amg", breaking=rule, event_tolerance=0.05)
+
+        paper = predict(facts(run["n_bonds"]), law)
+        assert paper.wall_s == pytest.approx(run["wall_s"], rel=1e-6) and paper.events == run["events"] == events
+        assert paper.peak_MiB == pytest.approx(1024 * run["peak_memory_GiB"], rel=1e-6)
+        d30, d20 = predict(facts(1810179), law), predict(facts(6_000_000), law)
+        assert d30.wall_s < d20.wall_s < paper.wall_s and d30.events <= d20.events <= events
 
 
 def test_a_relative_out_folder(tmp_path, monkeypatch, capsys):

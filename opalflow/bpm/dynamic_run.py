@@ -68,20 +68,20 @@ LONG_RUN_S = 3600.0
 def long_run_estimate(spec: BpmWorkflow, deck: CompressionDeck, ranks: int = 1) -> str:
     """One line with the predicted wall time of a dynamic run longer than :data:`LONG_RUN_S` (the cost laws
     of :mod:`opalflow.runs.plan`, measured here by ``bench/bench_cost.py``), "" for a shorter one."""
-    from opalflow.runs.plan import LAWS, laws, predict
+    from opalflow.runs.plan import LAWS, CostFacts, laws, predict
 
     try:
         law = laws()
     except SpecError:              # no cost laws measured: nothing to say
         return ""
-    facts = {"method": "dynamic", "n_bonds": deck.structure.n_bonds, "steps": dynamic_steps(spec, deck),
-             "bond_model": spec.bonds.model, "build_s": 0.0}
-    wall = predict(facts, law, ranks)["wall_s"]
+    facts = CostFacts("dynamic", deck.structure.n_particles, deck.structure.n_bonds, bond_model=spec.bonds.model,
+                      steps=dynamic_steps(spec, deck))
+    wall = predict(facts, law, ranks).wall_s
     if wall < LONG_RUN_S:
         return ""
     when = f"{wall / 86400:.1f} days" if wall > 2 * 86400 else f"{wall / 3600:.1f} h"
-    return (f"estimate: this run takes about {when} here on {ranks} rank(s) ({facts['steps']} steps x "
-            f"{facts['n_bonds']} bonds; cost laws of {LAWS.name}, measured {law.get('date', '?')}); "
+    return (f"estimate: this run takes about {when} here on {ranks} rank(s) ({facts.steps} steps x "
+            f"{facts.n_bonds} bonds; cost laws of {LAWS.name}, measured {law.date or '?'}); "
             "compression.method = \"static\" gives E in minutes, \"quasistatic\" the strength without dynamics")
 
 

@@ -17,6 +17,7 @@ from opalflow.bpm import dynamic_run, quasistatic_run, static_run
 from opalflow.bpm.methods import METHODS
 from opalflow.bpm.scene import scene_of
 from opalflow.bpm.spec import BpmWorkflow
+from opalflow.runs.plan import CostFacts
 from opalflow.runs.record import RunRecord
 from opalflow.spec import SpecError
 
@@ -51,17 +52,15 @@ def run_workflow(spec: BpmWorkflow, out: Path, *, np_: int = 1, resume: bool = F
     return RUNNERS[method.name].run(spec, out, say=say, **{o: values[o] for o in method.options})
 
 
-def cost_facts(spec: BpmWorkflow) -> dict:
+def cost_facts(spec: BpmWorkflow) -> CostFacts:
     """What :mod:`opalflow.runs.plan` prices a run by: its method and what the method adds (a dynamic run's
     steps, a solve's solver), particles, bonds, and the seconds the structure took to build here.  Writes
     nothing."""
     method = spec.compression.method
     t = time.perf_counter()
     s = scene_of(spec).structure(spec)
-    facts = {"method": method, "n_particles": s.n_particles, "n_bonds": s.n_bonds, "bond_model": spec.bonds.model,
-             **RUNNERS[method].price(spec, s)}
-    facts["build_s"] = time.perf_counter() - t
-    return facts
+    return CostFacts(method, s.n_particles, s.n_bonds, bond_model=spec.bonds.model, **RUNNERS[method].price(spec, s),
+                     build_s=time.perf_counter() - t)
 
 
 def resumable(out: Path) -> bool:

@@ -23,8 +23,10 @@ finished run or study beside the predicted ones.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from opalflow import registry
@@ -41,7 +43,136 @@ QUASISTATIC = ROOT / "bench" / "results" / "quasistatic_scale.json"
 MARGIN = 1.5
 
 
-def laws() -> dict:
+@dataclass
+class MemoryLaw:
+    """Peak memory = m0 + m1 * bonds (MiB)."""
+
+    m0_MiB: float
+    m1_MiB: float
+
+    def at(self, bonds: float) -> float:
+        return self.m0_MiB + self.m1_MiB * bonds
+
+
+@dataclass
+class SolverLaw(MemoryLaw):
+    """A static solver: solve seconds = c * bonds^p, its memory as :class:`MemoryLaw`."""
+
+    c: float = 0.0
+    p: float = 0.0
+
+
+@dataclass
+class StaticRest:
+    """The static solve's outputs: rest_s0 + rest_s_per_bond * bonds seconds."""
+
+    rest_s0: float
+    rest_s_per_bond: float
+
+
+@dataclass
+class DynamicLaw:
+    """A LAMMPS run: seconds per bond and step (bpm/rotational; bpm/spring ``spring_factor`` times cheaper), the
+    start and the analysis, and the MPI efficiency."""
+
+    s_per_bond_step: float
+    lammps_start_s: float
+    rest_s: float
+    spring_factor: float
+    mpi_efficiency: float
+
+
+@dataclass
+class MeasuredRun:
+    """A whole quasi-static run measured (bench/results/quasistatic_scale.json), the fastest at its size."""
+
+    bonds: int
+    wall_s: float
+    events: int
+    diameter_nm: float
+    peak_MiB: float | None
+
+
+@dataclass
+class CostLaws:
+    """The cost laws of this kind of machine (bench/bench_cost.py, bench/bench_static.py, the quasi-static runs)."""
+
+    date: str
+    machine: dict
+    static: StaticRest
+    static_memory: MemoryLaw
+    dynamic: DynamicLaw
+    dynamic_memory: MemoryLaw
+    solvers: dict[str, SolverLaw] = field(default_factory=dict)
+    #: "breaking rule, event tolerance" -> the measured runs, by size
+    quasistatic: dict[str, list[MeasuredRun]] = field(default_factory=dict)
+
+
+@dataclass
+class CostFacts:
+    """What a job is priced by (a kind's ``cost`` hook): its method, size and what the method adds, and the
+    seconds its structure took to build here."""
+
+    method: str
+    n_particles: int
+    n_bonds: int
+    build_s: float = 0.0
+    bond_model: str = "parallel"
+    steps: int | None = None               # a dynamic run's time steps
+    solver: str | None = None              # a solve's solver
+    breaking: str | None = None            # a quasi-static run's rule and event tolerance
+    event_tolerance: float | None = None
+
+
+@dataclass
+class Prediction:
+    wall_s: float
+    core_s: float
+    peak_MiB: float
+    priced_by: str | None = None           # "measured runs": a quasi-static job priced by whole runs
+    events: int | None = None
+
+
+@dataclass
+class Measured:
+    """What a finished job of ``--measured DIR`` took (None: not known)."""
+
+    wall_s: float | None
+    peak_MiB: float | None
+
+
+@dataclass
+class PlanRow:
+    label: str
+    built: bool                            # its structure built (else interpolated between the built ones)
+    facts: CostFacts
+    prediction: Prediction
+    measured: Measured | None = None
+
+    def as_dict(self) -> dict:
+        """The row as one table (facts and prediction side by side), as ``plan``'s JSON gives it."""
+        row = {"label": self.label, "built": self.built, **dataclasses.asdict(self.facts),
+               **{k: v for k, v in dataclasses.asdict(self.prediction).items() if v is not None}}
+        return row | ({"measured": dataclasses.asdict(self.measured)} if self.measured else {})
+
+
+@dataclass
+class Plan:
+    workflow: str
+    kind: str
+    jobs: list[PlanRow]
+    core_hours: float
+    longest_job_s: float
+    peak_MiB: float
+    slurm: dict
+    machine: dict
+    laws_measured: str
+
+    def as_dict(self) -> dict:
+        return {**dataclasses.asdict(self), "jobs": [r.as_dict() for r in self.jobs]}
+
+
+def laws() -> CostLaws:
     """The cost laws (bench/bench_cost.py) with the static solvers' laws (bench/bench_static.py): per solver,
     solve seconds = c * bonds^p and solver memory = m0 + m1 * bonds, fitted to the measured rows."""
     import numpy as np
@@ -49,34 +180,34 @@ def laws() -> dict:
     for path, bench in ((LAWS, "bench_cost.py"), (SOLVERS, "bench_static.py")):
         if not path.exists():
             raise SpecError("plan", str(path), f"no cost laws measured yet: run python bench/{bench}")
-    law = json.loads(LAWS.read_text())
+    raw = json.loads(LAWS.read_text())
+    law = CostLaws(raw.get("date", ""), raw.get("machine", {}), StaticRest(**raw["static"]),
+                   MemoryLaw(**raw["static_memory"]), DynamicLaw(**raw["dynamic"]), MemoryLaw(**raw["dynamic_memory"]))
     rows = json.loads(SOLVERS.read_text())["rows"]
-    law["solvers"] = {}
     for solver in sorted({r["solver"] for r in rows}):
         mine = [r for r in rows if r["solver"] == solver]
         b = np.array([r["n_bonds"] for r in mine], float)
         p, logc = np.polyfit(np.log(b), np.log([r["total_s"] for r in mine]), 1)
         m1, m0 = np.polyfit(b, [1024 * r["peak_memory_GiB"] for r in mine], 1)
-        law["solvers"][solver] = {"c": float(np.exp(logc)), "p": float(p), "m0_MiB": float(m0), "m1_MiB": float(m1)}
-    law["quasistatic"] = quasistatic_runs()
+        law.solvers[solver] = SolverLaw(float(m0), float(m1), float(np.exp(logc)), float(p))
+    law.quasistatic = quasistatic_runs()
     return law
 
 
-def quasistatic_runs() -> dict[str, list[dict]]:
-    """"breaking rule, event tolerance" -> the fastest complete quasi-static run at each size (bonds, wall_s,
-    peak_MiB, events, diameter_nm), from bench/results/quasistatic_scale.json (none: {})."""
+def quasistatic_runs() -> dict[str, list[MeasuredRun]]:
+    """"breaking rule, event tolerance" -> the fastest complete quasi-static run at each size, from
+    bench/results/quasistatic_scale.json (none: {})."""
     if not QUASISTATIC.exists():
         return {}
-    best: dict[tuple, dict] = {}
+    best: dict[tuple, MeasuredRun] = {}
     for r in json.loads(QUASISTATIC.read_text())["rows"]:
         if not r.get("complete") or not r.get("wall_s"):
             continue
         key = (f"{r.get('breaking', 'lammps')}, {r['tolerance']:g}", r["n_bonds"])
-        if key not in best or r["wall_s"] < best[key]["wall_s"]:
-            best[key] = {"bonds": r["n_bonds"], "wall_s": r["wall_s"], "events": r["events"],
-                         "diameter_nm": r["diameter_nm"],
-                         "peak_MiB": 1024 * r["peak_memory_GiB"] if r.get("peak_memory_GiB") else None}
-    runs: dict[str, list[dict]] = {}
+        if key not in best or r["wall_s"] < best[key].wall_s:
+            best[key] = MeasuredRun(r["n_bonds"], r["wall_s"], r["events"], r["diameter_nm"],
+                                    1024 * r["peak_memory_GiB"] if r.get("peak_memory_GiB") else None)
+    runs: dict[str, list[MeasuredRun]] = {}
     for (setting, _), row in sorted(best.items(), key=lambda kv: kv[0][1]):
         runs.setdefault(setting, []).append(row)
     return runs
@@ -102,31 +233,35 @@ def jobs_of(spec) -> list[Job]:
     return registry.resolve(kind.jobs)(spec) if kind.jobs else [Job(spec.name, spec)]
 
 
-def predict(facts: dict, law: dict, ranks: int = 1) -> dict:
+def predict(facts: CostFacts, law: CostLaws, ranks: int = 1) -> Prediction:
     """Wall seconds, core-seconds and peak memory (MiB) of one job with these facts: the build as timed by
     the plan, plus the solve (static: the solver's law) or the time steps (dynamic), plus the outputs."""
-    bonds = max(facts["n_bonds"], 1)
-    if facts["method"] in ("static", "quasistatic"):      # quasistatic: its first solve, unless measured runs
-        sv, st = law["solvers"][facts["solver"]], law["static"]
-        wall = facts["build_s"] + sv["c"] * bonds ** sv["p"] + st["rest_s0"] + st["rest_s_per_bond"] * bonds
-        mem = law["static_memory"]["m0_MiB"] + (law["static_memory"]["m1_MiB"] * bonds if facts["solver"] == "amg"
-                                                 else sv["m0_MiB"] + sv["m1_MiB"] * bonds)
-        runs = law.get("quasistatic", {}).get(f"{facts.get('breaking')}, {facts.get('event_tolerance', 0):g}")
-        if facts["method"] == "quasistatic" and runs:
-            sizes = [r["bonds"] for r in runs]
-            wall = facts["build_s"] + _loglog(bonds, sizes, [r["wall_s"] for r in runs])
-            with_memory = [r for r in runs if r["peak_MiB"]]
-            if with_memory:
-                mem = _loglog(bonds, [r["bonds"] for r in with_memory], [r["peak_MiB"] for r in with_memory])
-            return {"wall_s": wall, "core_s": wall * ranks, "peak_MiB": mem, "priced_by": "measured runs",
-                    "events": max(1, round(_loglog(bonds, sizes, [r["events"] for r in runs])))}
-    else:
-        dyn = law["dynamic"]
-        per_bond = dyn["s_per_bond_step"] / (dyn["spring_factor"] if facts.get("bond_model") == "spring" else 1.0)
-        lammps = facts["steps"] * bonds * per_bond / (ranks * dyn["mpi_efficiency"] if ranks > 1 else 1.0)
-        wall = facts["build_s"] + dyn["lammps_start_s"] + lammps + dyn["rest_s"]
-        mem = law["dynamic_memory"]["m0_MiB"] + law["dynamic_memory"]["m1_MiB"] * bonds
-    return {"wall_s": wall, "core_s": wall * ranks, "peak_MiB": mem}
+    bonds = max(facts.n_bonds, 1)
+    if facts.method not in ("static", "quasistatic"):
+        dyn = law.dynamic
+        per_bond = dyn.s_per_bond_step / (dyn.spring_factor if facts.bond_model == "spring" else 1.0)
+        lammps = facts.steps * bonds * per_bond / (ranks * dyn.mpi_efficiency if ranks > 1 else 1.0)
+        wall = facts.build_s + dyn.lammps_start_s + lammps + dyn.rest_s
+        return Prediction(wall, wall * ranks, law.dynamic_memory.at(bonds))
+    runs = law.quasistatic.get(f"{facts.breaking}, {facts.event_tolerance or 0:g}")
+    if facts.method == "quasistatic" and runs:          # whole runs measured with its rule and tolerance
+        sizes = [r.bonds for r in runs]
+        wall = facts.build_s + _loglog(bonds, sizes, [r.wall_s for r in runs])
+        with_memory = [r for r in runs if r.peak_MiB]
+        mem = (_loglog(bonds, [r.bonds for r in with_memory], [r.peak_MiB for r in with_memory]) if with_memory
+               else _solve_memory(facts, law, bonds))
+        return Prediction(wall, wall * ranks, mem, "measured runs",
+                          max(1, round(_loglog(bonds, sizes, [r.events for r in runs]))))
+    sv, st = law.solvers[facts.solver], law.static          # a solve (quasi-static: its first, a lower bound)
+    wall = facts.build_s + sv.c * bonds ** sv.p + st.rest_s0 + st.rest_s_per_bond * bonds
+    return Prediction(wall, wall * ranks, _solve_memory(facts, law, bonds))
+
+
+def _solve_memory(facts: CostFacts, law: CostLaws, bonds: int) -> float:
+    """A solve's peak memory: the static method's law, with AMG's own per bond or the solver's."""
+    if facts.solver == "amg":
+        return law.static_memory.at(bonds)
+    return law.static_memory.m0_MiB + law.solvers[facts.solver].at(bonds)
 
 
 def _sample(n: int, k: int) -> list[int]:
@@ -135,7 +270,7 @@ def _sample(n: int, k: int) -> list[int]:
     return sorted({round(i * (n - 1) / (k - 1)) for i in range(k)}) if k > 1 else [0]
 
 
-def _between(costs: dict[int, dict], i: int) -> dict:
+def _between(costs: dict[int, CostFacts], i: int) -> CostFacts:
     """The facts of job ``i``: its own where it was built, else interpolated in the job's index between the
     built jobs on either side (a study's jobs run along its parameter), the nearest one beyond the ends."""
     if i in costs:
@@ -145,17 +280,17 @@ def _between(costs: dict[int, dict], i: int) -> dict:
     if lo is None or hi is None:
         return costs[lo if hi is None else hi]
     w = (i - lo) / (hi - lo)
-    out = dict(costs[lo])
-    for key, a in costs[lo].items():
-        b = costs[hi].get(key)
+    out = dataclasses.replace(costs[lo])
+    for f in dataclasses.fields(out):
+        a, b = getattr(costs[lo], f.name), getattr(costs[hi], f.name)
         if isinstance(a, (int, float)) and not isinstance(a, bool) and isinstance(b, (int, float)):
-            out[key] = type(a)(a + w * (b - a)) if isinstance(a, float) else round(a + w * (b - a))
-    if out["method"] == "static" and costs[lo].get("solver") != costs[hi].get("solver"):
-        out["solver"] = costs[lo if w < 0.5 else hi]["solver"]
+            setattr(out, f.name, type(a)(a + w * (b - a)) if isinstance(a, float) else round(a + w * (b - a)))
+    if out.method == "static" and costs[lo].solver != costs[hi].solver:
+        out.solver = costs[lo if w < 0.5 else hi].solver
     return out
 
 
-def measured(folder: Path, label: str, single: bool) -> dict | None:
+def measured(folder: Path, label: str, single: bool) -> Measured | None:
     job = folder if single else next(iter(sorted(folder.glob(f"jobs/{label}-*"))), None)
     if job is None:
         return None
@@ -163,12 +298,11 @@ def measured(folder: Path, label: str, single: bool) -> dict | None:
     if not s or s.get("state") == "built":
         return None
     rec = job_record(job)
-    wall, peak = s.get("wall_s"), rec.peak_rss_MiB if rec is not None else None
     number = lambda x: x if isinstance(x, (int, float)) and not isinstance(x, bool) and x >= 0 else None  # noqa: E731
-    return {"wall_s": number(wall), "peak_MiB": number(peak)}
+    return Measured(number(s.get("wall_s")), number(rec.peak_rss_MiB if rec is not None else None))
 
 
-def plan(spec, *, ranks: int = 1, sample: int = 3, against: Path | None = None, say=print) -> dict:
+def plan(spec, *, ranks: int = 1, sample: int = 3, against: Path | None = None, say=print) -> Plan:
     """Price the jobs of ``spec`` (``sample`` of a study's jobs are built, spread from the first to the last;
     the others are interpolated between them) and return rows and totals."""
     if isinstance(sample, bool) or not isinstance(sample, int) or sample < 0:
@@ -180,61 +314,55 @@ def plan(spec, *, ranks: int = 1, sample: int = 3, against: Path | None = None, 
     jobs = jobs_of(spec)
     if not jobs:
         raise SpecError("workflow", spec.name, "has no jobs to plan")
-    costs = {}
     for j in jobs:
-        k = registry.get(j.spec.kind)
-        if not k.cost:
+        if not registry.get(j.spec.kind).cost:
             raise SpecError("kind", j.spec.kind, "has no cost model yet (plan prices bonded-particle runs)")
-    picked = _sample(len(jobs), sample)
-    for i in picked:
+    costs = {}
+    for i in _sample(len(jobs), sample):
         say(f"plan: building {jobs[i].label} ({i + 1}/{len(jobs)}) for its size")
         costs[i] = registry.resolve(registry.get(jobs[i].spec.kind).cost)(jobs[i].spec)
     rows = []
     for i, j in enumerate(jobs):
         facts = _between(costs, i)
-        row = {"label": j.label, "built": i in costs, **facts, **predict(facts, law, ranks)}
-        if against is not None:
-            row["measured"] = measured(Path(against), j.label, single="executor" not in kind.options)
-        rows.append(row)
-    total_core_h = sum(r["core_s"] for r in rows) / 3600
-    longest = max(r["wall_s"] for r in rows)
-    peak = max(r["peak_MiB"] for r in rows)
+        rows.append(PlanRow(j.label, i in costs, facts, predict(facts, law, ranks),
+                            None if against is None else measured(Path(against), j.label,
+                                                                  single="executor" not in kind.options)))
+    longest = max(r.prediction.wall_s for r in rows)
+    peak = max(r.prediction.peak_MiB for r in rows)
     slurm = {"ntasks": ranks, "mem": f"{math.ceil(MARGIN * peak / 1024)}G",
              "time_min": max(1, math.ceil(MARGIN * longest / 60)), "array": f"0-{len(rows) - 1}"}
-    return {"workflow": spec.name, "kind": spec.kind, "jobs": rows, "core_hours": total_core_h,
-            "longest_job_s": longest, "peak_MiB": peak, "slurm": slurm, "machine": law.get("machine", {}),
-            "laws_measured": law.get("date", "")}
+    return Plan(spec.name, spec.kind, rows, sum(r.prediction.core_s for r in rows) / 3600, longest, peak, slurm,
+                law.machine, law.date)
 
 
-def plan_lines(p: dict) -> list[str]:
-    lines = [f"plan {p['workflow']} ({p['kind']}, {len(p['jobs'])} job(s); cost laws of {LAWS.name}, measured "
-             f"{p['laws_measured']} on {p['machine'].get('cpus', '?')} cores)",
+def plan_lines(p: Plan) -> list[str]:
+    lines = [f"plan {p.workflow} ({p.kind}, {len(p.jobs)} job(s); cost laws of {LAWS.name}, measured "
+             f"{p.laws_measured} on {p.machine.get('cpus', '?')} cores)",
              f"  {'job':<22} {'method':<11} {'particles':>10} {'bonds':>11} {'steps':>8} {'wall (s)':>10} "
-             f"{'core-s':>10} {'memory':>10}" + ("   measured wall / memory" if any("measured" in r for r in p["jobs"])
-                                                 else "")]
-    for r in p["jobs"]:
-        m = r.get("measured")
+             f"{'core-s':>10} {'memory':>10}" + ("   measured wall / memory" if any(r.measured for r in p.jobs) else "")]
+    for r in p.jobs:
+        f, pr, m = r.facts, r.prediction, r.measured
         meas = ""
         if m:
-            err = f" ({100 * (r['wall_s'] / m['wall_s'] - 1):+.0f} %)" if m.get("wall_s") else ""
-            mem = (f"{m['peak_MiB']:.0f} MiB ({100 * (r['peak_MiB'] / m['peak_MiB'] - 1):+.0f} %)"
-                   if m.get("peak_MiB") else "-")
-            meas = f"   {m['wall_s']:.1f} s{err} / {mem}" if m.get("wall_s") else "   -"
-        lines.append(f"  {r['label']:<22} {r['method']:<11} {r['n_particles']:>10} {r['n_bonds']:>11} "
-                     f"{r.get('steps', '-'):>8} {r['wall_s']:>10.1f} {r['core_s']:>10.1f} "
-                     f"{r['peak_MiB'] / 1024:>8.2f} GiB{'' if r['built'] else ' ~'}{meas}")
-    s = p["slurm"]
-    lines += [f"total: {p['core_hours']:.3g} core-hours; longest job {p['longest_job_s']:.0f} s "
-              f"({p['longest_job_s'] / 3600:.2f} h); peak memory {p['peak_MiB'] / 1024:.2f} GiB per job "
+            err = f" ({100 * (pr.wall_s / m.wall_s - 1):+.0f} %)" if m.wall_s else ""
+            mem = f"{m.peak_MiB:.0f} MiB ({100 * (pr.peak_MiB / m.peak_MiB - 1):+.0f} %)" if m.peak_MiB else "-"
+            meas = f"   {m.wall_s:.1f} s{err} / {mem}" if m.wall_s else "   -"
+        lines.append(f"  {r.label:<22} {f.method:<11} {f.n_particles:>10} {f.n_bonds:>11} "
+                     f"{f.steps if f.steps is not None else '-':>8} {pr.wall_s:>10.1f} {pr.core_s:>10.1f} "
+                     f"{pr.peak_MiB / 1024:>8.2f} GiB{'' if r.built else ' ~'}{meas}")
+    s = p.slurm
+    lines += [f"total: {p.core_hours:.3g} core-hours; longest job {p.longest_job_s:.0f} s "
+              f"({p.longest_job_s / 3600:.2f} h); peak memory {p.peak_MiB / 1024:.2f} GiB per job "
               "(~: job interpolated between built ones)",
               f"SLURM (x{MARGIN} margin): --array={s['array']} --ntasks={s['ntasks']} --mem={s['mem']} "
               f"--time={s['time_min']}  ([executor] type = \"slurm\", mem_gb, time_min)"]
-    if any(r["method"] == "quasistatic" and r.get("priced_by") for r in p["jobs"]):
-        events = [r["events"] for r in p["jobs"] if "events" in r]
+    quasistatic = [r for r in p.jobs if r.facts.method == "quasistatic"]
+    if any(r.prediction.priced_by for r in quasistatic):
+        events = [r.prediction.events for r in quasistatic if r.prediction.events]
         lines.append("quasistatic jobs are priced by the whole runs measured with their breaking rule and event "
                      f"tolerance ({QUASISTATIC.name}: the standard sample's events, {min(events)}-{max(events)} "
                      "here; a study's pores or coatings change how many events a run takes)")
-    if any(r["method"] == "quasistatic" and not r.get("priced_by") for r in p["jobs"]):
+    if any(not r.prediction.priced_by for r in quasistatic):
         lines.append("quasistatic jobs are priced as their first solve, a lower bound: each broken bond costs a "
                      "re-solve and their number is not known before the run")
     return lines
