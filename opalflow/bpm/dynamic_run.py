@@ -204,7 +204,7 @@ def analyze(out: Path, started: float | None = None, lammps_s: float | None = No
         solid_fraction=sample.solid_fraction, bond_stiffness_error_max=sample.bond_stiffness_error_max,
         timestep_estimate_s=sample.timestep_estimate_s, build_timings_s=sample.build_timings_s,
         statistics=sample.statistics or {}, rate_check=rate_check)
-    result.headline = report.headline(result.summary(), run.references, breakable)
+    result.headline = report.headline(result, run.references, breakable)
     result.refer(run.references)
     if not result.complete:
         result.headline = f"INCOMPLETE run (stopped at step {result.steps} of {sample.steps}): {result.headline}"

@@ -830,12 +830,23 @@ def _intact(m: int, events: list[Event]) -> np.ndarray:
     return alive
 
 
-def summary_of(res: FractureResult) -> dict:
+@dataclass
+class PeakFacts:
+    """What a fracture run came to: E of the first branch, the strength and its strain (nan: no event), the
+    events and the bonds broken in all and before the peak."""
+
+    youngs_modulus_GPa: float
+    strength_MPa: float
+    strain_at_peak: float
+    events: int
+    broken_bonds: int
+    broken_bonds_at_peak: int
+
+
+def peak_facts(res: FractureResult) -> PeakFacts:
     """Strength, strain at peak, E of the first branch and the event counts."""
     if not res.events:
-        return {"youngs_modulus_GPa": res.modulus_MPa / 1e3, "strength_MPa": math.nan, "strain_at_peak": math.nan,
-                "events": 0, "broken_bonds": 0}
+        return PeakFacts(res.modulus_MPa / 1e3, math.nan, math.nan, 0, 0, 0)
     p = res.peak
-    return {"youngs_modulus_GPa": res.modulus_MPa / 1e3, "strength_MPa": res.events[p].stress_MPa,
-            "strain_at_peak": res.events[p].strain, "events": len(res.events),
-            "broken_bonds": int((~res.alive).sum()), "broken_bonds_at_peak": sum(len(e.bonds) for e in res.events[:p])}
+    return PeakFacts(res.modulus_MPa / 1e3, res.events[p].stress_MPa, res.events[p].strain, len(res.events),
+                     int((~res.alive).sum()), sum(len(e.bonds) for e in res.events[:p]))

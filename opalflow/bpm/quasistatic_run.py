@@ -23,12 +23,12 @@ from opalflow.bpm.deck import particle_material
 from opalflow.bpm.facts import RunFacts
 from opalflow.bpm.loading import LOADINGS
 from opalflow.materials import contact_properties
-from opalflow.bpm.quasistatic import CHECKS, Event, Stopped, Strengths, solve_fracture, summary_of
+from opalflow.bpm.quasistatic import CHECKS, Event, Stopped, Strengths, peak_facts, solve_fracture
 from opalflow.bpm.scene import scene_of
 from opalflow.bpm.spec import BREAKING_RULES, BpmWorkflow
 from opalflow.bpm.methods import METHODS
 from opalflow.bpm.report import network_inputs, plots_line, sample_lines, structure_cost
-from opalflow.bpm.result import CompressionResult
+from opalflow.bpm.result import CompressionResult, EventFacts
 from opalflow.bpm.static_run import network_run, particle_stress
 from opalflow.bpm.stiffness import per_bond
 from opalflow.runs.record import finish
@@ -125,36 +125,36 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
         raise Interrupted(out, None) from None
     finally:
         written.result()                         # data.lmp, written while the events ran, is whole
-    got = summary_of(res)
+    got = peak_facts(res)
     materials = np.array(sample.bins.materials)[data.bond_types - 1]
     broken = ~res.alive
     by_material = {m: int(np.sum(broken & (materials == m))) for m in sorted(set(sample.bins.materials))}
-    E = got["youngs_modulus_GPa"]
+    E = got.youngs_modulus_GPa
     result = CompressionResult.of(
         spec.kind, run.sample.structure or {}, workflow=spec.name, method="quasistatic", loading=loading.name,
         youngs_modulus_GPa=E, youngs_modulus_specimen_GPa=E,
-        strength_MPa=got["strength_MPa"], strain_at_peak=got["strain_at_peak"],
-        broken_bonds=got["broken_bonds"], broken_bonds_by_material=by_material,
-        broken_bonds_at_peak=got.get("broken_bonds_at_peak", 0),
+        strength_MPa=got.strength_MPa, strain_at_peak=got.strain_at_peak,
+        broken_bonds=got.broken_bonds, broken_bonds_by_material=by_material,
+        broken_bonds_at_peak=got.broken_bonds_at_peak,
         broken_bonds_by_check=broken_by_check(res, sample, spec.bonds.breaking, peak_only=False),
         broken_bonds_by_check_at_peak=broken_by_check(res, sample, spec.bonds.breaking, peak_only=True),
         n_particles=s.n_particles, n_bonds=s.n_bonds, solid_fraction=run.sample.solid_fraction,
-        build_s=run.sample.build_s, quasistatic=_event_facts(spec, res, got["events"], contacts),
-        headline=f"E = {E:.4g} GPa, strength = {got['strength_MPa']:.4g} MPa (strain at peak "
-                 f"{got['strain_at_peak']:.4f}; quasi-static, {got['events']} events, {got['broken_bonds']} "
-                 f"bonds broken)" if got["events"] else
+        build_s=run.sample.build_s, quasistatic=_event_facts(spec, res, got.events, contacts),
+        headline=f"E = {E:.4g} GPa, strength = {got.strength_MPa:.4g} MPa (strain at peak "
+                 f"{got.strain_at_peak:.4f}; quasi-static, {got.events} events, {got.broken_bonds} "
+                 f"bonds broken)" if got.events else
                  f"E = {E:.4g} GPa, no strength: no bond reached its limit up to strain {c.strain_max:g} "
                  "(quasi-static)",
     ).refer(run.references)
     summary = result.summary()
-    record.sessions[-1].last_step = got["events"]
+    record.sessions[-1].last_step = got.events
     plots = METHODS["quasistatic"].draws_plots(c.plots)
 
     def files(stage):
         stage(RESULTS).write_bytes(h5_bytes(lambda h: _fill_h5(h, res, data, result, sample, run,
                                                                           spec.bonds.breaking)))
         if plots:
-            _plot_curve(stage("stress_strain.png"), res, summary)
+            _plot_curve(stage("stress_strain.png"), res, result)
         frames = _frames(net, data, res)
         if frames and plots:
             fracture.plot_fracture(stage("fracture.png"), frames, data.box_lengths, float(np.mean(data.diameters)),
@@ -179,22 +179,20 @@ def resumed_state(out: Path, say) -> dict:
     return state
 
 
-def _event_facts(spec: BpmWorkflow, res, events: int, contacts) -> dict:
+def _event_facts(spec: BpmWorkflow, res, events: int, contacts) -> EventFacts:
     """summary.json's ``quasistatic``: how the events went (where they stopped, the re-solves, the local steps,
     the contacts) and what they cost."""
     c = spec.compression
-    return {"events": events, "stopped": res.stopped, "resolver": res.resolver,
-            "tolerance": c.event_tolerance, "setup_s": round(res.setup_seconds, 3),
-            "events_s": round(res.seconds - res.setup_seconds, 3),
-            "factorizations": res.factorizations,
-            "cg_iterations": int(sum(e.iterations for e in res.events)) if res.resolver != "direct" else 0,
-            "local_rtol": c.local_rtol, "settled_locally": int(sum(e.settled for e in res.events)),
-            "loose_particles": res.loose,
-            "contacts": spec.contacts.quasistatic,
-            "contact_pairs": len(contacts.bond) if contacts else 0,
-            "contacts_pressing_at_peak": res.events[max(res.peak - 1, 0)].contacts if res.events else 0,
-            "contacts_pressing_at_end": res.events[-1].contacts if res.events else 0,
-            "peak_memory_MiB": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
+    return EventFacts(
+        events=events, stopped=res.stopped, resolver=res.resolver, tolerance=c.event_tolerance,
+        setup_s=round(res.setup_seconds, 3), events_s=round(res.seconds - res.setup_seconds, 3),
+        factorizations=res.factorizations,
+        cg_iterations=int(sum(e.iterations for e in res.events)) if res.resolver != "direct" else 0,
+        local_rtol=c.local_rtol, settled_locally=int(sum(e.settled for e in res.events)), loose_particles=res.loose,
+        contacts=spec.contacts.quasistatic, contact_pairs=len(contacts.bond) if contacts else 0,
+        contacts_pressing_at_peak=res.events[max(res.peak - 1, 0)].contacts if res.events else 0,
+        contacts_pressing_at_end=res.events[-1].contacts if res.events else 0,
+        peak_memory_MiB=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0)
 
 
 def _length_bins(sample) -> tuple[np.ndarray, list[str]]:
@@ -300,7 +298,7 @@ def _fill_h5(h, res, data, result, sample, run: RunFacts, rule: str) -> None:
     put(g, "position_nm", data.positions, "nm", ["x", "y", "z"])
 
 
-def _plot_curve(path: Path, res, summary) -> None:
+def _plot_curve(path: Path, res, result: CompressionResult) -> None:
     fig, ax = new_figure()
     pts = [(0.0, 0.0)]
     for e in res.events:
@@ -310,17 +308,17 @@ def _plot_curve(path: Path, res, summary) -> None:
     ax.plot([e.strain for e in res.events], [e.stress_MPa for e in res.events], ".", ms=4, color="C0",
             label="events (the envelope)")
     if res.events:
-        ax.plot([summary["strain_at_peak"]], [summary["strength_MPa"]], "o", color="C3",
-                label=f"strength {summary['strength_MPa']:.3g} MPa")
+        ax.plot([result.strain_at_peak], [result.strength_MPa], "o", color="C3",
+                label=f"strength {result.strength_MPa:.3g} MPa")
     ax.set_xlabel("strain")
     ax.set_ylabel("stress (MPa)")
     ax.legend()
     save_figure(fig, path)
 
 
-def _check_table(summary) -> list[str]:
-    """Which check broke the bonds, by length bin, before the peak and in all (the summary's counts)."""
-    peak, total = summary["broken_bonds_by_check_at_peak"], summary["broken_bonds_by_check"]
+def _check_table(result: CompressionResult) -> list[str]:
+    """Which check broke the bonds, by length bin, before the peak and in all (the result's counts)."""
+    peak, total = result.broken_bonds_by_check_at_peak, result.broken_bonds_by_check
     names = [name for name in total]
     labels = sorted({label for counts in total.values() for label in counts},
                     key=lambda label: (label.split(" ")[0], label.split(" ")[-1]))
@@ -333,30 +331,29 @@ def _check_table(summary) -> list[str]:
     return lines
 
 
-def _report(run: RunFacts, summary, result, loading, sample, plots: bool) -> str:
-    spec, facts = run.spec, run.sample
-    q = summary["quasistatic"]
+def _report(run: RunFacts, summary: dict, result: CompressionResult, loading, sample, plots: bool) -> str:
+    """report.md; ``summary`` as written (its ``wall_s``, set as the files are written)."""
+    spec, facts, q = run.spec, run.sample, result.quasistatic
     lines = [f"# {spec.name}: quasi-static {loading.title}", "",
              f"{facts.n_particles} particles, {facts.n_bonds} bonds; the bond network linearised from LAMMPS's "
              f"bpm/rotational, bonds broken one event at a time by {BREAKING_RULES[spec.bonds.breaking]} at full "
              f"load (as `smooth no`; opalflow/bpm/quasistatic.py); {loading.held_text(facts.top_layer_particles)}.",
              "",
              *sample_lines(facts), *network_inputs(run, sample), "## Results", "",
-             *([f"Contacts (`contacts.quasistatic = \"{q['contacts']}\"`, opalflow/bpm/contacts.py): "
-                f"{q['contact_pairs']} touching pairs, linear Hertz-Mindlin springs at "
+             *([f"Contacts (`contacts.quasistatic = \"{q.contacts}\"`, opalflow/bpm/contacts.py): "
+                f"{q.contact_pairs} touching pairs, linear Hertz-Mindlin springs at "
                 f"{100 * spec.contacts.reference_strain:g} % overlap, in compression only; pressing just before the "
-                f"peak: {q['contacts_pressing_at_peak']}, at the end: {q['contacts_pressing_at_end']}.", ""]
-               if q["contacts"] != "off" else []),
+                f"peak: {q.contacts_pressing_at_peak}, at the end: {q.contacts_pressing_at_end}.", ""]
+               if q.contacts != "off" else []),
              *result.results_table(float(sample.structure.diameters.mean()))]
-    lines += ["", f"{q['events']} events, {summary['broken_bonds']} bonds broken "
-              f"({', '.join(f'{m}: {k}' for m, k in summary['broken_bonds_by_material'].items())}), "
-              f"{summary['broken_bonds_at_peak']} before the peak; stopped: {q['stopped']}.", "",
-              *_check_table(summary), "",
-              f"Re-solves `{q['resolver']}`: set-up {q['setup_s']:.1f} s, events {q['events_s']:.1f} s, "
-              f"{q['factorizations']} factorisations" + (f", {q['cg_iterations']} CG iterations" if q["cg_iterations"]
-                                                         else "")
-              + (f"; {q['settled_locally']} events settled by the local step alone (local_rtol {q['local_rtol']:g})"
-                 if q["local_rtol"] else "")
+    lines += ["", f"{q.events} events, {result.broken_bonds} bonds broken "
+              f"({', '.join(f'{m}: {k}' for m, k in result.broken_bonds_by_material.items())}), "
+              f"{result.broken_bonds_at_peak} before the peak; stopped: {q.stopped}.", "",
+              *_check_table(result), "",
+              f"Re-solves `{q.resolver}`: set-up {q.setup_s:.1f} s, events {q.events_s:.1f} s, "
+              f"{q.factorizations} factorisations" + (f", {q.cg_iterations} CG iterations" if q.cg_iterations else "")
+              + (f"; {q.settled_locally} events settled by the local step alone (local_rtol {q.local_rtol:g})"
+                 if q.local_rtol else "")
               + f"; {structure_cost(facts)}; wall {summary['wall_s']:.1f} s.", "",
               plots_line(plots, "stress_strain.png, fracture.png", spec.compression.plots) + f" Data: {RESULTS} "
               f"(group `quasistatic`), fracture.peak.dump and fracture.end.dump (OVITO), {SUMMARY}."]

@@ -25,17 +25,17 @@ def reference_errors(summary: dict, references: dict) -> dict:
     return {k: {"value": v, "source": src, "error": (summary[k] - v) / v}
             for k, (v, src) in references.items() if summary.get(k) is not None}
 
-def headline(summary: dict, references: dict, breakable: bool) -> str:
-    """The one line ``run`` prints: the modulus the scene's reference is about (the top layer's where only that
-    one has a reference: the lattice's analytic E excludes the plate's Hertz settling) and, with breakable
-    bonds, the strength and its strain."""
+def headline(result, references: dict, breakable: bool) -> str:
+    """The one line ``run`` prints of a dynamic run's ``result``: the modulus the scene's reference is about (the
+    top layer's where only that one has a reference: the lattice's analytic E excludes the plate's Hertz
+    settling) and, with breakable bonds, the strength and its strain."""
     specimen = "youngs_modulus_specimen_GPa" in references and "youngs_modulus_GPa" not in references
-    E = summary["youngs_modulus_specimen_GPa" if specimen else "youngs_modulus_GPa"]
+    E = result.youngs_modulus_specimen_GPa if specimen else result.youngs_modulus_GPa
     line = f"E{' (top-layer strain)' if specimen else ''} = {E:.4g} GPa"
     if not breakable:
         return f"{line} (bonds unbreakable: no strength)"
-    strain = summary["strain_at_peak_specimen" if specimen else "strain_at_peak"]
-    return f"{line}, strength = {summary['strength_MPa']:.4g} MPa (strain at peak {strain:.4f})"
+    strain = result.strain_at_peak_specimen if specimen else result.strain_at_peak
+    return f"{line}, strength = {result.strength_MPa:.4g} MPa (strain at peak {strain:.4f})"
 
 
 #: an error beyond this (relative) gets its reason said where one is known
@@ -87,7 +87,7 @@ def sample_lines(sample: SampleFacts) -> list[str]:
     return lines + [f"Stress on {stress_area(sample)}.", ""]
 
 
-def _inputs(run: RunFacts, summary: dict) -> list[str]:
+def _inputs(run: RunFacts, result) -> list[str]:
     spec, sample = run.spec, run.sample
     c, b = spec.compression, spec.bonds
     box = sample.box_nm
@@ -126,8 +126,8 @@ def _inputs(run: RunFacts, summary: dict) -> list[str]:
                  f" between unbonded particles" if contacts.enabled else "none (bonds only)"))
     rows.append(("loading", f"{c.loading} at {sample.plate_speed_m_s:g} m/s to strain {c.strain_max:g}; "
                  f"snapshots at {', '.join(f'{e:g}' for e in c.snapshot_strains) or 'none'}"))
-    ran = (f"{sample.steps} steps, the curve's last row at step {summary['steps']}" if summary["complete"] else
-           f"stopped at step {summary['steps']} of {sample.steps}")
+    ran = (f"{sample.steps} steps, the curve's last row at step {result.steps}" if result.complete else
+           f"stopped at step {result.steps} of {sample.steps}")
     estimate = sample.timestep_estimate_s
     rows.append(("time step", f"{sample.timestep_s:.3g} s ({ran}; stability limit {estimate['limit']:.3g} s, "
                  f"stiffest: {estimate['stiffest_mode']}); global damping {c.global_damping:g}"))
@@ -152,24 +152,24 @@ def _session_row(k: int, x: dict) -> str:
 
 
 def compression_report(run: RunFacts, summary: dict, result, fit, fracture: bool, plots: bool = True) -> str:
-    """The text of report.md (sections :data:`SECTIONS`) of a dynamic run: ``summary`` as written (with its wall
-    time), ``result`` its :class:`opalflow.bpm.result.CompressionResult` (the Results table); ``plots``: the
-    figures were drawn (``compression.plots``)."""
+    """The text of report.md (sections :data:`SECTIONS`) of a dynamic run: ``result`` its
+    :class:`opalflow.bpm.result.CompressionResult`, ``summary`` as written (its wall time, set as the files are
+    written); ``plots``: the figures were drawn (``compression.plots``)."""
     spec, sample = run.spec, run.sample
     lines = [f"# {run.workflow}: {LOADINGS[result.loading].title}", ""]
-    if not summary["complete"]:
+    if not result.complete:
         c = spec.compression
-        lines += [f"**Incomplete run**: the output stops at step {summary['steps']} of {sample.steps} "
-                  f"(strain {summary['steps'] / sample.steps * c.strain_max:.4f} of {c.strain_max:g}); the "
+        lines += [f"**Incomplete run**: the output stops at step {result.steps} of {sample.steps} "
+                  f"(strain {result.steps / sample.steps * c.strain_max:.4f} of {c.strain_max:g}); the "
                   "figures below cover only that part. `python -m opalflow run --out DIR --resume` continues it "
                   "from its newest restart file.", ""]
-    lines += _inputs(run, summary)
+    lines += _inputs(run, result)
     lines += ["## Results", "", *result.results_table(sample.mean_diameter_nm)]
     lines += ["", f"Elastic window: strain {fit.window[0]:.4f} - {fit.window[1]:.4f}, R^2 = {fit.r2:.5f} "
               f"({fit.points} points). Bond stiffness error from {spec.bonds.length_bins} length bins: max "
-              f"{100 * summary['bond_stiffness_error_max']:.2f} %."]
-    if "rate_check" in summary:
-        rc = summary["rate_check"]
+              f"{100 * result.bond_stiffness_error_max:.2f} %."]
+    if result.rate_check is not None:
+        rc = result.rate_check
         strength = ("" if rc["strength_change"] is None
                     else f", strength by {100 * rc['strength_change']:+.2f} %")
         lines += ["", f"Rate check (half plate speed): E changes by {100 * rc['youngs_modulus_change']:+.2f} %"
@@ -179,7 +179,7 @@ def compression_report(run: RunFacts, summary: dict, result, fit, fracture: bool
         lines += [plots_line(False, "stress_strain.png, stress_hist.png, bond_strain.png, fracture.png",
                              spec.compression.plots), ""]
     lines += ["## Particle stresses", ""]
-    table = mech.stress_table(summary["stress_by_material"])
+    table = mech.stress_table(result.stress_by_material)
     lines += (table + [""] + (["Histograms at every snapshot (rows), mean +- std per material in the legends:", "",
                                *figure(True, "particle stresses", "stress_hist.png"),
                                "Bond strains (Fig. 7 format; bins from the data):", "",
@@ -196,18 +196,18 @@ def compression_report(run: RunFacts, summary: dict, result, fit, fracture: bool
               "- `snapshots/particles.STEP.dump`: LAMMPS dumps (id, type, x y z, image flags, radius, sigma_xx ... "
               "sigma_yz in MPa, broken_bonds) that OVITO opens as they are; `snapshots/bonds.STEP.txt`: bond lengths.",
               ""]
-    sessions = summary.get("sessions", [])
+    sessions = result.sessions or []
     if summary.get("wall_s") is None:
         cost = "run outside opalflow (analyze only)"
     else:
-        done = summary["steps"] - (sessions[-1]["first_step"] if sessions else 0)
-        cost = (f"this session: wall {summary['wall_s']:.1f} s, of which LAMMPS {summary['lammps_s']:.1f} s, steps "
-                f"{sessions[-1]['first_step'] if sessions else 0}-{summary['steps']} ({done} steps)")
-    lines += ["## Cost", "", f"{cost}; {summary['steps']} steps in all of {sample.timestep_s:.3g} s for "
+        first = sessions[-1]["first_step"] if sessions else 0
+        cost = (f"this session: wall {summary['wall_s']:.1f} s, of which LAMMPS {result.lammps_s:.1f} s, steps "
+                f"{first}-{result.steps} ({result.steps - first} steps)")
+    lines += ["## Cost", "", f"{cost}; {result.steps} steps in all of {sample.timestep_s:.3g} s for "
               f"{sample.n_particles} particles and {sample.n_bonds} bonds; structure built in "
               f"{sample.build_s:.1f} s.", ""]
-    if len(sessions) > 1 or summary.get("requeues"):
-        lines += [f"Sessions ({len(sessions)}; SLURM requeues: {summary.get('requeues', 0)}):", "",
+    if len(sessions) > 1 or result.requeues:
+        lines += [f"Sessions ({len(sessions)}; SLURM requeues: {result.requeues or 0}):", "",
                   "| # | started | launcher | continued from | steps | wall (s) | ended |", "|---|---|---|---|---|---|---|"]
         lines += [_session_row(k, x) for k, x in enumerate(sessions, 1)]
         lines.append("")

@@ -10,12 +10,12 @@ of a run opalflow drove).  The scene's statistics (porosity, density, ...) are a
 from __future__ import annotations
 
 import dataclasses
-import json
 from dataclasses import dataclass, field
 
 from opalflow import registry
 from opalflow.bpm.report import provenance_group, reference_errors, why
 from opalflow.runs.result import Result, key
+from opalflow.store import json_text
 from opalflow.version import __version__
 
 DYNAMIC, STATIC, QUASISTATIC, TENSOR = "dynamic", "static", "quasistatic", "tensor"
@@ -25,6 +25,29 @@ SOLVED = (STATIC, TENSOR)                         # one linear solve
 EVERY_CASE = (*LOADED, TENSOR)
 #: the strength's name by loading (bending: the flexural stress 3FL / (2bh^2) at the peak, ASTM D790)
 STRENGTH = {"plate": "compressive", "glued": "compressive", "tension": "tensile", "bending": "flexural"}
+
+
+@dataclass
+class EventFacts:
+    """How a quasi-static run's events went (summary.json's ``quasistatic``): where they stopped, the re-solves,
+    the local steps, the contacts, and what they cost."""
+
+    events: int
+    stopped: str
+    resolver: str
+    tolerance: float
+    setup_s: float
+    events_s: float
+    factorizations: int
+    cg_iterations: int
+    local_rtol: float
+    settled_locally: int
+    loose_particles: int
+    contacts: str
+    contact_pairs: int
+    contacts_pressing_at_peak: int
+    contacts_pressing_at_end: int
+    peak_memory_MiB: float
 
 
 @dataclass
@@ -68,7 +91,7 @@ class CompressionResult(Result):
     loose_particles_left_out: int = key(*SOLVED)
     energy_split: dict = key(STATIC)              # bonds' strain energy by mode (BondNetwork.energy_parts)
     bond_strain_per_strain: dict = key(STATIC)
-    quasistatic: dict = key(QUASISTATIC)         # the events: where they stopped, re-solves, contacts, cost
+    quasistatic: EventFacts = key(QUASISTATIC)   # the events: where they stopped, re-solves, contacts, cost
     # the periodic tensor (opalflow.analysis.elasticity)
     stiffness_tensor_GPa: list = key(TENSOR)
     voigt_order: str = key(TENSOR, default="xx yy zz yz xz xy")
@@ -121,6 +144,14 @@ class CompressionResult(Result):
         out = super().summary()
         return {**out, **{k: v for k, v in self.statistics.items() if k not in out}}
 
+    @classmethod
+    def from_summary(cls, summary: dict) -> CompressionResult:
+        """The result a summary.json holds (the quasi-static events' facts as :class:`EventFacts`)."""
+        out = super().from_summary(summary)
+        if isinstance(out.quasistatic, dict):
+            out.quasistatic = EventFacts(**out.quasistatic)
+        return out
+
     def rest(self, keys: dict) -> None:
         """Read back: summary.json's keys that no field declares are the scene's statistics (and the run's state)."""
         self.statistics.update(keys)
@@ -135,7 +166,7 @@ class CompressionResult(Result):
         run's facts, :class:`opalflow.bpm.facts.RunFacts`)."""
         h.attrs["method"] = self.method
         h.attrs["youngs_modulus_GPa"] = self.youngs_modulus_GPa
-        h.attrs["summary"] = json.dumps(self.summary(), default=float)
+        h.attrs["summary"] = json_text(self.summary())
         provenance_group(h, run)
 
     def results_table(self, diameter_nm: float) -> list[str]:

@@ -221,14 +221,14 @@ def _report(run: RunFacts, summary: dict, result, res: StaticResult, sides: str,
              "the reference state and bonds do not break: no strength.", "", *sample_lines(facts),
              *network_inputs(run, sample), "## Results", "",
              *result.results_table(float(sample.structure.diameters.mean()))]
-    if summary.get("energy_split"):
+    if result.energy_split:
         lines += ["", "Strain energy of the bonds by mode: " + ", ".join(
-            f"{k} {100 * v:.1f} %" for k, v in summary["energy_split"].items()) + " (BondNetwork.energy_parts)."]
+            f"{k} {100 * v:.1f} %" for k, v in result.energy_split.items()) + " (BondNetwork.energy_parts)."]
     lines += ["", f"Solver `{res.solver}`: {res.iterations} iterations to relative residual {res.residual:.1e}; "
               f"set-up {res.setup_seconds:.1f} s, iterations {res.seconds - res.setup_seconds:.1f} s, peak memory "
               f"{res.peak_memory_MiB:.0f} MiB; "
               f"{structure_cost(facts)}; wall {summary['wall_s']:.1f} s.", ""]
-    lines += mech.stress_table(summary["stress_by_material"], digits=2)
+    lines += mech.stress_table(result.stress_by_material, digits=2)
     lines += ["", plots_line(plots, "displacement.png, stress_hist.png, bond_strain.png", spec.compression.plots)
               + f" Data: {RESULTS} (group `static`), {SUMMARY}."]
     return "\n".join(lines) + "\n"
@@ -275,13 +275,13 @@ def run_tensor(spec: BpmWorkflow, s, out: Path, t0: float, say=print) -> dict:
              "| | " + " | ".join(names) + " |", "|---|" + "---|" * 6]
     lines += [f"| {names[r]} | " + " | ".join(f"{C[r, k]:.4g}" for k in range(6)) + " |" for r in range(6)]
     lines += ["", f"Young's moduli x / y / z: {E[0]:.4g} / {E[1]:.4g} / {E[2]:.4g} GPa; Poisson ratio zx "
-              f"{summary['poisson_ratio_zx']:.4f}; bulk modulus (Reuss) {summary['bulk_modulus_GPa']:.4g} GPa.", "",
+              f"{result.poisson_ratio_zx:.4f}; bulk modulus (Reuss) {result.bulk_modulus_GPa:.4g} GPa.", "",
               "Isotropic averages (opalflow/analysis/elasticity.py: Voigt, Reuss, Hill; universal anisotropy index "
               f"A^U = {iso['anisotropy_index']:.3g}, 0 for an isotropic tensor):", "",
               "| average | K (GPa) | G (GPa) | E (GPa) | nu |", "|---|---|---|---|---|",
               *(f"| {k} | {iso[k]['K']:.4g} | {iso[k]['G']:.4g} | {iso[k]['E']:.4g} | {iso[k]['nu']:.4f} |"
                 for k in ("voigt", "reuss", "hill")), ""]
-    for k, r in summary["reference"].items():
+    for k, r in result.reference.items():
         lines.append(f"Reference {k}: {r['value']:.6g} ({r['source']}); error {100 * r['error']:+.4f} %.")
     lines += ["", f"Solver `{res.solver}`: iterations per loading {res.iterations}, worst relative residual "
               f"{res.residual:.1e}; {res.seconds:.1f} s, peak memory {res.peak_memory_MiB:.0f} MiB."]
