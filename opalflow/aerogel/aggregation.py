@@ -631,6 +631,27 @@ def place_grid(r: np.ndarray, box: float, rng: np.random.Generator) -> np.ndarra
     return (ijk + 0.5) * a + (rng.random((n, 3)) - 0.5) * room
 
 
+def _initial_placement(r: np.ndarray, box: float, nc: int, phi: float, rng, random_placement_max: float):
+    """The spheres' first positions and their cell lists (head, next, previous, cell of each): random sequential
+    addition up to ``random_placement_max``, random slots of a cubic grid above it (the kernel's random state
+    seeded before)."""
+    n = len(r)
+    head = np.full(nc**3, -1, np.int64)
+    nxt = np.full(n, -1, np.int64)
+    prv = np.full(n, -1, np.int64)
+    cell_of = np.zeros(n, np.int64)
+    pos = np.zeros((n, 3))
+    if phi <= random_placement_max:
+        placed = _place_random(r, box, nc, head, nxt, prv, cell_of, pos, 100_000)
+        if placed < n:
+            raise ValueError(f"only {placed} of {n} spheres found room at solid fraction {phi:.3g}")
+        return pos, (head, nxt, prv, cell_of), "random sequential addition"
+    pos = place_grid(r, box, rng)
+    for i in range(n):
+        _insert(i, _cell(pos[i], box, nc), head, nxt, prv, cell_of)
+    return pos, (head, nxt, prv, cell_of), "random slots of a cubic grid"
+
+
 def aggregate(diameters: np.ndarray, box: float, *, seed: int, step_fraction: float = 0.5,
               mobility_exponent: float = -0.5, sticking_probability: float = 1.0, stepping: str = "fixed",
               jump_min: float = 4.0, restructure: bool = False, progress=None, chunk_moves: int = 20_000,
@@ -655,21 +676,7 @@ def aggregate(diameters: np.ndarray, box: float, *, seed: int, step_fraction: fl
         raise ValueError(f"box {box:.4g} nm is too small: fewer than 3 cells of {step0 + diameters.max():.4g} nm")
     rng = np.random.default_rng(seed)
     _seed(int(rng.integers(2**31)))
-    head = np.full(nc**3, -1, np.int64)
-    nxt = np.full(n, -1, np.int64)
-    prv = np.full(n, -1, np.int64)
-    cell_of = np.zeros(n, np.int64)
-    pos = np.zeros((n, 3))
-    placement = "random sequential addition"
-    if phi <= random_placement_max:
-        placed = _place_random(r, box, nc, head, nxt, prv, cell_of, pos, 100_000)
-        if placed < n:
-            raise ValueError(f"only {placed} of {n} spheres found room at solid fraction {phi:.3g}")
-    else:
-        placement = "random slots of a cubic grid"
-        pos = place_grid(r, box, rng)
-        for i in range(n):
-            _insert(i, _cell(pos[i], box, nc), head, nxt, prv, cell_of)
+    pos, (head, nxt, prv, cell_of), placement = _initial_placement(r, box, nc, phi, rng, random_placement_max)
     upos = pos.copy()
     cl = np.arange(n, dtype=np.int64)
     chead = np.arange(n, dtype=np.int64)

@@ -644,14 +644,7 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
 
     x, force, stress_unit, its, b_norm = loaded.solve(loaded.x_p.copy())
     modulus = float(state["modulus_MPa"]) if state else stress_unit
-    peak = int(np.argmax([e.stress_MPa for e in events])) if events else 0
-    peak_stress = events[peak].stress_MPa if events else 0.0
-    peak_alive = _intact(m, events[:peak]) if events else None
-    # the displacements just before the peak event, as the state kept them (``peak_event``: the event they
-    # precede; an event cut short by Ctrl-C may have set them without being kept)
-    peak_x = (np.asarray(state["peak_x"], float) if state and state.get("peak_x") is not None
-              and state.get("peak_event") == peak else None)
-    peak_event = peak if peak_x is not None else -1
+    peak_stress, peak_alive, peak_x, peak_event = _restored_peak(state, events, m)
 
     def save():
         if checkpoint:
@@ -660,8 +653,7 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
 
     stopped = "events_max"
     touched, B = None, None
-    last_said = time.perf_counter()
-    last_saved = time.perf_counter()
+    pace = _Pace(checkpoint_s)
     try:
         while len(events) < events_max:
             if stress_unit <= 0 or not loaded.held.loaded.any():
@@ -694,13 +686,10 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
                 touched, settled = None, False
             events.append(Event(strain, stress, strain * stress_unit, broken.tolist(), its, settled, checks,
                                 int(loaded.engaged.sum())))
-            now = time.perf_counter()
             stop = should_stop()
-            if now - last_said > 10:
-                last_said = now
-                say(_progress_line(events, alive, strain_max, peak_stress, now - t0 - setup))
-            if stop or now - last_saved > checkpoint_s:
-                last_saved = now
+            if pace.say_now():
+                say(_progress_line(events, alive, strain_max, peak_stress, time.perf_counter() - t0 - setup))
+            if pace.save_now(stop):
                 save()
             if stop:
                 raise Stopped(len(events))
@@ -715,6 +704,40 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
                           factorizations=loaded.solver.factorizations, peak_alive=peak_alive, peak_x=peak_x,
                           end_x=events[-1].strain * x.reshape(n, 6) if events else None,
                           loose=int(loaded.loose.sum()))
+
+
+def _restored_peak(state: dict | None, events: list[Event], m: int) -> tuple:
+    """Where a resumed run's peak stood: its stress, the bonds intact before it, the displacements just before it
+    as the state kept them (``peak_event``: the event they precede; an event cut short by Ctrl-C may have set
+    them without being kept: then None) and that event's index (-1: none kept)."""
+    peak = int(np.argmax([e.stress_MPa for e in events])) if events else 0
+    peak_x = (np.asarray(state["peak_x"], float) if state and state.get("peak_x") is not None
+              and state.get("peak_event") == peak else None)
+    return (events[peak].stress_MPa if events else 0.0, _intact(m, events[:peak]) if events else None, peak_x,
+            peak if peak_x is not None else -1)
+
+
+class _Pace:
+    """When an event loop says where it stands (every 10 s) and keeps its state (every ``checkpoint_s`` and
+    when it is told to stop)."""
+
+    def __init__(self, checkpoint_s: float):
+        self.checkpoint_s = checkpoint_s
+        self.said = self.saved = time.perf_counter()
+
+    def say_now(self) -> bool:
+        now = time.perf_counter()
+        if now - self.said > 10:
+            self.said = now
+            return True
+        return False
+
+    def save_now(self, stop: bool) -> bool:
+        now = time.perf_counter()
+        if stop or now - self.saved > self.checkpoint_s:
+            self.saved = now
+            return True
+        return False
 
 
 def _breaking_indices(net: BondNetwork, x: np.ndarray, strengths: Strengths, B: np.ndarray | None,

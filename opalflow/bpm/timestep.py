@@ -109,31 +109,10 @@ def estimate_timestep(s: Structure, coeffs: list[BondCoefficients],
                + ks * R[j] / np.sqrt(inertia[j] * m[j]) + ks * R[j] / np.sqrt(inertia[j] * m[i]))
     total = np.maximum(tr, rot)
 
-    # contacts: a particle touching ~12 neighbours (dense packing) and the plate; Hertz stiffness at
-    # an overlap of DELTA_CONTACT d, linear stiffness as it is (the plate's: one ball on a rigid wall, 2 K)
-    contact = np.zeros(n)
-    types = s.types
-    for typ, cp in contacts.items():
-        sel = types == typ
-        k = CONTACT_LAWS[cp.model].stiffness(cp, R[sel] / 2, DELTA_CONTACT * s.diameters[sel])
-        contact[sel] = 12 * 2 * k / m[sel]
-    for typ, E in plate_E.items():
-        sel = types == typ
-        cp = plate_props[typ]
-        k = CONTACT_LAWS[cp.model].stiffness(cp, R[sel], DELTA_CONTACT * s.diameters[sel], E=E, wall=True)
-        contact[sel] += k / m[sel]
+    contact = _contact_omega2(s, contacts, plate_E, plate_props, m)
     modes["contact"] = contact
     total = total + contact
-
-    # damping rates (1/ns): the diagonal of M^-1 C per particle (normal and sliding
-    # dampers on the translations; rolling, twisting and the sliding damper's lever arm on
-    # the rotations - LAMMPS applies it through 0.5 (w1 + w2) x r, so gamma_s L0^2 / 4)
-    gn = np.array([c.gn for c in coeffs])[t]
-    gs = np.array([c.gs for c in coeffs])[t]
-    c_rot = 0.5 * np.array([c.gr for c in coeffs])[t] * L0 + 0.5 * np.array([c.gt for c in coeffs])[t] \
-        + gs * L0**2 / 4
-    g_tr = gn + gs
-    rate = np.maximum(both(g_tr / m[i], g_tr / m[j]), both(c_rot / inertia[i], c_rot / inertia[j]))
+    rate = _damping_rates(coeffs, t, L0, both, m[i], m[j], inertia[i], inertia[j])
     by_mode = {k: _dt(v) for k, v in modes.items()}
     by_mode["damping"] = 2.0 / float(np.max(rate)) if np.max(rate, initial=0) > 0 else math.inf
     # all together, per particle: a damped oscillator with omega^2 = total and rate c,
@@ -147,6 +126,38 @@ def estimate_timestep(s: Structure, coeffs: list[BondCoefficients],
         by_mode["spectral"] = _spectral_limit(s, coeffs, L0, contact * m)
         return TimestepEstimate(by_mode, by_mode["spectral"], stiffest, "spectral")
     return TimestepEstimate(by_mode, bound, stiffest, "gershgorin")
+
+
+def _contact_omega2(s: Structure, contacts: dict[int, ContactProperties], plate_E: dict[int, float],
+                    plate_props: dict[int, ContactProperties], m: np.ndarray) -> np.ndarray:
+    """Contact stiffness over mass per particle: a particle touching ~12 neighbours (dense packing) and the
+    plate; Hertz stiffness at an overlap of DELTA_CONTACT d, linear stiffness as it is (the plate's: one ball
+    on a rigid wall, 2 K)."""
+    contact = np.zeros(s.n_particles)
+    R = s.diameters / 2
+    for typ, cp in contacts.items():
+        sel = s.types == typ
+        k = CONTACT_LAWS[cp.model].stiffness(cp, R[sel] / 2, DELTA_CONTACT * s.diameters[sel])
+        contact[sel] = 12 * 2 * k / m[sel]
+    for typ, E in plate_E.items():
+        sel = s.types == typ
+        cp = plate_props[typ]
+        k = CONTACT_LAWS[cp.model].stiffness(cp, R[sel], DELTA_CONTACT * s.diameters[sel], E=E, wall=True)
+        contact[sel] += k / m[sel]
+    return contact
+
+
+def _damping_rates(coeffs: list[BondCoefficients], t: np.ndarray, L0: np.ndarray, both, m_i, m_j, inertia_i,
+                   inertia_j) -> np.ndarray:
+    """Damping rates (1/ns): the diagonal of M^-1 C per particle (normal and sliding dampers on the translations;
+    rolling, twisting and the sliding damper's lever arm on the rotations - LAMMPS applies it through
+    0.5 (w1 + w2) x r, so gamma_s L0^2 / 4); ``both`` sums a per-bond term onto its two particles."""
+    gn = np.array([c.gn for c in coeffs])[t]
+    gs = np.array([c.gs for c in coeffs])[t]
+    c_rot = 0.5 * np.array([c.gr for c in coeffs])[t] * L0 + 0.5 * np.array([c.gt for c in coeffs])[t] \
+        + gs * L0**2 / 4
+    g_tr = gn + gs
+    return np.maximum(both(g_tr / m_i, g_tr / m_j), both(c_rot / inertia_i, c_rot / inertia_j))
 
 
 def _largest_eigenvalue(matvec, n: int) -> float:

@@ -227,6 +227,36 @@ def read_data(path: str | os.PathLike, periodic=(True, True, False), atom_style:
         header_text = raw[: marks[0].start()].decode()
     except UnicodeDecodeError:
         raise DataFileError(path, "the header is not text") from None
+    box, type_names = _header_box(path, header_text)
+    counts = {word: int(n) for n, word in COUNT.findall(header_text)}
+    bodies, styles = {}, {}
+    for k, m in enumerate(marks):
+        end = marks[k + 1].start() if k + 1 < len(marks) else len(raw)
+        bodies[m.group(1).decode()] = raw[m.end():end]
+        styles[m.group(1).decode()] = m.group(2).decode(errors="replace").strip().lstrip("#").strip()
+    declared = styles["Atoms"].split()[0] if styles["Atoms"] else ""
+    if declared and declared != atom_style.split()[0]:
+        raise DataFileError(path, f"its Atoms section says atom style {styles['Atoms']!r}, not {atom_style!r} "
+                                  "(datafile.atom_style names the style, as atom_style does before read_data)")
+    atoms = _atoms(path, bodies["Atoms"], counts.get("atoms"), fields, atom_style)
+    ids = atoms[:, 0]
+    if "Bonds" in bodies:
+        bonds, bond_types = _bonds(path, bodies["Bonds"], counts.get("bonds"), ids)
+    elif counts.get("bonds"):
+        raise DataFileError(path, f"the header declares {counts['bonds']} bonds but there is no Bonds section")
+    else:
+        bonds, bond_types = np.zeros((0, 2), np.int64), np.zeros(0, np.int32)
+    molecules = atoms[:, col["molecule"]].astype(np.int32) if "molecule" in col else np.zeros(len(atoms), np.int32)
+    return Structure(
+        positions=atoms[:, [col["x"], col["y"], col["z"]]], diameters=atoms[:, col["diameter"]],
+        types=atoms[:, col["type"]].astype(np.int32), densities=atoms[:, col["density"]], box_lo=box[:, 0],
+        box_hi=box[:, 1], periodic=np.asarray(periodic), bonds=bonds, bond_types=bond_types, molecules=molecules,
+        type_names=type_names,
+    )
+
+
+def _header_box(path, header_text: str) -> tuple[np.ndarray, list[str]]:
+    """The box (3 x lo, hi) and the type names (opalflow's ``# atom types:`` comment) of a data file's header."""
     box = np.full((3, 2), np.nan)
     type_names: list[str] = []
     for line in header_text.splitlines()[1:]:
@@ -240,17 +270,13 @@ def read_data(path: str | os.PathLike, periodic=(True, True, False), atom_style:
                 raise DataFileError(path, f"box line {line.strip()!r} needs two numbers") from None
     if not np.all(np.isfinite(box)) or np.any(box[:, 1] <= box[:, 0]):
         raise DataFileError(path, "the header needs 'xlo xhi', 'ylo yhi' and 'zlo zhi' lines with lo < hi")
-    counts = {word: int(n) for n, word in COUNT.findall(header_text)}
-    bodies, styles = {}, {}
-    for k, m in enumerate(marks):
-        end = marks[k + 1].start() if k + 1 < len(marks) else len(raw)
-        bodies[m.group(1).decode()] = raw[m.end():end]
-        styles[m.group(1).decode()] = m.group(2).decode(errors="replace").strip().lstrip("#").strip()
-    declared = styles["Atoms"].split()[0] if styles["Atoms"] else ""
-    if declared and declared != atom_style.split()[0]:
-        raise DataFileError(path, f"its Atoms section says atom style {styles['Atoms']!r}, not {atom_style!r} "
-                                  "(datafile.atom_style names the style, as atom_style does before read_data)")
-    atoms = _table(path, "Atoms", bodies["Atoms"], (len(fields), len(fields) + 3), counts.get("atoms"),
+    return box, type_names
+
+
+def _atoms(path, body: bytes, count: int | None, fields: tuple, atom_style: str) -> np.ndarray:
+    """The Atoms section as a table sorted by id, its ids, types, diameters and densities checked."""
+    col = {f: k for k, f in enumerate(fields)}
+    atoms = _table(path, "Atoms", body, (len(fields), len(fields) + 3), count,
                    f"atom style {atom_style}: {' '.join(fields)} [ix iy iz]")
     atoms = atoms[np.argsort(atoms[:, 0], kind="stable")]
     ids = atoms[:, 0]
@@ -264,29 +290,21 @@ def read_data(path: str | os.PathLike, periodic=(True, True, False), atom_style:
     if np.any(atoms[:, col["diameter"]] <= 0) or np.any(atoms[:, col["density"]] <= 0):
         raise DataFileError(path, f"every diameter and density must be > 0 (columns {col['diameter'] + 1} and "
                                   f"{col['density'] + 1} of atom style {atom_style})")
-    bonds = np.zeros((0, 2), np.int64)
-    bond_types = np.zeros(0, np.int32)
-    if "Bonds" in bodies:
-        braw = _table(path, "Bonds", bodies["Bonds"], (4,), counts.get("bonds"))
-        if np.any(braw != np.round(braw)) or np.any(braw[:, 1] < 1):
-            raise DataFileError(path, "bond lines must be integers 'id type atom1 atom2' with type >= 1")
-        braw = braw.astype(np.int64)
-        braw = braw[np.argsort(braw[:, 0], kind="stable")]
-        id_to_index = np.full(int(ids.max()) + 1, -1, np.int64)
-        id_to_index[ids.astype(np.int64)] = np.arange(len(atoms))
-        ends = braw[:, 2:4]
-        if np.any(ends < 1) or np.any(ends > ids.max()) or np.any(id_to_index[np.clip(ends, 0, None)] < 0):
-            raise DataFileError(path, "a bond names an atom id that is not in the Atoms section")
-        if np.any(ends[:, 0] == ends[:, 1]):
-            raise DataFileError(path, "a bond joins an atom to itself")
-        bonds = id_to_index[ends]
-        bond_types = braw[:, 1].astype(np.int32)
-    elif counts.get("bonds"):
-        raise DataFileError(path, f"the header declares {counts['bonds']} bonds but there is no Bonds section")
-    molecules = atoms[:, col["molecule"]].astype(np.int32) if "molecule" in col else np.zeros(len(atoms), np.int32)
-    return Structure(
-        positions=atoms[:, [col["x"], col["y"], col["z"]]], diameters=atoms[:, col["diameter"]],
-        types=types.astype(np.int32), densities=atoms[:, col["density"]], box_lo=box[:, 0], box_hi=box[:, 1],
-        periodic=np.asarray(periodic), bonds=bonds, bond_types=bond_types, molecules=molecules,
-        type_names=type_names,
-    )
+    return atoms
+
+
+def _bonds(path, body: bytes, count: int | None, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The Bonds section: each bond's two atoms (as indices of the sorted Atoms table) and its type."""
+    braw = _table(path, "Bonds", body, (4,), count)
+    if np.any(braw != np.round(braw)) or np.any(braw[:, 1] < 1):
+        raise DataFileError(path, "bond lines must be integers 'id type atom1 atom2' with type >= 1")
+    braw = braw.astype(np.int64)
+    braw = braw[np.argsort(braw[:, 0], kind="stable")]
+    id_to_index = np.full(int(ids.max()) + 1, -1, np.int64)
+    id_to_index[ids.astype(np.int64)] = np.arange(len(ids))
+    ends = braw[:, 2:4]
+    if np.any(ends < 1) or np.any(ends > ids.max()) or np.any(id_to_index[np.clip(ends, 0, None)] < 0):
+        raise DataFileError(path, "a bond names an atom id that is not in the Atoms section")
+    if np.any(ends[:, 0] == ends[:, 1]):
+        raise DataFileError(path, "a bond joins an atom to itself")
+    return id_to_index[ends], braw[:, 1].astype(np.int32)

@@ -35,9 +35,65 @@ from opalflow.studies.sweep import Job, failed_jobs, fmt_value, job_spec, label_
 from opalflow.version import __version__
 
 
-def paper() -> dict:
+@dataclass
+class PaperCalibration:
+    bond_E_GPa: float
+    bond_strength_MPa: float
+    experiment_E_GPa: float
+    experiment_E_std_GPa: float
+    experiment_strength_MPa: float
+    experiment_strength_std_MPa: float
+
+
+@dataclass
+class PaperBulk:
+    E_macro_GPa: float
+    K_E: float
+    strength_MPa: float
+
+
+@dataclass
+class PaperCoated:
+    youngs_modulus_GPa: float
+    strength_MPa: float
+    density_kg_m3: float
+
+
+@dataclass
+class PaperCoating:
+    E_exp_GPa: dict[str, list[float]]         # by thickness label: mean and standard deviation
+    coated20: PaperCoated
+
+
+@dataclass
+class PaperPorosity:
+    b_E: float
+    m: float
+    E0_GPa: float
+    sigma0_MPa: float
+    b_strength: float
+
+
+@dataclass
+class Paper:
+    """The numbers of Dosta et al. the studies compare with (data/reference/dosta2022.toml: each with its section
+    and table there)."""
+
+    structure: dict
+    tolerance: dict
+    calibration: PaperCalibration
+    bulk: PaperBulk
+    coating: PaperCoating
+    porosity: PaperPorosity
+
+
+def paper() -> Paper:
     """Reference numbers of Dosta et al. (data/reference/dosta2022.toml)."""
-    return tomllib.loads(resource(DATA / "reference", "dosta2022.toml").read_text())
+    raw = tomllib.loads(resource(DATA / "reference", "dosta2022.toml").read_text())
+    coating = raw.pop("coating")
+    return Paper(raw.pop("structure"), raw.pop("tolerance"), PaperCalibration(**raw.pop("calibration")),
+                 PaperBulk(**raw.pop("bulk")), PaperCoating(coating["E_exp_GPa"], PaperCoated(**coating["coated20"])),
+                 PaperPorosity(**raw.pop("porosity")))
 
 
 def optional(default=None):
@@ -204,7 +260,7 @@ def calibration(spec: StudyWorkflow, out: Path, say) -> Calibration:
 
 def calibration_render(spec: StudyWorkflow, cal: Calibration, out: Path) -> list[str]:
     st = spec.study
-    ref = paper()["calibration"]
+    ref = paper().calibration
     lines = [f"Targets E* = {st.target_E_GPa} GPa, sigma* = {st.target_strength_MPa} MPa (do Rosario et al., "
              f"via Dosta et al. section 3.1), tolerance {100 * st.tolerance:g} %, {st.jacobian} derivative, "
              f"finite-difference step {100 * st.fd_step:g} %.", "",
@@ -214,10 +270,10 @@ def calibration_render(spec: StudyWorkflow, cal: Calibration, out: Path) -> list
               f"{100 * h.error_E:+.2f} % | {h.strength_MPa:.4g} | {100 * h.error_strength:+.2f} % | {h.dem_runs} | "
               f"{h.wall_s:.0f} |" for h in cal.history]
     return lines + ["", cal.headline + ".", "",
-                    f"The paper's calibration at d = 15 nm and 8.05 um^2: E_b = {ref['bond_E_GPa']} GPa, "
-                    f"sigma_b = {ref['bond_strength_MPa']} MPa (E = 1.7 GPa, strength 41.1 MPa). "
-                    f"Here E_b / paper = {cal.bond_E_GPa / ref['bond_E_GPa']:.2f} and sigma_b / paper = "
-                    f"{cal.bond_strength_MPa / ref['bond_strength_MPa']:.2f}: the bond parameters that give the "
+                    f"The paper's calibration at d = 15 nm and 8.05 um^2: E_b = {ref.bond_E_GPa} GPa, "
+                    f"sigma_b = {ref.bond_strength_MPa} MPa (E = 1.7 GPa, strength 41.1 MPa). "
+                    f"Here E_b / paper = {cal.bond_E_GPa / ref.bond_E_GPa:.2f} and sigma_b / paper = "
+                    f"{cal.bond_strength_MPa / ref.bond_strength_MPa:.2f}: the bond parameters that give the "
                     "experiment depend on the resolution (see the convergence study)."]
 
 
@@ -268,14 +324,14 @@ def bulk_analyse(spec: StudyWorkflow, jobs: list[Job], results: dict) -> Bulk | 
         return None
     ref = paper()
     finest = min(rows.values(), key=lambda row: row.diameter_nm)
-    titania = {k: {"E_exp_GPa": v[0], "E_b_GPa": v[0] / finest.K_E, "E_b_paper_GPa": v[0] / ref["bulk"]["K_E"]}
-               for k, v in ref["coating"]["E_exp_GPa"].items()}
+    titania = {k: {"E_exp_GPa": v[0], "E_b_GPa": v[0] / finest.K_E, "E_b_paper_GPa": v[0] / ref.bulk.K_E}
+               for k, v in ref.coating.E_exp_GPa.items()}
     return Bulk(finest.K_E, rows, titania, "K_E = " + ", ".join(f"{v.K_E:.3f} (d = {k} nm)" for k, v in rows.items())
-                + f"; paper {ref['bulk']['K_E']}")
+                + f"; paper {ref.bulk.K_E}")
 
 
 def bulk_render(spec: StudyWorkflow, bulk: Bulk, out: Path) -> list[str]:
-    ref = paper()["bulk"]
+    ref = paper().bulk
     how = ("By the static solver (compression.method = static): E_macro is the top layer's modulus at zero "
            "loading rate, the same in both columns (no plate); no strength." if not METHODS[spec.study.method].strength
            else "The plate-strain modulus beside it also holds the Hertz settling of the plate on the rough top, "
@@ -291,8 +347,8 @@ def bulk_render(spec: StudyWorkflow, bulk: Bulk, out: Path) -> list[str]:
              *(["No bond broke in the samples marked 0: their 'strength' is the stress at the last strain, not a "
                 "peak (bpm/rotational breaks bonds in tension and shear; a confined pore-free block sees little).",
                 ""] if any(r.broken_bonds == 0 for r in bulk.by_diameter.values()) else []),
-             f"Paper (d = 15 nm): E_macro = {ref['E_macro_GPa']} GPa, K_E = {ref['K_E']}, bulk strength "
-             f"{ref['strength_MPa']} MPa.", "",
+             f"Paper (d = 15 nm): E_macro = {ref.E_macro_GPa} GPa, K_E = {ref.K_E}, bulk strength "
+             f"{ref.strength_MPa} MPa.", "",
              "Titania bond moduli E_b = E_exp / K_E with the finest K_E here (the paper's in brackets):", "",
              "| coating | E_exp (GPa) | E_b (GPa) | paper E_b (GPa) |", "|---|---|---|---|"]
     return lines + [f"| {k} nm | {v['E_exp_GPa']:g} | {v['E_b_GPa']:.2f} | {v['E_b_paper_GPa']:.2f} |"
@@ -326,17 +382,17 @@ def coating_jobs(spec: StudyWorkflow) -> list[Job]:
     """The uncoated sample (thickness 0) and each coating at E_exp - std, E_exp, E_exp + std (``at``: thickness,
     case, E_exp)."""
     ref = paper()
-    k_e = ref["bulk"]["K_E"]
+    k_e = ref.bulk.K_E
     jobs = []
     for t in spec.study.thicknesses_nm:
         if t == 0:
             jobs.append(Job("coat0", job_spec(spec, {"coating.thickness_nm": 0.0}), at=(t, "uncoated", None)))
             continue
         key = label_number(t)
-        if key not in ref["coating"]["E_exp_GPa"]:
+        if key not in ref.coating.E_exp_GPa:
             raise SpecError("study.thicknesses_nm", t, f"no E_exp for it; the paper gives "
-                            f"{', '.join(ref['coating']['E_exp_GPa'])} nm")
-        mean, std = ref["coating"]["E_exp_GPa"][key]
+                            f"{', '.join(ref.coating.E_exp_GPa)} nm")
+        mean, std = ref.coating.E_exp_GPa[key]
         for case, e_exp in (("low", mean - std), ("mean", mean), ("high", mean + std)):
             jobs.append(Job(f"coat{key}_{case}", job_spec(spec, {
                 "coating.thickness_nm": float(t), "materials.titania.bond_youngs_modulus_GPa": e_exp / k_e}),
@@ -346,7 +402,7 @@ def coating_jobs(spec: StudyWorkflow) -> list[Job]:
 
 def coating_analyse(spec: StudyWorkflow, jobs: list[Job], results: dict) -> Coating | None:
     """Coatings of each thickness at E_exp - std, E_exp, E_exp + std (E_b = E_exp / K_E, K_E = 3.35)."""
-    k_e = paper()["bulk"]["K_E"]
+    k_e = paper().bulk.K_E
     table = []
     for job in jobs:
         if job.label in results:
@@ -370,9 +426,9 @@ def coating_analyse(spec: StudyWorkflow, jobs: list[Job], results: dict) -> Coat
 
 def coating_render(spec: StudyWorkflow, coating: Coating, out: Path) -> list[str]:
     ref = paper()
-    paper20 = ref["coating"]["coated20"]
+    paper20 = ref.coating.coated20
     _plot_coating(coating.table, out / "coating.png")
-    lines = [f"E_b(titania) = E_exp / K_E with the paper's K_E = {ref['bulk']['K_E']}; E_exp of Colombi et al. "
+    lines = [f"E_b(titania) = E_exp / K_E with the paper's K_E = {ref.bulk.K_E}; E_exp of Colombi et al. "
              "(Table 1).", "",
              "| coating (nm) | E_exp case | E_exp (GPa) | titania E_b (GPa) | E (GPa) | strength (MPa) | vs uncoated "
              "| wall (s) |", "|---|---|---|---|---|---|---|---|"]
@@ -380,8 +436,8 @@ def coating_render(spec: StudyWorkflow, coating: Coating, out: Path) -> list[str
               f"{r.youngs_modulus_GPa:.3g} | {fmt_value(r.strength_MPa, '.3g')} | "
               f"{fmt_value(r.strength_vs_uncoated, '.3f')} | {r.wall_s:.0f} |" for r in coating.table]
     return lines + ["", f"Paper (d = 15 nm, 8.05 um^2): uncoated E = 1.7 GPa, strength 41.1 MPa; 20 nm coated "
-                    f"E = {paper20['youngs_modulus_GPa']} GPa, strength {paper20['strength_MPa']} MPa "
-                    f"(density {paper20['density_kg_m3']} kg/m^3); the 34 nm strength within 2.2 % of experiment.",
+                    f"E = {paper20.youngs_modulus_GPa} GPa, strength {paper20.strength_MPa} MPa "
+                    f"(density {paper20.density_kg_m3} kg/m^3); the 34 nm strength within 2.2 % of experiment.",
                     "", coating.headline + ".", "", "![coating](coating.png)"]
 
 
@@ -427,7 +483,7 @@ class Porosity:
     runs: list[PorosityRun]
     fits: dict[str, Fit]
     E_better_law: str
-    paper: dict
+    paper: PaperPorosity
     headline: str
 
 
@@ -452,7 +508,7 @@ def porosity_analyse(spec: StudyWorkflow, jobs: list[Job], results: dict) -> Por
     better = "power" if fits["E_power"].r2 > fits["E_exponential"].r2 else "exponential"
     sigma = (f", b_sigma = {fits['strength_exponential'].exponent:.2f}, sigma0 = "
              f"{fits['strength_exponential'].prefactor:.4g} MPa" if "strength_exponential" in fits else " (static)")
-    return Porosity(runs, fits, better, paper()["porosity"],
+    return Porosity(runs, fits, better, paper().porosity,
                     f"b_E = {fits['E_exponential'].exponent:.2f}, m = {fits['E_power'].exponent:.2f}{sigma}; "
                     f"E better fitted by the {better} law")
 
@@ -465,9 +521,9 @@ def porosity_render(spec: StudyWorkflow, study: Porosity, out: Path) -> list[str
              "| law | parameter | fitted | 95 % interval | paper | prefactor | 95 % interval | paper | R^2 |",
              "|---|---|---|---|---|---|---|---|---|"]
     for key, name, pname, ref_exp, ref_pre in (
-            ("E_exponential", "E = E0 exp(-b eps) (22)", "b", ref["b_E"], ref["E0_GPa"]),
-            ("E_power", "E = E0 (1 - eps)^m (23)", "m", ref["m"], ref["E0_GPa"]),
-            ("strength_exponential", "sigma = sigma0 exp(-b eps) (26)", "b", ref["b_strength"], ref["sigma0_MPa"])):
+            ("E_exponential", "E = E0 exp(-b eps) (22)", "b", ref.b_E, ref.E0_GPa),
+            ("E_power", "E = E0 (1 - eps)^m (23)", "m", ref.m, ref.E0_GPa),
+            ("strength_exponential", "sigma = sigma0 exp(-b eps) (26)", "b", ref.b_strength, ref.sigma0_MPa)):
         if key in fits:
             f = fits[key]
             lines.append(f"| {name} | {pname} | {f.exponent:.3f} | [{f.exponent_ci[0]:.3f}, {f.exponent_ci[1]:.3f}] | "
@@ -622,7 +678,7 @@ def convergence_analyse(spec: StudyWorkflow, jobs: list[Job], results: dict) -> 
         # exponent on particles, ~1) and as d^k at fixed area
         ref_row = diam_rows[-1]
         alpha = cost["particles"].exponent if "particles" in cost else 1.0
-        structure = paper()["structure"]
+        structure = paper().structure
         extrapolated = (ref_row.wall_s_mean * (structure["sample_area_um2"] / ref_row.area_um2) ** alpha
                         * (structure["particle_diameter_nm"] / ref_row.diameter_nm) ** cost["diameter"].exponent)
     return Convergence(rows, cost, extrapolated,

@@ -104,23 +104,7 @@ run 0 post no
         for ax in free:
             i = "xyz".index(ax)
             interior &= (x0[:, i] > a - 1e-6) & (x0[:, i] < length - a - 1e-6)
-        e0 = lmp.get_thermo("etotal")
-        drift, temps = 0.0, []
-        chunk = max(1, steps // 20)
-        meter = Progress(steps, 0, f"stability {boundary} {temperature_K:g} K: ")
-        step = 0
-        while step < steps:
-            n = min(chunk, steps - step)
-            lmp.command(f"run {n} pre {'yes' if step == 0 else 'no'} post no")
-            step += n
-            natoms = max(lmp.get_natoms(), 1)
-            etot = lmp.get_thermo("etotal")
-            drift = max(drift, abs(etot - e0) / natoms) if math.isfinite(etot) else math.inf
-            temps.append(lmp.get_thermo("temp"))
-            if progress:
-                meter.update(step)
-            if not math.isfinite(etot):
-                break
+        drift, temps = _integrate(lmp, steps, f"stability {boundary} {temperature_K:g} K: ", progress)
         lost = n0 - lmp.get_natoms()
         if lost == 0:
             coord = np.array(lmp.gather("c_coord", 1, 1), dtype=float)
@@ -129,21 +113,49 @@ run 0 post no
             rms = float(np.sqrt(np.mean(disp[interior] ** 2)))
         else:       # atom order is gone with the lost atoms; the run has failed anyway
             fourfold, rms = math.nan, math.nan
-    reasons = []
-    if lost:   # the rest cannot be judged on the atoms that are left
-        reasons.append(f"{lost} of {n0} atoms lost (flew out of the box padded by one lattice constant)")
-    else:
-        if not drift <= criteria.max_drift_eV:
-            reasons.append(f"energy drift {drift:.3g} eV/atom > {criteria.max_drift_eV:g}")
-        if not fourfold >= criteria.min_fourfold:
-            reasons.append(f"4-coordinated interior fraction {fourfold:.3f} < {criteria.min_fourfold:g}")
-        if not rms <= criteria.max_rms_A:
-            reasons.append(f"interior RMS displacement {rms:.3g} A > {criteria.max_rms_A:g} A")
+    reasons = _failures(criteria, lost, n0, drift, fourfold, rms)
     return BoundaryResult(boundary=boundary, temperature_K=temperature_K, passed=not reasons,
                           reason="; ".join(reasons) or "ok", drift_eV_per_atom=drift,
                           fourfold_interior=fourfold, rms_interior_A=rms, atoms_lost=int(lost),
                           mean_temperature_K=float(np.mean(temps)) if temps else math.nan,
                           seconds=time.perf_counter() - t0)
+
+
+def _integrate(lmp, steps: int, label: str, progress: bool) -> tuple[float, list[float]]:
+    """Run ``steps`` NVE steps in 20 chunks: the largest energy drift per atom (inf once the energy is not
+    finite: the run stops there) and the temperature after each chunk."""
+    e0 = lmp.get_thermo("etotal")
+    drift, temps = 0.0, []
+    chunk = max(1, steps // 20)
+    meter = Progress(steps, 0, label)
+    step = 0
+    while step < steps:
+        n = min(chunk, steps - step)
+        lmp.command(f"run {n} pre {'yes' if step == 0 else 'no'} post no")
+        step += n
+        natoms = max(lmp.get_natoms(), 1)
+        etot = lmp.get_thermo("etotal")
+        drift = max(drift, abs(etot - e0) / natoms) if math.isfinite(etot) else math.inf
+        temps.append(lmp.get_thermo("temp"))
+        if progress:
+            meter.update(step)
+        if not math.isfinite(etot):
+            break
+    return drift, temps
+
+
+def _failures(criteria: Criteria, lost: int, n0: int, drift: float, fourfold: float, rms: float) -> list[str]:
+    """Why a boundary's MD fails the criteria (none: it passes); with atoms lost nothing else can be judged."""
+    if lost:
+        return [f"{lost} of {n0} atoms lost (flew out of the box padded by one lattice constant)"]
+    reasons = []
+    if not drift <= criteria.max_drift_eV:
+        reasons.append(f"energy drift {drift:.3g} eV/atom > {criteria.max_drift_eV:g}")
+    if not fourfold >= criteria.min_fourfold:
+        reasons.append(f"4-coordinated interior fraction {fourfold:.3f} < {criteria.min_fourfold:g}")
+    if not rms <= criteria.max_rms_A:
+        reasons.append(f"interior RMS displacement {rms:.3g} A > {criteria.max_rms_A:g} A")
+    return reasons
 
 
 def _run_job(job) -> BoundaryResult:
