@@ -205,6 +205,7 @@ def test_one_result_class_gives_each_method_its_keys(api_run, tmp_path):
     import h5py
 
     from opalflow.bpm.result import CompressionResult
+    from opalflow.store import json_text
 
     fields = {f.name: f.metadata for f in dataclasses.fields(CompressionResult) if "cases" in f.metadata}
     folders = {"dynamic": api_run[0]}
@@ -224,3 +225,24 @@ def test_one_result_class_gives_each_method_its_keys(api_run, tmp_path):
         report = (folder / "report.md").read_text()
         assert f"| Young's modulus{', plate strain' if method == 'dynamic' else ''} (GPa) | " in report, method
         assert ("| compressive strength (MPa) | " in report) == (method != "static"), method
+        # read back as the same class: every key an attribute, summary.json again from it
+        back = CompressionResult.read(folder)
+        assert isinstance(back, CompressionResult) and back.case == method, method
+        assert back.youngs_modulus_GPa == summary["youngs_modulus_GPa"], method
+        assert json.loads(json_text(back.summary())) == summary, method           # (typed parts as their tables)
+        assert json.loads(json_text(opalflow.load_results(folder).result.summary())) == summary, method
+
+
+def test_the_sample_facts_are_read_back_typed_and_a_foreign_fact_is_one_line(api_run):
+    """run.json's deck is SampleFacts (bpm/facts.py), the spec rebuilt typed from the record (RunFacts); a fact this
+    opalflow does not know (a newer record) is refused in one line, not read as a dict."""
+    from opalflow.bpm.facts import RunFacts, SampleFacts
+    from opalflow.runs.record import RunRecord
+    from opalflow.spec import InputError
+
+    record = RunRecord.read(api_run[0])
+    run = RunFacts.of(record)
+    assert run.spec.bonds.breakable is False and run.spec.kind == "lattice" and run.sample.steps > 0
+    assert run.sample.bond_types[0].kr_pN > 0 and run.sample.to_dict() == record.deck
+    with pytest.raises(InputError, match="unknown facts surprise"):
+        SampleFacts.from_dict({**record.deck, "surprise": 1})
