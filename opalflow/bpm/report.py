@@ -87,15 +87,21 @@ def sample_lines(sample: SampleFacts) -> list[str]:
     return lines + [f"Stress on {stress_area(sample)}.", ""]
 
 
+def _scene_rows(run: RunFacts, box) -> list[tuple[str, str]]:
+    """The Inputs table's first rows, every method's: the scene and the sample's size and stressed area."""
+    spec, sample = run.spec, run.sample
+    return [("scene", f"{spec.kind}: {spec.description or spec.name}"),
+            ("sample", f"{box[0]:.0f} x {box[1]:.0f} nm (x, y; sides {sample.sides}), {sample.height_nm:.0f} nm high "
+                       f"above the fixed substrate; stress on {stress_area(sample)}")]
+
+
 def _inputs(run: RunFacts, result) -> list[str]:
     spec, sample = run.spec, run.sample
     c, b = spec.compression, spec.bonds
     box = sample.box_nm
     structure = sample.structure or {}
     n, bonds = sample.n_particles, sample.n_bonds
-    rows = [("scene", f"{spec.kind}: {spec.description or spec.name}"),
-            ("sample", f"{box[0]:.0f} x {box[1]:.0f} nm (x, y; sides {sample.sides}), {sample.height_nm:.0f} nm high "
-                       f"above the fixed substrate; stress on {stress_area(sample)}"),
+    rows = [*_scene_rows(run, box),
             ("particles", f"{n}, mean diameter d = {sample.mean_diameter_nm:.3g} nm"),
             ("bonds", f"{bonds} ({bonds / max(1, n):.1f} per particle, the paper's measure; coordination "
                       f"{2 * bonds / max(1, n):.1f}), "
@@ -272,9 +278,7 @@ def network_inputs(run: RunFacts, loaded) -> list[str]:
     d = float(data.diameters.mean())
     structure = sample.structure or {}
     n, bonds = sample.n_particles, sample.n_bonds
-    rows = [("scene", f"{spec.kind}: {spec.description or spec.name}"),
-            ("sample", f"{box[0]:.0f} x {box[1]:.0f} nm (x, y; sides {sample.sides}), {sample.height_nm:.0f} nm high "
-                       f"above the fixed substrate; stress on {stress_area(sample)}"),
+    rows = [*_scene_rows(run, box),
             ("particles", f"{n}, mean diameter d = {d:.3g} nm; top layer {sample.top_layer_particles}"),
             ("bonds", f"{bonds} ({bonds / max(1, n):.1f} per particle), "
                       + ("from the data file, " if sample.source else f"cutoff {b.cutoff_factor:g} d, ")

@@ -22,7 +22,7 @@ from opalflow.analysis.elasticity import VOIGT
 from opalflow.progress import Progress
 from opalflow.runs.jobs import Job, job_record, prepare
 from opalflow.runs.record import RunRecord, finish
-from opalflow.store import RESULTS, h5_bytes, new_figure, save_figure
+from opalflow.store import RESULTS, SUMMARY, h5_bytes, new_figure, save_figure
 from opalflow.tersoff.parameters import load_parameters
 from opalflow.tersoff.polycrystal.crystal import check_sample_hessian, longitudinal_speed_nm_ps, single_crystal
 from opalflow.tersoff.polycrystal.dynamics import M_PER_S, Bounds, Polycrystal, WaveSpeeds, polycrystal_bounds, speeds
@@ -167,7 +167,8 @@ def run_experiments(jobs: list[Job], out: Path, resume: bool, compute, read, say
         folder = job.folder(out)
         (job_record(folder) or RunRecord.job(job.spec, job.label, job.key)).begin(folder, launcher="in-process")
         results[job.label] = result = compute(job)
-        finish(folder, dataclasses.asdict(result), f"# {job.label}\n\nAn experiment of the run in {out} (its summary.json holds the result).")
+        finish(folder, dataclasses.asdict(result),
+               f"# {job.label}\n\nAn experiment of the run in {out} (its {SUMMARY} holds the result).")
     return {j.label: results[j.label] for j in jobs}
 
 
