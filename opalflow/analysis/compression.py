@@ -23,7 +23,24 @@ CURVE_UNITS = {"step": "1", "plate_dz_nm": "nm", "plate_fz_pN": "pN", "substrate
 CURVE_COLUMNS = ["step", "plate_dz_nm", "plate_fz_pN", "substrate_fz_pN", "intact_bonds", "ke_zJ", "top_z_nm"]
 
 
-def read_curve(path: Path) -> dict[str, np.ndarray]:
+@dataclass
+class Curve:
+    """curve.txt's columns (units in :data:`CURVE_UNITS`), one row per output interval (averages over it)."""
+
+    step: np.ndarray
+    plate_dz_nm: np.ndarray
+    plate_fz_pN: np.ndarray
+    substrate_fz_pN: np.ndarray
+    intact_bonds: np.ndarray
+    ke_zJ: np.ndarray
+    top_z_nm: np.ndarray
+
+    def columns(self) -> list[tuple[str, np.ndarray]]:
+        """(name, column) in the file's order."""
+        return [(name, getattr(self, name)) for name in CURVE_COLUMNS]
+
+
+def read_curve(path: Path) -> Curve:
     """curve.txt as columns; rows repeated by a resumed run keep their last value."""
     with warnings.catch_warnings():           # (an empty file: said once, below, not also as numpy's warning)
         warnings.simplefilter("ignore", UserWarning)
@@ -34,7 +51,7 @@ def read_curve(path: Path) -> dict[str, np.ndarray]:
     # the last occurrence of each step wins (a resumed run appends rows it re-computed)
     _, last = np.unique(steps[::-1], return_index=True)
     rows = rows[::-1][last]
-    return {name: rows[:, k] for k, name in enumerate(CURVE_COLUMNS)}
+    return Curve(*(rows[:, k] for k in range(len(CURVE_COLUMNS))))
 
 
 def trim_curve(path: Path, last_step: int) -> None:

@@ -140,7 +140,7 @@ def newest_readable_restart(out: Path) -> int | None:
     return None
 
 
-def boundary_stresses(curve: dict, area: float, sense: int = 1) -> tuple[np.ndarray, np.ndarray]:
+def boundary_stresses(curve: mech.Curve, area: float, sense: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """Stress (MPa) on the plate and on the substrate, positive in the loading's sense (``sense`` +1:
     compression, -1: tension).
 
@@ -149,15 +149,15 @@ def boundary_stresses(curve: dict, area: float, sense: int = 1) -> tuple[np.ndar
     particles (negative: pulled down).  The sample stress is their mean, the stress at
     mid-height, which also cancels what inertia and damping add at one end.  pN/nm^2 = MPa.
     """
-    return -sense * curve["plate_fz_pN"] / area, -sense * curve["substrate_fz_pN"] / area
+    return -sense * curve.plate_fz_pN / area, -sense * curve.substrate_fz_pN / area
 
 
-def curve_strain_stress(curve: dict, sample: SampleFacts) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def curve_strain_stress(curve: mech.Curve, sample: SampleFacts) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Strain of the wall, mean stress, plate and substrate stresses of a curve, positive in the
     loading's sense (``loading_sense`` of the deck facts; +1 before there were tension loadings)."""
     sense = sample.loading_sense
     plate, substrate = boundary_stresses(curve, sample.area_nm2, sense)
-    return -sense * curve["plate_dz_nm"] / sample.height_nm, 0.5 * (plate + substrate), plate, substrate
+    return -sense * curve.plate_dz_nm / sample.height_nm, 0.5 * (plate + substrate), plate, substrate
 
 
 def analyze(out: Path, started: float | None = None, lammps_s: float | None = None,
@@ -179,10 +179,10 @@ def analyze(out: Path, started: float | None = None, lammps_s: float | None = No
     strain, stress, stress_plate, stress_substrate = curve_strain_stress(curve, sample)
     fit = mech.fit_elastic(strain, stress)
     # specimen strain: mean displacement of the top particle layer (no plate indentation)
-    strain_top = sample.loading_sense * (sample.top_z0_nm - curve["top_z_nm"]) / sample.height_nm
+    strain_top = sample.loading_sense * (sample.top_z0_nm - curve.top_z_nm) / sample.height_nm
     fit_top = mech.fit_elastic(strain_top, stress)
     peak = int(np.argmax(stress))
-    broken = sample.n_bonds - curve["intact_bonds"]
+    broken = sample.n_bonds - curve.intact_bonds
 
     snapshots, histograms = read_snapshots(out, sample, curve, strain)
 
@@ -195,9 +195,9 @@ def analyze(out: Path, started: float | None = None, lammps_s: float | None = No
         strength_MPa=float(stress[peak]) if breakable else None,
         peak_stress_MPa=None if breakable else float(stress[peak]),
         strain_at_peak=float(strain[peak]), strain_at_peak_specimen=float(strain_top[peak]),
-        timestep_s=sample.timestep_s, steps=int(curve["step"][-1]),
+        timestep_s=sample.timestep_s, steps=int(curve.step[-1]),
         # the last averaged row lies within one output interval of the last step of a whole run
-        complete=bool(curve["step"][-1] > sample.steps - sample.output_every_steps),
+        complete=bool(curve.step[-1] > sample.steps - sample.output_every_steps),
         steps_planned=sample.steps, lammps_s=lammps_s, wall_s=wall_s,
         broken_bonds=int(broken[-1]), n_particles=sample.n_particles, n_bonds=sample.n_bonds,
         stress_by_material={f"{v['strain']:.4f}": v["by_material"] for v in snapshots.values()},
@@ -234,11 +234,11 @@ def analyze(out: Path, started: float | None = None, lammps_s: float | None = No
                   files=files, record=record, started=started)
 
 
-def read_snapshots(out: Path, sample: SampleFacts, curve: dict, strain: np.ndarray) -> tuple[dict, dict]:
+def read_snapshots(out: Path, sample: SampleFacts, curve: mech.Curve, strain: np.ndarray) -> tuple[dict, dict]:
     """The run's snapshots, by step: particles (positions, radii, types, the stress of eq. 21 and its means by
     material, bonds broken so far) and the histograms of the bonds' strains (Fig. 7), each at its strain."""
     # curve rows are averages over the preceding `every` steps: they belong to the middle step
-    mid_step = curve["step"] - (sample.output_every_steps - 1) / 2
+    mid_step = curve.step - (sample.output_every_steps - 1) / 2
     snapshots = {}
     for step, path in (mech.snapshot_files(out, "particles", "dump") or mech.snapshot_files(out, "stress")).items():
         dump = mech.read_dump_custom(path)
@@ -260,12 +260,12 @@ def read_snapshots(out: Path, sample: SampleFacts, curve: dict, strain: np.ndarr
 
 def _fill_h5(h, run: RunFacts, curve, strain, stress, stress_plate, stress_substrate, broken, snapshots, histograms,
              result):
-    for k, v in curve.items():
+    for k, v in curve.columns():
         put(h, f"curve/{k}", v, mech.CURVE_UNITS[k])
     for k, v, unit in (("strain", strain, "1"), ("stress_MPa", stress, "MPa"),
                        ("stress_plate_MPa", stress_plate, "MPa"), ("stress_substrate_MPa", stress_substrate, "MPa"),
                        ("broken_bonds", broken, "1"),
-                       ("strain_specimen", (run.sample.top_z0_nm - curve["top_z_nm"]) / run.sample.height_nm, "1")):
+                       ("strain_specimen", (run.sample.top_z0_nm - curve.top_z_nm) / run.sample.height_nm, "1")):
         put(h, f"curve/{k}", v, unit)
     h["curve"].attrs["description"] = ("averages over each output interval of the plate's displacement and force, "
                                        "the substrate's force, intact bonds, kinetic energy and the top layer's "
