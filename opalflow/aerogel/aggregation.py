@@ -416,14 +416,7 @@ def _restructure(c, hit_i, hit_j, pos, upos, r, box, nc, head, nxt, prv, cell_of
     for q in range(3):
         cvec[q] = _min_image(pos[ib, q] - pos[ia, q], box)
     cn = math.sqrt(cvec[0] ** 2 + cvec[1] ** 2 + cvec[2] ** 2)
-    reach = 0.0
-    k = chead[b]
-    while k >= 0:
-        d2 = 0.0
-        for q in range(3):
-            d2 += (cvec[q] + upos[k, q] - upos[ib, q]) ** 2
-        reach = max(reach, math.sqrt(d2))
-        k = cnext[k]
+    reach = _reach(b, ib, cvec, upos, chead, cnext)
     axis = np.empty(3)
     norm = 0.0
     while norm < 1e-9:
@@ -457,13 +450,33 @@ def _restructure(c, hit_i, hit_j, pos, upos, r, box, nc, head, nxt, prv, cell_of
             hit[1] = trial[1]
         else:
             lo = mid
-    # turn b by lo: positions, unwrapped positions, cells and the R_g sums
+    _turn(b, ib, ia, cvec, axis, lo, pos, upos, box, nc, head, nxt, prv, cell_of, chead, cnext, csize, csum, csq)
+
+
+@njit(cache=True)
+def _reach(b, ib, cvec, upos, chead, cnext):
+    """The largest distance of a sphere of cluster b from the centre of the contact sphere (at -cvec from ib)."""
+    reach = 0.0
+    k = chead[b]
+    while k >= 0:
+        d2 = 0.0
+        for q in range(3):
+            d2 += (cvec[q] + upos[k, q] - upos[ib, q]) ** 2
+        reach = max(reach, math.sqrt(d2))
+        k = cnext[k]
+    return reach
+
+
+@njit(cache=True)
+def _turn(b, ib, ia, cvec, axis, angle, pos, upos, box, nc, head, nxt, prv, cell_of, chead, cnext, csize, csum, csq):
+    """Turn cluster b by ``angle`` about ``axis`` through the centre of ia: positions, unwrapped positions, cells
+    and the R_g sums."""
     rel = np.empty(3)
     new = np.empty((csize[b], 3))
     m = 0
     k = chead[b]
     while k >= 0:
-        _rotated(b, ib, ia, cvec, axis, lo, k, upos, rel)
+        _rotated(b, ib, ia, cvec, axis, angle, k, upos, rel)
         for q in range(3):
             new[m, q] = rel[q]
         m += 1

@@ -616,11 +616,7 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
     to ``rtol`` |b|.
 
     With ``contacts`` (:mod:`opalflow.bpm.contacts`; not with the local step) the touching pairs no intact bond
-    joins press on each other: after every global solve the contacts in tension open and those pressed close,
-    and the network is solved again until none changes (at most :data:`CONTACT_ITERATIONS` rounds; each event's
-    re-solves count them).  A contact that opens stays open for the rest of that solve: with a sticking
-    tangential spring a contact can pull its own pair apart (closed it is in tension, open it is pressed:
-    Coulomb's law would give it no force either way), and the rounds would flip it for ever.
+    joins press on each other (:class:`LoadedNetwork`: the active set of each solve).
 
     Stops when the next event would lie beyond ``strain_max``, when the stress after an event has fallen
     below ``stop_fraction`` of the peak, when no path carries load, or after ``events_max`` events.
@@ -651,22 +647,16 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
             checkpoint({"events": [e.__dict__ for e in events], "modulus_MPa": modulus, "peak_event": peak_event,
                         "peak_x": peak_x})
 
-    stopped = "events_max"
-    touched, B = None, None
-    pace = _Pace(checkpoint_s)
+    stopped, touched, B, pace = "events_max", None, None, _Pace(checkpoint_s)
     try:
         while len(events) < events_max:
             if stress_unit <= 0 or not loaded.held.loaded.any():
                 stopped = "no load path"
                 break
             B = _breaking_indices(net, x, strengths, B, alive, touched)
-            worst = float(B.max(initial=-np.inf))
-            if worst <= 0:
-                stopped = "no bond loaded towards breaking"
-                break
-            strain = 1.0 / worst
-            if strain > strain_max:
-                stopped = f"the network holds to strain_max = {strain_max:g}"
+            worst, strain, why = _next_event(B, strain_max)
+            if why:
+                stopped = why
                 break
             stress = strain * stress_unit
             if stress > peak_stress:
@@ -674,24 +664,13 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
                 peak_event = len(events)
             broken = np.flatnonzero(B >= worst / (1.0 + tolerance))
             checks = _checks(net, x, strengths, broken)
-            if settle:
-                settle.release(x, force, broken)
-            came_loose = loaded.break_bonds(broken, adjacency)
+            x, force, stress_unit, its, b_norm, touched, settled = _after_break(
+                loaded, settle, adjacency, broken, x, force, b_norm, local_rtol)
             B[broken] = -np.inf
-            touched = settle(x, force, broken, alive, loaded.free) if settle and not came_loose else None
-            if touched is not None and np.linalg.norm(force[loaded.free]) <= local_rtol * b_norm:
-                stress_unit, its, settled = loaded.stress(force), 0, True
-            else:
-                x, force, stress_unit, its, b_norm = loaded.solve(x)
-                touched, settled = None, False
             events.append(Event(strain, stress, strain * stress_unit, broken.tolist(), its, settled, checks,
                                 int(loaded.engaged.sum())))
-            stop = should_stop()
-            if pace.say_now():
-                say(_progress_line(events, alive, strain_max, peak_stress, time.perf_counter() - t0 - setup))
-            if pace.save_now(stop):
-                save()
-            if stop:
+            if pace.tick(should_stop(), save, lambda: say(_progress_line(
+                    events, alive, strain_max, peak_stress, time.perf_counter() - t0 - setup))):
                 raise Stopped(len(events))
             if events[-1].stress_after_MPa < stop_fraction * peak_stress:
                 stopped = f"stress fell below {stop_fraction:g} of the peak"
@@ -704,6 +683,31 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
                           factorizations=loaded.solver.factorizations, peak_alive=peak_alive, peak_x=peak_x,
                           end_x=events[-1].strain * x.reshape(n, 6) if events else None,
                           loose=int(loaded.loose.sum()))
+
+
+def _next_event(B: np.ndarray, strain_max: float) -> tuple[float, float, str]:
+    """The largest breaking index, the strain of the event it makes (its inverse) and why there is none ("": there
+    is one)."""
+    worst = float(B.max(initial=-np.inf))
+    if worst <= 0:
+        return worst, math.inf, "no bond loaded towards breaking"
+    strain = 1.0 / worst
+    return worst, strain, f"the network holds to strain_max = {strain_max:g}" if strain > strain_max else ""
+
+
+def _after_break(loaded: LoadedNetwork, settle, adjacency, broken: np.ndarray, x: np.ndarray, force: np.ndarray,
+                 b_norm: float, local_rtol: float) -> tuple:
+    """The ``broken`` bonds gone: the local step settles the event where it leaves a residual below ``local_rtol``
+    |b| (and no particle came loose), else the network is re-solved.  Returns x, force, stress per unit strain,
+    iterations, |b|, the bonds the local step touched (None after a re-solve) and whether it settled."""
+    if settle:
+        settle.release(x, force, broken)
+    came_loose = loaded.break_bonds(broken, adjacency)
+    touched = settle(x, force, broken, loaded.alive, loaded.free) if settle and not came_loose else None
+    if touched is not None and np.linalg.norm(force[loaded.free]) <= local_rtol * b_norm:
+        return x, force, loaded.stress(force), 0, b_norm, touched, True
+    x, force, stress_unit, its, b_norm = loaded.solve(x)
+    return x, force, stress_unit, its, b_norm, None, False
 
 
 def _restored_peak(state: dict | None, events: list[Event], m: int) -> tuple:
@@ -725,19 +729,17 @@ class _Pace:
         self.checkpoint_s = checkpoint_s
         self.said = self.saved = time.perf_counter()
 
-    def say_now(self) -> bool:
+    def tick(self, stop: bool, save, tell) -> bool:
+        """After an event: ``tell()`` where it stands, ``save()`` the state when it is time (or ``stop``); returns
+        ``stop``."""
         now = time.perf_counter()
         if now - self.said > 10:
             self.said = now
-            return True
-        return False
-
-    def save_now(self, stop: bool) -> bool:
-        now = time.perf_counter()
+            tell()
         if stop or now - self.saved > self.checkpoint_s:
             self.saved = now
-            return True
-        return False
+            save()
+        return stop
 
 
 def _breaking_indices(net: BondNetwork, x: np.ndarray, strengths: Strengths, B: np.ndarray | None,
@@ -778,7 +780,13 @@ class LoadedNetwork:
     """The bond network under its loading's supports while bonds break: the particles that came loose held
     still, the re-solver over the intact bonds (with contacts: and the contacts pressing), and the solve
     (:meth:`solve`) with the contacts' active set.  ``alive`` (the intact bonds) is the caller's, changed in
-    place by :meth:`break_bonds`."""
+    place by :meth:`break_bonds`.
+
+    The contacts' active set: after every global solve the contacts in tension open and those pressed close,
+    and the network is solved again until none changes (at most :data:`CONTACT_ITERATIONS` rounds; each event's
+    re-solves count them).  A contact that opens stays open for the rest of that solve: with a sticking
+    tangential spring a contact can pull its own pair apart (closed it is in tension, open it is pressed:
+    Coulomb's law would give it no force either way), and the rounds would flip it for ever."""
 
     def __init__(self, net: BondNetwork, supports: Supports, positions: np.ndarray, alive: np.ndarray,
                  contacts: Contacts | None, resolver: str, rtol: float):
