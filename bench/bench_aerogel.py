@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from opalflow.aerogel.aggregation import aggregate, box_edge, gaussian_diameters
-from opalflow.aerogel.run import fractal_fits
+from opalflow.aerogel.fractal import estimates
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results" / "aerogel.json"
@@ -39,11 +39,11 @@ def one(n: int, phi: float, seed: int, *, stepping: str = "jump", p: float = 1.0
 
 def fits_row(agg, seed: int) -> dict:
     """Every D of an aggregate, with its interval, range and note; the crossover mass and length."""
-    fits = fractal_fits(agg, seed)
-    row = {m: {"D": f.D, "ci95": list(f.ci95), "range": list(f.range), "points": f.points, "note": f.note}
-           for m, (f, _) in fits.items()}
-    row["crossover_mass"] = fits["R_g(N)"][1]["crossover_mass"]
-    row["correlation_length_nm"] = fits["g(r)"][1]["xi_nm"]
+    fits = estimates(agg, seed)
+    row = {f.method: {"D": f.D, "ci95": list(f.ci95), "range": list(f.range), "points": f.points, "note": f.note}
+           for f in fits.fits()}
+    row["crossover_mass"] = fits.rg[1].crossover_mass
+    row["correlation_length_nm"] = fits.gr[1].xi_nm
     return row
 
 

@@ -49,13 +49,13 @@ def test_dilute_rg_of_n_is_the_dlca_value(dilute):
     crossover mass inside the clusters made and a fit range of at least a factor 3 in N."""
     fit, curve = radius_of_gyration(dilute)
     assert 1.65 < fit.D < 1.95 and fit.ci95[0] < fit.D < fit.ci95[1]
-    assert math.isfinite(curve["crossover_mass"]) and fit.range[1] >= 3 * fit.range[0]
-    assert fit.range[1] == pytest.approx(curve["crossover_mass"] / 3, rel=1e-9)
+    assert math.isfinite(curve.crossover_mass) and fit.range[1] >= 3 * fit.range[0]
+    assert fit.range[1] == pytest.approx(curve.crossover_mass / 3, rel=1e-9)
 
 
 def test_a_dense_gel_has_no_dilute_range_and_says_so():
     fit, curve = radius_of_gyration(_agg(1500, 0.05))
-    assert math.isnan(fit.D) and "no dilute range" in fit.note and curve["crossover_mass"] < 60
+    assert math.isnan(fit.D) and "no dilute range" in fit.note and curve.crossover_mass < 60
 
 
 def test_gel_pair_correlation_and_structure_factor():
@@ -63,12 +63,12 @@ def test_gel_pair_correlation_and_structure_factor():
     at 0.005 (5 000 spheres) gives 1.5-2.0 both ways; the correlation length is finite and above 6 d."""
     a = _agg(5000, 0.005, stepping="jump")
     g, gc = pair_correlation(a)
-    s, sc = structure_factor(a, gc["xi_nm"])
-    assert 6 * 10.0 < gc["xi_nm"] < a.box / 2
+    s, sc = structure_factor(a, gc.xi_nm)
+    assert 6 * 10.0 < gc.xi_nm < a.box / 2
     assert 1.5 < g.D < 2.0 and 1.5 < s.D < 2.0
-    assert g.range == pytest.approx((2 * np.mean(a.diameters), gc["xi_nm"] / 2))
+    assert g.range == pytest.approx((2 * np.mean(a.diameters), gc.xi_nm / 2))
     # S(q) of the centres: the self term 1 at large q, the fractal excess at small q
-    assert sc["S"][0] > 10 * sc["S"][-1]
+    assert sc.S[0] > 10 * sc.S[-1]
 
 
 def test_loop_statistics_count_independent_cycles():

@@ -48,13 +48,64 @@ class FractalFit:
         return asdict(self)
 
 
+@dataclass
+class MassRadiusCurve:
+    r_nm: np.ndarray
+    count: np.ndarray                   # sphere centres within r of a centre
+    background: np.ndarray              # the homogeneous n 4/3 pi r^3
+
+
+@dataclass
+class GyrationCurve:
+    N: np.ndarray                       # every merger's new cluster: its size and radius of gyration
+    rg_nm: np.ndarray
+    used: np.ndarray                    # the clusters fitted
+    crossover_mass: float
+    bin_N: np.ndarray | None = None     # the bin means the fit runs through (None: none fitted)
+    bin_rg_nm: np.ndarray | None = None
+
+
+@dataclass
+class PairCurve:
+    r_nm: np.ndarray
+    g: np.ndarray
+    xi_nm: float                        # the cut-off length (nan: its fit failed)
+    beta: float
+
+
+@dataclass
+class StructureCurve:
+    q_per_nm: np.ndarray
+    S: np.ndarray
+
+
+@dataclass
+class FractalEstimates:
+    """Every estimate of D_f of an aggregate, each with the curve it was fitted to."""
+
+    mass_radius: tuple[FractalFit, MassRadiusCurve]
+    rg: tuple[FractalFit, GyrationCurve]
+    gr: tuple[FractalFit, PairCurve]
+    sq: tuple[FractalFit, StructureCurve]
+
+    def fits(self) -> list[FractalFit]:
+        return [self.mass_radius[0], self.rg[0], self.gr[0], self.sq[0]]
+
+
+def estimates(agg: Aggregate, seed: int) -> FractalEstimates:
+    """The four estimates of D_f of an aggregate (S(q) over the window that g(r)'s cut-off length sets)."""
+    gr = pair_correlation(agg, seed=seed)
+    return FractalEstimates(mass_radius(agg, seed=seed), radius_of_gyration(agg), gr,
+                            structure_factor(agg, gr[1].xi_nm))
+
+
 def _linear_fit(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     """Slope and the half-width of its 95 % interval."""
     res = stats.linregress(x, y)
     return float(res.slope), float(stats.t.ppf(0.975, len(x) - 2) * res.stderr)
 
 
-def mass_radius(agg: Aggregate, *, centres: int = 4000, seed: int = 0) -> tuple[FractalFit, dict]:
+def mass_radius(agg: Aggregate, *, centres: int = 4000, seed: int = 0) -> tuple[FractalFit, MassRadiusCurve]:
     """D from the excess mass-radius relation of the network (method 1), and the curve for the plot."""
     x, L, n = agg.positions, agg.box, len(agg.positions)
     d = float(np.mean(agg.diameters))
@@ -62,7 +113,7 @@ def mass_radius(agg: Aggregate, *, centres: int = 4000, seed: int = 0) -> tuple[
     pick = np.random.default_rng(seed).choice(n, min(n, centres), replace=False)
     count = cKDTree(x[pick], boxsize=L).count_neighbors(cKDTree(x, boxsize=L), r) / len(pick) - 1.0
     background = (n - 1) / L**3 * 4 / 3 * np.pi * r**3
-    curve = {"r_nm": r, "count": count, "background": background}
+    curve = MassRadiusCurve(r, count, background)
     above = np.flatnonzero((r >= 2 * d) & (count < DENSER * background))
     r_hi = float(r[above[0] - 1]) if len(above) and above[0] > 0 else float(r[-1])
     sel = (r >= 2 * d) & (r <= r_hi) & (count > background)
@@ -113,7 +164,7 @@ RG_N_MIN = 20
 RG_CROSSOVER_FRACTION = 1 / 3
 
 
-def radius_of_gyration(agg: Aggregate, *, n_min: int = RG_N_MIN) -> tuple[FractalFit, dict]:
+def radius_of_gyration(agg: Aggregate, *, n_min: int = RG_N_MIN) -> tuple[FractalFit, GyrationCurve]:
     """D from R_g ~ N^(1/D) of the clusters made during aggregation (method 2), and the points.
 
     The ensemble is every merger's new cluster; the fit runs from ``n_min`` to a third of the crossover mass
@@ -124,14 +175,14 @@ def radius_of_gyration(agg: Aggregate, *, n_min: int = RG_N_MIN) -> tuple[Fracta
     n_c = crossover_mass(N, rg, agg.diameters, agg.solid_fraction)
     n_hi = n_c * RG_CROSSOVER_FRACTION
     keep = (N >= n_min) & (N <= n_hi) & (rg < agg.box / 4) & (rg > 0)
-    curve = {"N": N, "rg_nm": rg, "used": keep, "crossover_mass": n_c}
+    curve = GyrationCurve(N, rg, keep, n_c)
     rng = (float(n_min), float(min(n_hi, N.max())))
     if rng[1] < 3 * n_min or keep.sum() < 10:
         return FractalFit("R_g(N)", math.nan, (math.nan, math.nan), rng, int(keep.sum()),
                           f"no dilute range: crossover mass {n_c:.4g}, a third of it is less than 3 x {n_min} "
                           "(too dense: measure D_f by g(r) or S(q), or dilute the aggregate)"), curve
     bx, by = _bin_means(np.log(N[keep]), np.log(rg[keep]))
-    curve.update(bin_N=np.exp(bx), bin_rg_nm=np.exp(by))
+    curve.bin_N, curve.bin_rg_nm = np.exp(bx), np.exp(by)
     if len(bx) < 4:
         return FractalFit("R_g(N)", math.nan, (math.nan, math.nan), rng, len(bx), "fewer than 4 bins of ln N"), curve
     slope, half = _linear_fit(bx, by)
@@ -165,7 +216,7 @@ def _cutoff(r: np.ndarray, excess: np.ndarray, d: float) -> tuple[float, float]:
     return float(math.exp(p[2])), float(p[3])
 
 
-def pair_correlation(agg: Aggregate, *, centres: int = 4000, seed: int = 0) -> tuple[FractalFit, dict]:
+def pair_correlation(agg: Aggregate, *, centres: int = 4000, seed: int = 0) -> tuple[FractalFit, PairCurve]:
     """D from the gel's pair correlation: g(r) - 1 ~ r^(D - 3) between 4 radii (2 d: past the contact spike
     at d and the jump at 2 d, Hasmy et al., Phys. Rev. B 50, 6006, 1994) and half the correlation length xi,
     with the cut-off function exp(-(r / xi)^beta) that :func:`_cutoff` fits divided out (without it the
@@ -180,7 +231,7 @@ def pair_correlation(agg: Aggregate, *, centres: int = 4000, seed: int = 0) -> t
     g = np.diff(cum) / (shell * (n - 1) / L**3)
     r = np.sqrt(edges[1:] * edges[:-1])
     xi, beta = _cutoff(r, g - 1.0, d)
-    curve = {"r_nm": r, "g": g, "xi_nm": xi, "beta": beta}
+    curve = PairCurve(r, g, xi, beta)
     if not math.isfinite(xi):
         return FractalFit("g(r)", math.nan, (math.nan, math.nan), (2 * d, L / 2), 0,
                           "no correlation length: the cut-off fit of g(r) failed"), curve
@@ -193,7 +244,7 @@ def pair_correlation(agg: Aggregate, *, centres: int = 4000, seed: int = 0) -> t
                       f"correlation length xi = {xi:.4g} nm, cut-off exponent beta = {beta:.2f}"), curve
 
 
-def structure_factor(agg: Aggregate, xi: float, *, grid: int = 0) -> tuple[FractalFit, dict]:
+def structure_factor(agg: Aggregate, xi: float, *, grid: int = 0) -> tuple[FractalFit, StructureCurve]:
     """D from the structure factor of the sphere centres, S(q) = |sum_j exp(-i q x_j)|^2 / N ~ q^-D (what a
     small-angle scattering experiment sees, less the sphere form factor; Heinson, Chakrabarti and Sorensen
     2010 measure off-lattice DLCA both ways), over q = pi / r for r from 2 d to xi / 2 (the window of
@@ -227,12 +278,12 @@ def structure_factor(agg: Aggregate, xi: float, *, grid: int = 0) -> tuple[Fract
     sq = np.bincount(which, power[ok], minlength=len(edges) + 1)[1:len(edges)]
     qs = np.bincount(which, q[ok], minlength=len(edges) + 1)[1:len(edges)]
     has = cnt > 0
-    curve = {"q_per_nm": qs[has] / cnt[has], "S": sq[has] / cnt[has]}
+    curve = StructureCurve(qs[has] / cnt[has], sq[has] / cnt[has])
     if not math.isfinite(xi):
         return FractalFit("S(q)", math.nan, (math.nan, math.nan), (math.nan, math.nan), 0,
                           "no correlation length (see g(r)): no window to fit"), curve
     q_lo, q_hi = np.pi / (xi / 2), np.pi / (2 * d)
-    qq, S = curve["q_per_nm"], curve["S"]
+    qq, S = curve.q_per_nm, curve.S
     sel = (qq >= q_lo) & (qq <= q_hi)
     if sel.sum() < 4 or q_hi < 1.5 * q_lo:
         return FractalFit("S(q)", math.nan, (math.nan, math.nan), (q_lo, q_hi), int(sel.sum()),
@@ -255,53 +306,53 @@ def _fit_line(ax, fit: FractalFit, x, y, power) -> None:
     ax.loglog(g, k * g**p, "r-", lw=2, label=f"D = {fit.D:.2f} [{fit.ci95[0]:.2f}, {fit.ci95[1]:.2f}]")
 
 
-def plot_fractal(fits: dict, path) -> None:
+def plot_fractal(fits: FractalEstimates, path) -> None:
     """The estimates side by side: excess count against r, R_g against N (crossover mass marked), g(r) - 1
-    and S(q), each with its fit; ``fits`` maps method -> (FractalFit, curve)."""
+    and S(q), each with its fit."""
     fig, axes = new_figure(2, 2, figsize=(10, 8))
     a, b, cg, cs = axes.ravel()
-    fit, c = fits["mass-radius"]
-    excess = c["count"] - c["background"]
-    a.loglog(c["r_nm"], c["count"], "o", ms=3, label="C(r): centres within r")
-    a.loglog(c["r_nm"], c["background"], "k:", label="homogeneous n 4/3 pi r^3")
-    a.loglog(c["r_nm"][excess > 0], excess[excess > 0], "s", ms=3, mfc="none", label="C - background")
-    _fit_line(a, fit, c["r_nm"], excess, lambda D: D)
+    fit, c = fits.mass_radius
+    excess = c.count - c.background
+    a.loglog(c.r_nm, c.count, "o", ms=3, label="C(r): centres within r")
+    a.loglog(c.r_nm, c.background, "k:", label="homogeneous n 4/3 pi r^3")
+    a.loglog(c.r_nm[excess > 0], excess[excess > 0], "s", ms=3, mfc="none", label="C - background")
+    _fit_line(a, fit, c.r_nm, excess, lambda D: D)
     a.set_xlabel("r (nm)")
     a.set_ylabel("spheres within r")
     a.set_title("mass-radius of the network" + ("" if math.isfinite(fit.D) else " (no fractal range)"))
     a.legend(fontsize=7)
-    fit, c = fits["R_g(N)"]
-    b.loglog(c["N"], c["rg_nm"], ".", ms=2, alpha=0.2, color="0.5", label="mergers")
-    b.loglog(c["N"][c["used"]], c["rg_nm"][c["used"]], ".", ms=2, alpha=0.3, label="mergers fitted")
-    if "bin_N" in c:
-        b.loglog(c["bin_N"], c["bin_rg_nm"], "ko", ms=4, label="bin means")
-        _fit_line(b, fit, c["bin_N"], c["bin_rg_nm"], lambda D: 1 / D)
-    if math.isfinite(c["crossover_mass"]):
-        b.axvline(c["crossover_mass"], color="k", ls="--", lw=1, label=f"crossover mass {c['crossover_mass']:.3g}")
+    fit, c = fits.rg
+    b.loglog(c.N, c.rg_nm, ".", ms=2, alpha=0.2, color="0.5", label="mergers")
+    b.loglog(c.N[c.used], c.rg_nm[c.used], ".", ms=2, alpha=0.3, label="mergers fitted")
+    if c.bin_N is not None:
+        b.loglog(c.bin_N, c.bin_rg_nm, "ko", ms=4, label="bin means")
+        _fit_line(b, fit, c.bin_N, c.bin_rg_nm, lambda D: 1 / D)
+    if math.isfinite(c.crossover_mass):
+        b.axvline(c.crossover_mass, color="k", ls="--", lw=1, label=f"crossover mass {c.crossover_mass:.3g}")
     b.set_xlabel("cluster size N")
     b.set_ylabel("R_g (nm)")
     b.set_title("radius of gyration during aggregation" + ("" if math.isfinite(fit.D) else " (no dilute range)"))
     b.legend(fontsize=7)
-    fit, c = fits["g(r)"]
-    ex = c["g"] - 1.0
-    cg.loglog(c["r_nm"][ex > 0], ex[ex > 0], "o", ms=3, label="g(r) - 1")
+    fit, c = fits.gr
+    ex = c.g - 1.0
+    cg.loglog(c.r_nm[ex > 0], ex[ex > 0], "o", ms=3, label="g(r) - 1")
     if math.isfinite(fit.D):             # the fit: the power law times the cut-off, through the window's points
-        r, xi, beta = c["r_nm"], c["xi_nm"], c["beta"]
+        r, xi, beta = c.r_nm, c.xi_nm, c.beta
         sel = (r >= fit.range[0]) & (r <= fit.range[1]) & (ex > 0)
         k = np.exp(np.mean(np.log(ex[sel]) + (r[sel] / xi) ** beta - (fit.D - 3) * np.log(r[sel])))
         g = np.geomspace(fit.range[0], xi, 30)
         cg.loglog(g, k * g ** (fit.D - 3) * np.exp(-(g / xi) ** beta), "r-", lw=2,
                   label=f"D = {fit.D:.2f} [{fit.ci95[0]:.2f}, {fit.ci95[1]:.2f}], cut-off beta = {beta:.2f}")
         cg.axvline(fit.range[1], color="r", ls=":", lw=1, label="xi / 2: end of the fitted window")
-    if math.isfinite(c["xi_nm"]):
-        cg.axvline(c["xi_nm"], color="k", ls="--", lw=1, label=f"xi = {c['xi_nm']:.3g} nm (cut-off length)")
+    if math.isfinite(c.xi_nm):
+        cg.axvline(c.xi_nm, color="k", ls="--", lw=1, label=f"xi = {c.xi_nm:.3g} nm (cut-off length)")
     cg.set_xlabel("r (nm)")
     cg.set_ylabel("g(r) - 1")
     cg.set_title("pair correlation of the gel")
     cg.legend(fontsize=7)
-    fit, c = fits["S(q)"]
-    cs.loglog(c["q_per_nm"], c["S"], "o", ms=3, label="S(q) of the centres")
-    _fit_line(cs, fit, c["q_per_nm"], c["S"], lambda D: -D)
+    fit, c = fits.sq
+    cs.loglog(c.q_per_nm, c.S, "o", ms=3, label="S(q) of the centres")
+    _fit_line(cs, fit, c.q_per_nm, c.S, lambda D: -D)
     cs.set_xlabel("q (1/nm)")
     cs.set_ylabel("S(q)")
     cs.set_title("structure factor")

@@ -14,8 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from opalflow.aerogel.aggregation import Aggregate
-from opalflow.aerogel.fractal import (FractalFit, mass_radius, pair_correlation, plot_fractal, radius_of_gyration,
-                                     structure_factor)
+from opalflow.aerogel.fractal import FractalFit, estimates, plot_fractal
 from opalflow.aerogel.loops import loop_statistics
 from opalflow.aerogel.scene import coordination, make_aggregate, periodic_structure
 from opalflow.aerogel.spec import AggregationWorkflow
@@ -72,14 +71,6 @@ def _fit_line(f: FractalFit) -> str:
             f"| {f.points} | {f.note} |")
 
 
-def fractal_fits(agg: Aggregate, seed: int) -> dict:
-    """Every estimate of D_f of an aggregate: method -> (FractalFit, curve)."""
-    fits = {"mass-radius": mass_radius(agg, seed=seed), "R_g(N)": radius_of_gyration(agg),
-            "g(r)": pair_correlation(agg, seed=seed)}
-    fits["S(q)"] = structure_factor(agg, fits["g(r)"][1]["xi_nm"])
-    return fits
-
-
 def run_aggregation(spec: AggregationWorkflow, out: Path, say=print) -> dict:
     start = time.perf_counter()
     a = spec.aggregate
@@ -91,7 +82,7 @@ def run_aggregation(spec: AggregationWorkflow, out: Path, say=print) -> dict:
     s = periodic_structure(agg, cutoff, spec.material)
     z = coordination(s.n_particles, s.bonds)
     loops = loop_statistics(s.n_particles, s.bonds)
-    fits = fractal_fits(agg, a.seed)
+    fits = estimates(agg, a.seed)
     lit, source = LITERATURE[a.algorithm]
     summary = {
         "workflow": spec.name, "opalflow_version": __version__, "algorithm": a.algorithm,
@@ -100,12 +91,12 @@ def run_aggregation(spec: AggregationWorkflow, out: Path, say=print) -> dict:
         "collisions": agg.collisions, "mergers": len(agg.contacts),
         "clusters_left": agg.clusters_left, "aggregation_s": agg.wall_s, "moves_per_s": agg.moves / max(agg.wall_s, 1e-9),
         "loop_model": done, "bond_cutoff": cutoff, **loops,
-        "crossover_mass": fits["R_g(N)"][1]["crossover_mass"], "correlation_length_nm": fits["g(r)"][1]["xi_nm"],
-        "fractal_mass_radius": fits["mass-radius"][0].as_dict(), "fractal_rg": fits["R_g(N)"][0].as_dict(),
-        "fractal_gr": fits["g(r)"][0].as_dict(), "fractal_sq": fits["S(q)"][0].as_dict(),
+        "crossover_mass": fits.rg[1].crossover_mass, "correlation_length_nm": fits.gr[1].xi_nm,
+        "fractal_mass_radius": fits.mass_radius[0], "fractal_rg": fits.rg[0], "fractal_gr": fits.gr[0],
+        "fractal_sq": fits.sq[0],
         "literature_D": {"value": lit, "source": source},
     }
-    d_text = "; ".join(f"{f.D:.2f} [{f.ci95[0]:.2f}, {f.ci95[1]:.2f}] ({f.method})" for f, _ in fits.values()
+    d_text = "; ".join(f"{f.D:.2f} [{f.ci95[0]:.2f}, {f.ci95[1]:.2f}] ({f.method})" for f in fits.fits()
                        if math.isfinite(f.D)) or "no fit"
     summary["headline"] = (f"D_f = {d_text}; literature {lit}; {s.n_particles} spheres, {s.n_bonds} bonds "
                            f"({loops['loops_per_10k']:.0f} loops per 10 000), {agg.wall_s:.1f} s")
@@ -122,7 +113,7 @@ def run_aggregation(spec: AggregationWorkflow, out: Path, say=print) -> dict:
               + (f"; {done['deflected']} of {done['dangling_before']} dangling spheres deflected" if "deflected" in done
                  else "") + ".", "",
               "| method | D_f | 95 % interval | fitted range | points | note |", "|---|---|---|---|---|---|",
-              *(_fit_line(f) for f, _ in fits.values()), "",
+              *(_fit_line(f) for f in fits.fits()), "",
               f"Literature ({a.algorithm.upper()}): {lit} ({source}); dilute DLCA by R_g(N): 1.78 +- 0.05 (Jullien, "
               "Kolb and Botet 1984). R_g(N) measures the dilute clusters (up to a third of the crossover mass, "
               "where a cluster's own solid fraction falls to the box's); g(r) and S(q) the gel up to half its "
@@ -130,20 +121,17 @@ def run_aggregation(spec: AggregationWorkflow, out: Path, say=print) -> dict:
               "seeds give the spread.", "",
               "![fractal dimension](fractal.png)", "", "![network](network.png)", "",
               "`aggregate.lmp`: the bonded network as an atom_style bpm/sphere data file (periodic in x, y, z)."]
-    mr_curve = fits["mass-radius"][1]
+    mr, gr, sq = fits.mass_radius[1], fits.gr[1], fits.sq[1]
 
     def fill(h):
         for key, value, unit, cols in (
                 ("positions_nm", agg.positions, "nm", ["x", "y", "z"]), ("diameters_nm", agg.diameters, "nm", None),
                 ("arrival", agg.arrival, "1", None), ("contacts", agg.contacts, "1", ["i", "j"]),
                 ("bonds", s.bonds, "1", ["i", "j"]), ("merger_size", agg.merger_size, "1", None),
-                ("merger_rg_nm", agg.merger_rg, "nm", None), ("mass_radius/r_nm", mr_curve["r_nm"], "nm", None),
-                ("mass_radius/count", mr_curve["count"], "1", None),
-                ("mass_radius/background", mr_curve["background"], "1", None),
-                ("pair_correlation/r_nm", fits["g(r)"][1]["r_nm"], "nm", None),
-                ("pair_correlation/g", fits["g(r)"][1]["g"], "1", None),
-                ("structure_factor/q_per_nm", fits["S(q)"][1]["q_per_nm"], "1/nm", None),
-                ("structure_factor/S", fits["S(q)"][1]["S"], "1", None)):
+                ("merger_rg_nm", agg.merger_rg, "nm", None), ("mass_radius/r_nm", mr.r_nm, "nm", None),
+                ("mass_radius/count", mr.count, "1", None), ("mass_radius/background", mr.background, "1", None),
+                ("pair_correlation/r_nm", gr.r_nm, "nm", None), ("pair_correlation/g", gr.g, "1", None),
+                ("structure_factor/q_per_nm", sq.q_per_nm, "1/nm", None), ("structure_factor/S", sq.S, "1", None)):
             put(h, key, value, unit, cols)
     results = h5_bytes(fill, workflow=spec.name)
     out.mkdir(parents=True, exist_ok=True)
