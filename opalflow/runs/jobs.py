@@ -9,6 +9,7 @@ and :mod:`opalflow.runs.status` reads any of them.  What a job came to is an :cl
 """
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -23,7 +24,7 @@ from opalflow.progress import note
 from opalflow.runs.record import RunRecord, finished_summary, run_kind, spec_digest
 from opalflow.runs.result import Result
 from opalflow.spec import WorkflowSpec
-from opalflow.store import RECORD
+from opalflow.store import RECORD, json_text
 
 
 def spec_hash(spec: WorkflowSpec) -> str:
@@ -70,8 +71,8 @@ class Outcome:
 
     @property
     def summary(self) -> dict | None:
-        """The finished job's summary.json as written (None where it has not finished)."""
-        return None if self.result is None else self.result.summary()
+        """The finished job's summary.json as written, JSON's types (None where it has not finished)."""
+        return None if self.result is None else json.loads(json_text(self.result.summary()))
 
 
 def job_record(folder: str | os.PathLike) -> RunRecord | None:
