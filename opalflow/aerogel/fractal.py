@@ -19,7 +19,7 @@ lower bounds of the uncertainty: seeds give the spread.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import stats
@@ -43,9 +43,6 @@ class FractalFit:
     range: tuple[float, float]          # nm (mass-radius) or N (R_g(N))
     points: int
     note: str = ""
-
-    def as_dict(self) -> dict:
-        return asdict(self)
 
 
 @dataclass

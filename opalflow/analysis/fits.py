@@ -10,7 +10,7 @@ that the two E laws can be compared on the same footing.
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import stats
@@ -26,9 +26,6 @@ class Fit:
     r2: float               # on the values, not their logarithms
     rmse_log: float         # residual of ln(value)
     n: int
-
-    def as_dict(self) -> dict:
-        return asdict(self)
 
 
 def _line_fit(x: np.ndarray, y_log: np.ndarray, values: np.ndarray, law: str, sign: float, model) -> Fit:
