@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 from opalflow.bpm.spec import StabilityMatrixWorkflow
-from opalflow.bpm.stability import check_workflow
+from opalflow.bpm.stability import stability_check
 from opalflow.registry import load_spec
 from opalflow.resources import WORKFLOWS
 from opalflow.spec import InputError
@@ -31,18 +31,17 @@ def run_matrix(spec: StabilityMatrixWorkflow, out: Path, say=print) -> dict:
         t = time.perf_counter()
         try:
             job = load_spec(WORKFLOWS / f"{row['workflow']}.toml", sets)
-            s = check_workflow(job, out / "rows" / label, say=lambda m, lb=label: say(f"[{lb}] {m}"),
-                               steps=spec.matrix.steps, strain=row.get("strain"), bisect=True)
+            s = stability_check(job, out / "rows" / label, say=lambda m, lb=label: say(f"[{lb}] {m}"),
+                                steps=spec.matrix.steps, strain=row.get("strain"), bisect=True)
         except InputError as exc:
             rows.append({"label": label, "workflow": row["workflow"], "set": sets, "error": str(exc)})
             say(f"[{label}] refused: {exc}")
             continue
         rows.append({"label": label, "workflow": row["workflow"], "set": sets, "strain": row.get("strain"),
-                     "steps": s["steps"], "passed": s["passed"],
-                     "failed": s["failed"], "timestep_s": s["timestep_estimate_s"],
-                     "timestep_limit_estimate_s": s["timestep_limit_estimate_s"],
-                     "timestep_stable_max_s": s["timestep_stable_max_s"], "ratio": s["estimate_over_bisected"],
-                     "stiffest_mode": s["stiffest_mode"], "seconds": time.perf_counter() - t})
+                     "steps": s.steps, "passed": s.passed, "failed": s.failed, "timestep_s": s.timestep_estimate_s,
+                     "timestep_limit_estimate_s": s.timestep_limit_estimate_s,
+                     "timestep_stable_max_s": s.timestep_stable_max_s, "ratio": s.estimate_over_bisected,
+                     "stiffest_mode": s.stiffest_mode, "seconds": time.perf_counter() - t})
     done = [r for r in rows if "error" not in r]
     stable = [r for r in done if r["passed"]]
     in_range = [r for r in done if r["ratio"] is not None and 0.5 <= r["ratio"] <= 1.0]

@@ -161,11 +161,57 @@ def bisect_timestep(deck: CompressionDeck, folder: Path, *, steps: int, strain: 
     return low, runs
 
 
+@dataclass
+class BisectionStep:
+    """One run of the bisection: its time step (as a factor of the deck's and in seconds) and the verdict."""
+
+    factor: float
+    timestep_s: float
+    passed: bool
+    failed: str
+
+
+@dataclass
+class StabilityCheck:
+    """What ``python -m opalflow check`` found (stability.json): the verdict at the deck's time step (x
+    ``timestep_factor``), the estimator's limit and, with bisection, the largest stable time step beside it."""
+
+    workflow: str
+    passed: bool
+    failed: str
+    timestep_s: float
+    timestep_factor: float
+    timestep_estimate_s: float
+    timestep_limit_estimate_s: float
+    stiffest_mode: str
+    steps: int
+    strain: float | None
+    run: dict
+    headline: str = ""
+    wall_s: float = 0.0
+    timestep_stable_max_s: float | None = None
+    estimate_over_bisected: float | None = None
+    bisection: list[BisectionStep] | None = None
+
+    def to_dict(self) -> dict:
+        """stability.json: the bisection's keys only where it ran."""
+        out = asdict(self)
+        return out if self.bisection is not None else {
+            k: v for k, v in out.items() if k not in ("timestep_stable_max_s", "estimate_over_bisected", "bisection")}
+
+
 def check_workflow(spec: BpmWorkflow, out: Path, *, say=print, steps: int = 3000, timestep_factor: float = 1.0,
                    bisect: bool = False, strain: float | None = None) -> dict:
-    """``python -m opalflow check``: the criteria at the deck's time step (x ``timestep_factor``) over
-    ``steps`` steps or up to ``strain`` and, with ``bisect``, the largest stable time step beside the
-    estimate; writes stability.json and stability.md into ``out``."""
+    """``python -m opalflow check``: :func:`stability_check`'s stability.json as a table (the kinds' ``check``)."""
+    return stability_check(spec, out, say=say, steps=steps, timestep_factor=timestep_factor, bisect=bisect,
+                           strain=strain).to_dict()
+
+
+def stability_check(spec: BpmWorkflow, out: Path, *, say=print, steps: int = 3000, timestep_factor: float = 1.0,
+                    bisect: bool = False, strain: float | None = None) -> StabilityCheck:
+    """The criteria at the deck's time step (x ``timestep_factor``) over ``steps`` steps or up to ``strain``
+    and, with ``bisect``, the largest stable time step beside the estimate; writes stability.json and
+    stability.md into ``out``."""
     t0 = time.perf_counter()
     s = scene_of(spec).structure(spec, say)
     deck = compression_deck(spec, s)
@@ -178,37 +224,32 @@ def check_workflow(spec: BpmWorkflow, out: Path, *, say=print, steps: int = 3000
     result = run_check(deck, out / "run", factor=timestep_factor, steps=steps, strain=strain)
     for name, (ok, figures) in result.criteria.items():
         say(f"  {'pass' if ok else 'FAIL'}  {name}: {figures}")
-    summary = {"workflow": spec.name, "passed": result.passed, "failed": result.failed(),
-               "timestep_s": result.timestep_s, "timestep_factor": timestep_factor,
-               "timestep_estimate_s": deck.dt_ns * 1e-9, "timestep_limit_estimate_s": deck.timestep.limit_ns * 1e-9,
-               "stiffest_mode": deck.timestep.stiffest, "steps": result.steps, "strain": strain,
-               "run": result.as_dict()}
+    check = StabilityCheck(spec.name, result.passed, result.failed(), result.timestep_s, timestep_factor,
+                           deck.dt_ns * 1e-9, deck.timestep.limit_ns * 1e-9, deck.timestep.stiffest, result.steps,
+                           strain, result.as_dict())
     if bisect:
         say("bisection of the largest stable time step:")
         best, runs = bisect_timestep(deck, out / "bisection", steps=steps, strain=strain, say=say)
-        dt_max = best * deck.dt_ns * 1e-9
-        summary.update({"timestep_stable_max_s": dt_max,
-                        "estimate_over_bisected": deck.timestep.limit_ns * 1e-9 / dt_max if dt_max else None,
-                        "bisection": [{"factor": r.timestep_factor, "timestep_s": r.timestep_s, "passed": r.passed,
-                                       "failed": r.failed()} for r in runs]})
-        ratio = summary["estimate_over_bisected"]
+        check.timestep_stable_max_s = dt_max = best * deck.dt_ns * 1e-9
+        check.estimate_over_bisected = ratio = check.timestep_limit_estimate_s / dt_max if dt_max else None
+        check.bisection = [BisectionStep(r.timestep_factor, r.timestep_s, r.passed, r.failed()) for r in runs]
         say(f"largest stable dt found {dt_max:.3g} s; estimated limit {deck.timestep.limit_ns * 1e-9:.3g} s "
             f"(ratio {'-' if ratio is None else format(ratio, '.2f')}); the deck uses {deck.dt_ns * 1e-9:.3g} s")
     verdict = "stable" if result.passed else f"UNSTABLE ({result.failed()})"
-    summary["headline"] = f"{spec.name}: {verdict} at dt = {result.timestep_s:.3g} s over {result.steps} steps{upto}"
-    summary["wall_s"] = time.perf_counter() - t0
-    lines = [f"# Stability check: {spec.name}", "", summary["headline"] + ".", "",
+    check.headline = f"{spec.name}: {verdict} at dt = {result.timestep_s:.3g} s over {result.steps} steps{upto}"
+    check.wall_s = time.perf_counter() - t0
+    lines = [f"# Stability check: {spec.name}", "", check.headline + ".", "",
              "| criterion | result | figures |", "|---|---|---|"]
     lines += [f"| {k} | {'pass' if ok else 'FAIL'} | {fig} |" for k, (ok, fig) in result.criteria.items()]
     if bisect:
-        lines += ["", f"Largest stable time step found by bisection: {summary['timestep_stable_max_s']:.3g} s; "
-                  f"the estimator's limit {summary['timestep_limit_estimate_s']:.3g} s "
-                  f"(ratio {summary['estimate_over_bisected']:.2f}); the deck's time step "
-                  f"{summary['timestep_estimate_s']:.3g} s.", "", "| factor | dt (s) | result |", "|---|---|---|"]
-        lines += [f"| {r['factor']:.3f} | {r['timestep_s']:.3g} | {'pass' if r['passed'] else 'FAIL: ' + r['failed']} |"
-                  for r in summary["bisection"]]
+        lines += ["", f"Largest stable time step found by bisection: {check.timestep_stable_max_s:.3g} s; "
+                  f"the estimator's limit {check.timestep_limit_estimate_s:.3g} s "
+                  f"(ratio {check.estimate_over_bisected:.2f}); the deck's time step "
+                  f"{check.timestep_estimate_s:.3g} s.", "", "| factor | dt (s) | result |", "|---|---|---|"]
+        lines += [f"| {r.factor:.3f} | {r.timestep_s:.3g} | {'pass' if r.passed else 'FAIL: ' + r.failed} |"
+                  for r in check.bisection]
     lines += ["", "Criteria: opalflow/bpm/stability.py. Wall time "
-              f"{summary['wall_s']:.1f} s."]
-    write_json_atomic(out / "stability.json", summary)
+              f"{check.wall_s:.1f} s."]
+    write_json_atomic(out / "stability.json", check.to_dict())
     write_text_atomic(out / "stability.md", "\n".join(lines) + "\n")
-    return summary
+    return check
