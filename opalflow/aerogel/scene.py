@@ -166,4 +166,4 @@ def _describe(st: dict) -> str:
             f"({st['dropped_unattached']} spheres left out: no bond path to the bottom after the cut)")
 
 
-SCENE = Scene(build=build_aerogel, statistics=statistics, run_keys=AerogelResult.facts(), describe=_describe)
+SCENE = Scene(build=build_aerogel, statistics=statistics, run_keys=AerogelResult.structure_keys(), describe=_describe)

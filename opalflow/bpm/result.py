@@ -135,7 +135,7 @@ class CompressionResult(Result):
         return track(**{**keys, **{k: v for k, v in structure.items() if k in names}})
 
     @classmethod
-    def facts(cls) -> tuple[str, ...]:
+    def structure_keys(cls) -> tuple[str, ...]:
         """The structure's numbers a track's class declares (its scene's ``run_keys``)."""
         return tuple(cls.__annotations__)
 

@@ -250,4 +250,4 @@ def opal_structure(spec: OpalWorkflow, progress=None) -> Structure:
     return build_opal(spec, progress)[0]
 
 
-SCENE = Scene(build=opal_structure, statistics=structure_statistics, run_keys=OpalResult.facts(), describe=_describe)
+SCENE = Scene(build=opal_structure, statistics=structure_statistics, run_keys=OpalResult.structure_keys(), describe=_describe)

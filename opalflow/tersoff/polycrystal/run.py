@@ -147,11 +147,10 @@ class WaveRun:
     profile: list
 
 
-def experiment_job(spec: PolycrystalWorkflow, label: str, **sections) -> Job:
+def experiment_job(spec: PolycrystalWorkflow, label: str, at: tuple = (), **sections) -> Job:
     """An experiment as a job: the run's spec with the sections that make it one experiment (``tension``,
     ``samples``, ``waves`` replaced), named by its label, so its spec hash is that of what it computes."""
-    one = dataclasses.replace(spec, name=label, description="", **sections)
-    return Job(label, one)
+    return Job(label, dataclasses.replace(spec, name=label, description="", **sections), at)
 
 
 def run_experiments(jobs: list[Job], out: Path, resume: bool, compute, read, say) -> dict:
@@ -280,15 +279,11 @@ def relaxation_comparison(samples: Samples, seed: int, force_tol: float, count: 
 
 def tension_jobs(spec: TensionWorkflow) -> list[Job]:
     """Each mesh x orientation seed as a job (``at``: its index in ``tension.cubes``, cubes, cube edge, seed)."""
-    t, jobs = spec.tension, []
-    for i, (n, h) in enumerate(zip(t.cubes, t.cube_nm)):
-        for seed in spec.samples.seeds:
-            job = experiment_job(spec, f"tension_{6 * n ** 3}el_{h:g}nm_seed{seed}",
-                                 tension=dataclasses.replace(t, cubes=[n], cube_nm=[h]),
-                                 samples=dataclasses.replace(spec.samples, seeds=[seed], lammps_check=0))
-            job.at = (i, n, h, seed)
-            jobs.append(job)
-    return jobs
+    t = spec.tension
+    return [experiment_job(spec, f"tension_{6 * n ** 3}el_{h:g}nm_seed{seed}", (i, n, h, seed),
+                           tension=dataclasses.replace(t, cubes=[n], cube_nm=[h]),
+                           samples=dataclasses.replace(spec.samples, seeds=[seed], lammps_check=0))
+            for i, (n, h) in enumerate(zip(t.cubes, t.cube_nm)) for seed in spec.samples.seeds]
 
 
 def run_tension(spec: TensionWorkflow, out: Path, say=print, resume: bool = False) -> dict:
