@@ -120,26 +120,30 @@ def run(workflow: str | Path | dict | WorkflowSpec | None, out: str | Path, *, s
         if suffix not in usable:
             raise SpecError("--suffix", suffix, f"this LAMMPS build offers {', '.join(usable) or 'none'}")
     from opalflow.runs.record import refuse_finished, run_kind
+    from opalflow.runs.result import read_summary
 
     kind = registry.get(spec.kind)
     if not resume and "executor" not in kind.options:      # (a study run again goes on: its finished jobs kept)
         refuse_finished(out)
     ex = executor_of(None if resume and workflow is None else workflow, set, executor)
     if "executor" in kind.options:              # a kind of many jobs sends them there
-        return run_kind(kind, spec, out, np_=np, resume=resume, say=_say(quiet), suffix=suffix,
-                        executor=ex if executor is not None else None)
-    if ex.type != "local":                      # any other run goes there as one job
+        run_kind(kind, spec, out, np_=np, resume=resume, say=_say(quiet), suffix=suffix,
+                 executor=ex if executor is not None else None)
+    elif ex.type != "local":                    # any other run goes there as one job
         if suffix:
             raise SpecError("--suffix", suffix, "is for runs on this machine (a submitted run uses the launcher)")
         return submit(spec, out, ex, np_=np, say=_say(quiet))
-    return run_kind(kind, spec, out, np_=np, resume=resume, say=_say(quiet), suffix=suffix)
+    else:
+        run_kind(kind, spec, out, np_=np, resume=resume, say=_say(quiet), suffix=suffix)
+    return read_summary(out)            # as written (the typed result: opalflow.load_results(out).result)
 
 
 def resumed_spec(out: Path, workflow=None, set: Settings = None) -> WorkflowSpec:
     """The spec a ``--resume`` of ``out`` goes on with: the one its run.json stores (the truth).  A workflow or
     ``set`` given beside it must give the same spec, else one line names the first difference; a finished run
     is not resumed (one line)."""
-    from opalflow.runs.record import RunRecord, is_finished
+    from opalflow.runs.record import RunRecord
+    from opalflow.runs.result import is_finished
 
     record = RunRecord.read(out, "--resume")
     stored = registry.spec_from_dict(record.spec)
@@ -201,8 +205,12 @@ def submit(spec: WorkflowSpec, out: str | Path, ex, *, np_: int = 1, say=_stderr
 def build(workflow: str | Path | dict | WorkflowSpec, out: str | Path, *, set: Settings = None,
           quiet: bool = False) -> dict:
     """Everything a run writes before it runs (structure, data.lmp, in.lmp, run.sh, summary.json); no run."""
+    from opalflow.runs.result import read_summary
+
     spec = load_workflow(workflow, set)
-    return registry.get(spec.kind).build_workflow(spec, usable_folder(out, "out"), say=_say(quiet))
+    out = usable_folder(out, "out")
+    registry.get(spec.kind).build_workflow(spec, out, say=_say(quiet))
+    return read_summary(out)
 
 
 def check(workflow: str | Path | dict | WorkflowSpec, out: str | Path, *, set: Settings = None, steps: int = 3000,
@@ -217,14 +225,18 @@ def check(workflow: str | Path | dict | WorkflowSpec, out: str | Path, *, set: S
         raise SpecError("--strain", strain, "must be in (0, 0.9] (compress the sample this far)")
     spec = load_workflow(workflow, set)
     return registry.get(spec.kind).check_workflow(spec, usable_folder(out, "out"), say=_say(quiet), steps=steps,
-                                                  timestep_factor=timestep_factor, bisect=bisect, strain=strain)
+                                                  timestep_factor=timestep_factor, bisect=bisect,
+                                                  strain=strain).to_dict()
 
 
 def analyze(folder: str | Path) -> dict:
     """The results of a run folder whose deck ran outside opalflow (``bash run.sh``): writes and returns them."""
     folder = Path(folder)
+    from opalflow.runs.result import read_summary
+
     kind = run_json(folder)["spec"].get("kind", registry.DEFAULT_KIND)
-    return registry.get(kind).analyze_folder(folder)
+    registry.get(kind).analyze_folder(folder)
+    return read_summary(folder)
 
 
 def workflows() -> dict[str, dict]:

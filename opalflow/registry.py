@@ -22,7 +22,7 @@ import importlib
 from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from opalflow.spec import InputError, SpecError, WorkflowSpec, apply_overrides, convert, read_toml
 from opalflow.store import folder_lock
@@ -34,6 +34,9 @@ OPTIONS = {"np": "np_", "suffix": "suffix", "resume": "resume", "executor": "exe
 DEFAULT_KIND = "opal"
 
 ENTRY_POINT_GROUP = "opalflow.kinds"
+
+if TYPE_CHECKING:                   # the registry does not import the run layer (it names it)
+    from opalflow.runs.result import Result
 
 
 def resolve(target: str) -> Any:
@@ -51,15 +54,15 @@ class Kind:
     name : the ``kind`` value of workflow files.
     spec : ``"module:Class"`` of its workflow spec (a dataclass subclass of WorkflowSpec with a
         ``validate`` method); the module must be light (dataclasses and checks only).
-    run : ``"module:function"`` called as ``run(spec, out, say=..., **options)`` -> summary dict
-        (with ``headline`` and ``wall_s``), where options are the keywords of :data:`OPTIONS`
-        that the kind takes.
-    build : ``"module:function"`` called as ``build(spec, out, say=...)`` -> summary dict:
-        everything ``run`` writes before it runs (``python -m opalflow build``); "" if none.
-    analyze : ``"module:function"`` called as ``analyze(folder)`` -> summary dict: the results of
+    run : ``"module:function"`` called as ``run(spec, out, say=..., **options)`` -> the run's result, an
+        instance of ``result`` (summary.json, with ``headline`` and ``wall_s``, read back by
+        :func:`opalflow.runs.record.finish`), where options are the keywords of :data:`OPTIONS` that the kind takes.
+    build : ``"module:function"`` called as ``build(spec, out, say=...)``: writes everything ``run`` writes before
+        it runs, summary.json with ``state = "built"`` (``python -m opalflow build``); "" if none.
+    analyze : ``"module:function"`` called as ``analyze(folder)`` -> its result (as ``run``): the results of
         a run folder whose deck ran outside opalflow (``python -m opalflow analyze``); "" if none.
     check : ``"module:function"`` called as ``check(spec, out, say=..., steps=..., timestep_factor=...,
-        bisect=...)`` -> summary dict: a short run judged for numerical stability
+        bisect=...)`` -> its :class:`opalflow.bpm.stability.StabilityCheck`: a short run judged for numerical stability
         (``python -m opalflow check``); "" if none.
     scene : ``"module:attribute"`` of the :class:`opalflow.bpm.scene.Scene` that the compression
         pipeline builds the structure with; "" for kinds that are not bonded-particle scenes.
@@ -100,7 +103,7 @@ class Kind:
         return resolve(self.result or "opalflow.runs.result:Result")
 
     def run_workflow(self, spec: WorkflowSpec, out: Path, *, say=print, np_: int = 1, resume: bool = False,
-                     suffix: str | None = None, executor=None) -> dict:
+                     suffix: str | None = None, executor=None) -> Result:
         """Run ``spec`` into ``out``; options the kind does not take must be at their defaults (``executor``:
         an :class:`opalflow.runs.spec.ExecutorSpec` for kinds that run many jobs)."""
         given = {"np": np_ != 1, "resume": resume, "suffix": suffix is not None, "executor": executor is not None}
@@ -111,19 +114,21 @@ class Kind:
         with folder_lock(out):
             return resolve(self.run)(spec, out, say=say, **{OPTIONS[o]: values[o] for o in self.options})
 
-    def build_workflow(self, spec: WorkflowSpec, out: Path, *, say=print) -> dict:
+    def build_workflow(self, spec: WorkflowSpec, out: Path, *, say=print) -> None:
         if not self.build:
             raise SpecError("kind", self.name, "has no deck of its own to build (it runs several or none): use 'run'")
         with folder_lock(out):
-            return resolve(self.build)(spec, out, say=say)
+            resolve(self.build)(spec, out, say=say)
 
-    def check_workflow(self, spec: WorkflowSpec, out: Path, *, say=print, **options) -> dict:
+    def check_workflow(self, spec: WorkflowSpec, out: Path, *, say=print, **options):
+        """The kind's stability check of ``spec`` in ``out`` (its ``check``: a bonded-particle scene's
+        :class:`opalflow.bpm.stability.StabilityCheck`)."""
         if not self.check:
             raise SpecError("kind", self.name, "has no stability check (bonded-particle scenes have one)")
         with folder_lock(out):
             return resolve(self.check)(spec, out, say=say, **options)
 
-    def analyze_folder(self, folder: Path) -> dict:
+    def analyze_folder(self, folder: Path) -> Result:
         if not self.analyze:
             raise SpecError("folder", str(folder), f"a {self.name} run has no analysis of its own: its run "
                             "writes the results")
@@ -137,7 +142,7 @@ def _compression(name: str, spec: str, scene: str, summary: str,
     track's subclass of :class:`opalflow.bpm.result.CompressionResult` where it has one."""
     return Kind(name, spec, run="opalflow.bpm.run:run_workflow", build="opalflow.bpm.pipeline:build",
                 analyze="opalflow.bpm.dynamic_run:analyze_folder",
-                check="opalflow.bpm.stability:check_workflow", scene=scene, cost="opalflow.bpm.run:cost_facts",
+                check="opalflow.bpm.stability:stability_check", scene=scene, cost="opalflow.bpm.run:cost_facts",
                 options=("np", "resume", "suffix"), resumable="opalflow.bpm.run:resumable",
                 result=result, summary=summary)
 

@@ -11,6 +11,7 @@ import random
 import re
 import zlib
 from collections import Counter
+from pathlib import Path
 
 import pytest
 
@@ -20,6 +21,7 @@ from opalflow.bpm.deck import compression_deck
 from opalflow.cli import main
 from opalflow.resources import WORKFLOWS
 from opalflow.spec import InputError, read_toml
+from opalflow.store import SUMMARY, write_json_atomic
 
 #: the base workflow of each kind
 BASES = {"opal": "opal_quick", "lattice": "lattice_sc", "datafile": "lattice_sc",
@@ -224,7 +226,12 @@ def test_the_command_line_refuses_in_one_line_or_accepts_and_writes_nothing_on_r
     import opalflow.runs.record as record
 
     accepted = []
-    monkeypatch.setattr(record, "run_kind", lambda kind, spec, out, **kw: accepted.append(spec) or {"headline": "stub", "wall_s": 0.0})
+    def stub(kind, spec, out, **kw):          # the run: its spec kept, a summary written as finish() would
+        accepted.append(spec)
+        Path(out).mkdir(parents=True, exist_ok=True)
+        write_json_atomic(Path(out) / SUMMARY, {"headline": "stub", "wall_s": 0.0, "state": "finished"})
+
+    monkeypatch.setattr(record, "run_kind", stub)
     rng = random.Random(20261203)
     workflows = sorted(p.stem for p in WORKFLOWS.glob("*.toml"))
     paths = sorted({".".join(p) for kind in registry.kinds().values() for p in fields(kind.spec_class())})

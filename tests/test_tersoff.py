@@ -139,10 +139,9 @@ def test_loss_of_table2_and_of_its_own_properties():
 
 def test_fit_from_random_starts_beats_table2():
     """Acceptance 2 (small): 4 seeded random starts reach a loss no larger than Table 2's."""
-    settings = {"targets": REF["targets"], "weights": fitting.default_weights(),
-                "bounds": fitting.DEFAULT_BOUNDS, "fixed": fitting.DEFAULT_FIXED}
-    results = fitting.multistart(settings, starts=4, seed=1)
-    assert results[0].loss <= fitting.Loss(**settings)(TABLE2)
+    loss = fitting.Loss(REF["targets"], fitting.default_weights(), fitting.DEFAULT_BOUNDS, fitting.DEFAULT_FIXED)
+    results = fitting.multistart(loss, starts=4, seed=1)
+    assert results[0].loss <= loss(TABLE2)
     assert [r.loss for r in results] == sorted(r.loss for r in results)
     assert all(len(r.history) == r.iterations for r in results)
     best = TersoffParameters.from_values(results[0].params)

@@ -20,6 +20,7 @@ from opalflow.aerogel.scene import coordination, make_aggregate, periodic_struct
 from opalflow.aerogel.spec import AggregationWorkflow
 from opalflow.lammps.datafile import write_data
 from opalflow.runs.record import finish
+from opalflow.runs.result import Result
 from opalflow.store import RESULTS, h5_bytes, new_figure, put, save_figure
 from opalflow.version import __version__
 
@@ -71,7 +72,7 @@ def _fit_line(f: FractalFit) -> str:
             f"| {f.points} | {f.note} |")
 
 
-def run_aggregation(spec: AggregationWorkflow, out: Path, say=print) -> dict:
+def run_aggregation(spec: AggregationWorkflow, out: Path, say=print) -> Result:
     start = time.perf_counter()
     a = spec.aggregate
     say(f"{spec.name}: {a.algorithm.upper()} of {a.particles} spheres (d = {a.diameter_nm:g} +- {a.diameter_std_nm:g} "

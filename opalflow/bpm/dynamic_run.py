@@ -24,6 +24,7 @@ from opalflow.bpm.result import CompressionResult
 from opalflow.bpm.spec import BpmWorkflow
 from opalflow.lammps.engine import EngineError, run_in_process, run_subprocess, session
 from opalflow.runs import launch
+from opalflow.runs.plan import LAWS, CostFacts, laws, predict
 from opalflow.runs.record import RunRecord, finish
 from opalflow.spec import SpecError
 from opalflow.store import RECORD, RESULTS, h5_bytes, new_figure, put, save_figure
@@ -68,14 +69,11 @@ LONG_RUN_S = 3600.0
 def long_run_estimate(spec: BpmWorkflow, deck: CompressionDeck, ranks: int = 1) -> str:
     """One line with the predicted wall time of a dynamic run longer than :data:`LONG_RUN_S` (the cost laws
     of :mod:`opalflow.runs.plan`, measured here by ``bench/bench_cost.py``), "" for a shorter one."""
-    from opalflow.runs.plan import LAWS, CostFacts, laws, predict
-
     try:
         law = laws()
     except SpecError:              # no cost laws measured: nothing to say
         return ""
-    facts = CostFacts("dynamic", deck.structure.n_particles, deck.structure.n_bonds, bond_model=spec.bonds.model,
-                      steps=dynamic_steps(spec, deck))
+    facts = deck_cost(spec, deck)
     wall = predict(facts, law, ranks).wall_s
     if wall < LONG_RUN_S:
         return ""
@@ -161,7 +159,7 @@ def curve_strain_stress(curve: mech.Curve, sample: SampleFacts) -> tuple[np.ndar
 
 
 def analyze(out: Path, started: float | None = None, lammps_s: float | None = None,
-            rate_check: dict | None = None, record: RunRecord | None = None) -> dict:
+            rate_check: dict | None = None, record: RunRecord | None = None) -> CompressionResult:
     """Curves, modulus, strength, particle stresses -> results.h5, summary.json, report.md, plots
     (:class:`opalflow.bpm.result.CompressionResult`).
     ``started``: when the run began (``time.perf_counter()``): its wall time then covers this analysis too;
@@ -231,7 +229,7 @@ def analyze(out: Path, started: float | None = None, lammps_s: float | None = No
 
     # all results or none (a full disk leaves the earlier set whole); summary.json is renamed last
     return finish(out, summary, lambda: report.compression_report(run, summary, result, fit, bool(frames), plots),
-                  files=files, record=record, started=started)
+                  result=type(result), files=files, record=record, started=started)
 
 
 def read_snapshots(out: Path, sample: SampleFacts, curve: mech.Curve, strain: np.ndarray) -> tuple[dict, dict]:
@@ -309,7 +307,7 @@ def _plots(stage, strain, stress, stress_plate, stress_substrate, fit, snapshots
                                {f"strain {100 * h['strain']:.2f} %": h["fraction"] for h in histograms.values()})
 
 
-def analyze_folder(out: Path) -> dict:
+def analyze_folder(out: Path) -> CompressionResult:
     """The results of a run folder whose deck ran outside opalflow (``bash run.sh``)."""
     if not (out / RECORD).exists() or not (out / "curve.txt").exists():
         raise SpecError("folder", str(out), f"needs {RECORD} and curve.txt (a built folder after 'bash run.sh')")
@@ -317,7 +315,7 @@ def analyze_folder(out: Path) -> dict:
 
 
 def run_dynamic(spec: BpmWorkflow, out: Path, *, np_: int = 1, resume: bool = False, say=print,
-                suffix: str | None = None) -> dict:
+                suffix: str | None = None) -> CompressionResult:
     """prepare (unless resuming) -> execute -> analyze; the rate check runs a half-speed twin.  A suffix the deck
     cannot run with is refused before anything is written, not by LAMMPS after the build."""
     if suffix == "kk":
@@ -358,6 +356,12 @@ def run_dynamic(spec: BpmWorkflow, out: Path, *, np_: int = 1, resume: bool = Fa
     return analyze(out, started=t, lammps_s=lammps_s, rate_check=rate_check, record=record)
 
 
-def price(spec: BpmWorkflow, s) -> dict:
-    """What :mod:`opalflow.runs.plan` prices a dynamic run of structure ``s`` by: its time steps."""
-    return {"steps": dynamic_steps(spec, compression_deck(spec, s))}
+def price(spec: BpmWorkflow, s) -> CostFacts:
+    """What :mod:`opalflow.runs.plan` prices a dynamic run of structure ``s`` by: its size and time steps."""
+    return deck_cost(spec, compression_deck(spec, s))
+
+
+def deck_cost(spec: BpmWorkflow, deck: CompressionDeck) -> CostFacts:
+    """The cost facts of a dynamic run of ``deck``."""
+    return CostFacts("dynamic", deck.structure.n_particles, deck.structure.n_bonds, bond_model=spec.bonds.model,
+                     steps=dynamic_steps(spec, deck))

@@ -17,10 +17,11 @@ from opalflow.registry import load_spec
 from opalflow.resources import WORKFLOWS
 from opalflow.spec import InputError
 from opalflow.runs.record import finish
+from opalflow.runs.result import Result
 from opalflow.version import __version__
 
 
-def run_matrix(spec: StabilityMatrixWorkflow, out: Path, say=print) -> dict:
+def run_matrix(spec: StabilityMatrixWorkflow, out: Path, say=print) -> Result:
     """Every row: build its scene, check it at the deck's time step and bisect the largest stable one."""
     t0 = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)

@@ -65,7 +65,7 @@ def prepare(spec: BpmWorkflow, out: Path, progress=None) -> tuple[CompressionDec
     return deck, record
 
 
-def build(spec: BpmWorkflow, out: Path, say=print) -> dict:
+def build(spec: BpmWorkflow, out: Path, say=print) -> None:
     """Structure + full deck (data.lmp, in.lmp, resume.lmp, run.sh) + summary.json; no run."""
     start = time.perf_counter()
     refuse_finished(out)
@@ -86,4 +86,3 @@ def build(spec: BpmWorkflow, out: Path, say=print) -> dict:
     write_build_summary(out, summary)
     say(f"wrote {out}/data.lmp, in.lmp, run.sh ({time.perf_counter() - start:.1f} s); "
         f"'bash {out}/run.sh' runs it with LAMMPS alone")
-    return summary

@@ -31,6 +31,7 @@ from opalflow.bpm.report import network_inputs, plots_line, sample_lines, struct
 from opalflow.bpm.result import CompressionResult, EventFacts
 from opalflow.bpm.static_run import network_run, particle_stress
 from opalflow.bpm.stiffness import per_bond
+from opalflow.runs.plan import CostFacts
 from opalflow.runs.record import finish
 from opalflow.progress import note
 from opalflow.lammps.engine import Interrupted, Preempted, stop_requested
@@ -91,7 +92,7 @@ def contacts_of(spec: BpmWorkflow, data) -> Contacts | None:
                             data.types - 1, k.quasistatic, k.reference_strain)
 
 
-def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=print) -> dict:
+def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=print) -> CompressionResult:
     """Build the scene, run the event loop, write the results (see the module docstring)."""
     t0 = time.perf_counter()
     c = spec.compression
@@ -162,11 +163,11 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
         for tag, (_, snap) in zip(("peak", "end"), frames):
             _write_dump(stage(f"fracture.{tag}.dump"), data, snap)
 
-    summary = finish(out, summary, lambda: _report(run, summary, result, loading, sample, plots), files=files,
-                     record=record, started=t0)
+    written = finish(out, summary, lambda: _report(run, summary, result, loading, sample, plots), result=type(result),
+                     files=files, record=record, started=t0)
     (out / STATE).unlink(missing_ok=True)
     (out / PEAK).unlink(missing_ok=True)
-    return summary
+    return written
 
 
 def resumed_state(out: Path, say) -> dict:
@@ -360,7 +361,8 @@ def _report(run: RunFacts, summary: dict, result: CompressionResult, loading, sa
     return "\n".join(lines) + "\n"
 
 
-def price(spec: BpmWorkflow, s) -> dict:
+def price(spec: BpmWorkflow, s) -> CostFacts:
     """What :mod:`opalflow.runs.plan` prices a quasi-static run by: the measured runs with its breaking rule and
     event tolerance (or, where none, its first solve)."""
-    return {"solver": "amg", "breaking": spec.bonds.breaking, "event_tolerance": spec.compression.event_tolerance}
+    return CostFacts("quasistatic", s.n_particles, s.n_bonds, bond_model=spec.bonds.model, solver="amg",
+                     breaking=spec.bonds.breaking, event_tolerance=spec.compression.event_tolerance)

@@ -1,6 +1,7 @@
 """The bonded-particle methods side by side: ``compression.method`` -> its runner module, each with the same three
-functions: ``run(spec, out, say=..., **options)`` -> summary dict, ``price(spec, structure)`` -> what
-:mod:`opalflow.runs.plan` prices a run by, and (where the method can go on) ``resumable(folder)`` -> bool.
+functions: ``run(spec, out, say=..., **options)`` -> its :class:`opalflow.bpm.result.CompressionResult` (summary.json
+read back), ``price(spec, structure)`` -> the :class:`opalflow.runs.plan.CostFacts` that :mod:`opalflow.runs.plan`
+prices a run by, and (where the method can go on) ``resumable(folder)`` -> bool.
 
 Every runner starts from the shared sample side (:func:`opalflow.bpm.pipeline.prepare` or the network built from
 it) and writes its results through :func:`opalflow.runs.record.finish`.  This module is what the compression
@@ -8,6 +9,7 @@ kinds of :mod:`opalflow.registry` name (``run_workflow``, ``cost_facts``, ``resu
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -15,6 +17,7 @@ from pathlib import Path
 
 from opalflow.bpm import dynamic_run, quasistatic_run, static_run
 from opalflow.bpm.methods import METHODS
+from opalflow.bpm.result import CompressionResult
 from opalflow.bpm.scene import scene_of
 from opalflow.bpm.spec import BpmWorkflow
 from opalflow.runs.plan import CostFacts
@@ -27,8 +30,8 @@ class Runner:
     """How a method runs (``run``), what a run of it costs (``price``) and whether a folder has something to go
     on from (``resumable``; None: the method does not resume)."""
 
-    run: Callable[..., dict]
-    price: Callable[..., dict]
+    run: Callable[..., CompressionResult]
+    price: Callable[..., CostFacts]
     resumable: Callable[[Path], bool] | None = None
 
 
@@ -41,7 +44,7 @@ RUNNERS: dict[str, Runner] = {
 
 
 def run_workflow(spec: BpmWorkflow, out: Path, *, np_: int = 1, resume: bool = False, say=print,
-                 suffix: str | None = None) -> dict:
+                 suffix: str | None = None) -> CompressionResult:
     """The run of a bonded-particle workflow by its ``compression.method``; options the method does not take must
     be at their defaults (one line naming the method where one is given)."""
     method = METHODS[spec.compression.method]
@@ -59,8 +62,7 @@ def cost_facts(spec: BpmWorkflow) -> CostFacts:
     method = spec.compression.method
     t = time.perf_counter()
     s = scene_of(spec).structure(spec)
-    return CostFacts(method, s.n_particles, s.n_bonds, bond_model=spec.bonds.model, **RUNNERS[method].price(spec, s),
-                     build_s=time.perf_counter() - t)
+    return dataclasses.replace(RUNNERS[method].price(spec, s), build_s=time.perf_counter() - t)
 
 
 def resumable(out: Path) -> bool:

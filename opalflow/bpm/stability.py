@@ -200,13 +200,6 @@ class StabilityCheck:
             k: v for k, v in out.items() if k not in ("timestep_stable_max_s", "estimate_over_bisected", "bisection")}
 
 
-def check_workflow(spec: BpmWorkflow, out: Path, *, say=print, steps: int = 3000, timestep_factor: float = 1.0,
-                   bisect: bool = False, strain: float | None = None) -> dict:
-    """``python -m opalflow check``: :func:`stability_check`'s stability.json as a table (the kinds' ``check``)."""
-    return stability_check(spec, out, say=say, steps=steps, timestep_factor=timestep_factor, bisect=bisect,
-                           strain=strain).to_dict()
-
-
 def stability_check(spec: BpmWorkflow, out: Path, *, say=print, steps: int = 3000, timestep_factor: float = 1.0,
                     bisect: bool = False, strain: float | None = None) -> StabilityCheck:
     """The criteria at the deck's time step (x ``timestep_factor``) over ``steps`` steps or up to ``strain``

@@ -34,6 +34,7 @@ from opalflow.bpm.static import (LooseParticlesError, StaticResult, auto_solver,
                                   loose_particles, solve_compression, solve_tensor)
 from opalflow.bpm.stiffness import BondNetwork, stiffness_network
 from opalflow.lammps.datafile import write_data
+from opalflow.runs.plan import CostFacts
 from opalflow.runs.record import RunRecord, finish
 from opalflow.store import RESULTS, SUMMARY, h5_bytes, new_figure, put, save_figure
 from opalflow.version import __version__
@@ -114,7 +115,7 @@ def _behind(timings: dict, key: str, work, *args, **kwargs) -> Future:
     return future
 
 
-def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
+def run_static(spec: BpmWorkflow, out: Path, say=print) -> CompressionResult:
     """Build the scene, solve the compression, write the results (see the module docstring)."""
     t0 = time.perf_counter()
     c = spec.compression
@@ -170,8 +171,8 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> dict:
         result.timings_s["files"] = time.perf_counter() - t
 
     sides = "periodic" if s.periodic[0] else "open"       # the structure's, whatever section set it
-    return finish(out, summary, lambda: _report(run, summary, result, res, sides, sample, plots), files=files,
-                  started=t0)
+    return finish(out, summary, lambda: _report(run, summary, result, res, sides, sample, plots),
+                  result=type(result), files=files, started=t0)
 
 
 def _write_h5(path: Path, data, res: StaticResult, sigma_unit, strain_unit, snapshots, result,
@@ -234,7 +235,7 @@ def _report(run: RunFacts, summary: dict, result, res: StaticResult, sides: str,
     return "\n".join(lines) + "\n"
 
 
-def run_tensor(spec: BpmWorkflow, s, out: Path, t0: float, say=print) -> dict:
+def run_tensor(spec: BpmWorkflow, s, out: Path, t0: float, say=print) -> CompressionResult:
     """The stiffness tensor of a sample periodic in x, y and z, and what it implies."""
     c = spec.compression
     data, _, coeffs = bond_model(spec, s)
@@ -291,11 +292,12 @@ def run_tensor(spec: BpmWorkflow, s, out: Path, t0: float, say=print) -> dict:
         result.h5_attrs(h, run)
         put(h, "stiffness_tensor_GPa", C, "GPa", voigt, rows=voigt)
     tensor = h5_bytes(fill)
-    return finish(out, summary, "\n".join(lines), files=lambda stage: stage(RESULTS).write_bytes(tensor),
-                  started=t0)
+    return finish(out, summary, "\n".join(lines), result=type(result),
+                  files=lambda stage: stage(RESULTS).write_bytes(tensor), started=t0)
 
 
-def price(spec: BpmWorkflow, s) -> dict:
-    """What :mod:`opalflow.runs.plan` prices a static solve of structure ``s`` by: its solver."""
+def price(spec: BpmWorkflow, s) -> CostFacts:
+    """What :mod:`opalflow.runs.plan` prices a static solve of structure ``s`` by: its size and solver."""
     solver = spec.compression.solver
-    return {"solver": auto_solver(s.n_particles, s.n_bonds) if solver == "auto" else solver}
+    return CostFacts("static", s.n_particles, s.n_bonds, bond_model=spec.bonds.model,
+                     solver=auto_solver(s.n_particles, s.n_bonds) if solver == "auto" else solver)

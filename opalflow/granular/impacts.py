@@ -29,6 +29,7 @@ import numpy as np
 from opalflow.granular.decks import Contact, Wall, liggghts_executable, run_engine, write_decks, write_spheres
 from opalflow.granular.spec import ImpactsWorkflow
 from opalflow.runs.record import RunRecord, finish
+from opalflow.runs.result import Result
 from opalflow.store import new_figure, save_figure
 
 #: a friction coefficient no impact here reaches: the contact sticks throughout
@@ -106,7 +107,7 @@ def difference(a: np.ndarray, b: np.ndarray, speed: float, radius: float) -> np.
     return np.maximum(dv, dw)
 
 
-def run_impacts(spec: ImpactsWorkflow, out: Path, say=print) -> dict:
+def run_impacts(spec: ImpactsWorkflow, out: Path, say=print) -> Result:
     liggghts_executable("kind", "granular_impacts")
     t0 = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)

@@ -18,6 +18,7 @@ from opalflow.granular.spec import GranularWorkflow
 from opalflow.lammps.engine import accelerated
 from opalflow.packing import dense_random_packing
 from opalflow.runs.record import RunRecord, finish
+from opalflow.runs.result import Result
 from opalflow.store import new_figure, save_figure
 
 #: a plate-force row counts in the comparison when its force is above this fraction of the largest
@@ -60,7 +61,7 @@ def compare(a: np.ndarray, b: np.ndarray, tolerance: float = 1e-6) -> dict:
             "first_step_over_tolerance": int(a[over[0], 0]) if len(over) else None}
 
 
-def run_granular(spec: GranularWorkflow, out: Path, say=print, suffix: str | None = None) -> dict:
+def run_granular(spec: GranularWorkflow, out: Path, say=print, suffix: str | None = None) -> Result:
     """The scene on LAMMPS (``suffix``: its accelerated styles; the packing never), LIGGGHTS or both."""
     t0 = time.perf_counter()
     engines = ["lammps", "liggghts"] if spec.engine == "both" else [spec.engine]

@@ -21,8 +21,8 @@ from pathlib import Path
 
 from opalflow import registry
 from opalflow.progress import note
-from opalflow.runs.record import RunRecord, finished_summary, run_kind, spec_digest
-from opalflow.runs.result import Result
+from opalflow.runs.record import RunRecord, run_kind, spec_digest
+from opalflow.runs.result import Result, finished_summary
 from opalflow.spec import WorkflowSpec
 from opalflow.store import RECORD, json_text
 
@@ -173,7 +173,7 @@ def _run_job(folder: Path, np_: int) -> Outcome:
         # a stopped run goes on from what it left (the kind knows what: restart files, the quasi-static events)
         resume = (bool(rec.deck) and "resume" in kind.options
                   and (not kind.resumable or registry.resolve(kind.resumable)(folder)))
-        summary = run_kind(kind, spec, folder, np_=np_, resume=resume, say=say)
+        result = run_kind(kind, spec, folder, np_=np_, resume=resume, say=say)
     except Preempted as exc:
         settle(folder, "requeued")
         requeue_self(say)
@@ -184,7 +184,7 @@ def _run_job(folder: Path, np_: int) -> Outcome:
         settle(folder, "failed", error=first, log_tail=tail)
         return Outcome("failed", str(folder), error=first, log_tail=tail)
     settle(folder, "finished", peak_rss_MiB=peak_rss_MiB())
-    return Outcome.finished(folder, spec.kind, summary)
+    return Outcome("finished", str(folder), result)
 
 
 def peak_rss_MiB() -> float:

@@ -32,7 +32,7 @@ from pathlib import Path
 from opalflow import registry
 from opalflow.resources import ROOT
 from opalflow.runs.jobs import Job, job_record
-from opalflow.runs.record import read_summary
+from opalflow.runs.result import read_summary
 from opalflow.spec import SpecError
 from opalflow.store import RECORD
 

@@ -33,6 +33,8 @@ from pathlib import Path
 from opalflow.spec import InputError, SpecError
 from opalflow.store import RECORD, SUMMARY, DamagedFile, json_text, read_json, staged_files, write_json_atomic
 
+from opalflow.runs.result import Result, is_finished, read_summary
+
 #: version of the run.json layout; :meth:`RunRecord.read` upgrades older files (schema 2: a study job's state
 #: in job.json beside it)
 SCHEMA = 3
@@ -229,25 +231,6 @@ def _references(spec) -> dict:
 
 
 # ----------------------------------------------------------------------------- results
-def read_summary(folder: str | os.PathLike) -> dict | None:
-    """The summary.json of ``folder`` (None where there is none or it is cut short)."""
-    try:
-        data = json.loads((Path(folder) / SUMMARY).read_text())
-    except (OSError, ValueError):
-        return None
-    return data if isinstance(data, dict) else None
-
-
-def finished_summary(folder: str | os.PathLike) -> dict | None:
-    """The summary of a finished run in ``folder`` (not ``build``'s), else None."""
-    s = read_summary(folder)
-    return s if s is not None and s.get("state", "finished") != "built" else None
-
-
-def is_finished(folder: str | os.PathLike) -> bool:
-    return finished_summary(folder) is not None
-
-
 def write_build_summary(folder: str | os.PathLike, summary: dict) -> None:
     """``build``'s summary.json (``state = "built"``); refused where it would overwrite a finished run."""
     refuse_finished(folder)
@@ -279,9 +262,11 @@ def command_run(folder: str | os.PathLike, started: float) -> None:
 
 
 def finish(folder: str | os.PathLike, summary: dict, report: str | Callable[[], str], *,
-           files: Callable[[Callable[[str], Path]], None] | None = None, record: RunRecord | None = None,
-           started: float | None = None) -> dict:
-    """Write a run's results all or none and mark it finished; returns the summary as written (JSON's types).
+           result: type[Result] = Result, files: Callable[[Callable[[str], Path]], None] | None = None,
+           record: RunRecord | None = None, started: float | None = None) -> Result:
+    """Write a run's results all or none and mark it finished; returns the summary as written (JSON's types)
+    read back as ``result``, the run's :class:`opalflow.runs.result.Result` class (the kind's ``result``; the
+    generic class keeps every key in ``extra``).
 
     ``files(stage)`` writes the other result files (results.h5, plots) to ``stage(name)``; report.md (``report``
     or, when it is a function, what it returns after ``files``) and then summary.json (the mark of a
@@ -315,7 +300,7 @@ def finish(folder: str | os.PathLike, summary: dict, report: str | Callable[[], 
             record = None
     if record is not None:
         record.end(folder, "finished", wall_s=summary.get("wall_s"))
-    return json.loads(written)            # as written: typed parts (dataclasses, arrays) as their tables
+    return result.from_summary(json.loads(written))   # as written: typed parts (dataclasses, arrays) as tables
 
 
 @contextmanager
@@ -359,7 +344,7 @@ def tracked(spec, folder: str | os.PathLike):
     settle("finished")
 
 
-def run_kind(kind, spec, folder: str | os.PathLike, **options) -> dict:
+def run_kind(kind, spec, folder: str | os.PathLike, **options) -> Result:
     """``kind.run_workflow(spec, folder, **options)`` (an :class:`opalflow.registry.Kind`) inside
     :func:`tracked`: how the API and every executor's job start a run."""
     with tracked(spec, folder):

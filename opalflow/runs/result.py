@@ -5,13 +5,38 @@ CompressionResult`; the Tersoff workflows: :class:`opalflow.tersoff.result.Terso
 :class:`Result` and names the case of each run (:attr:`Result.case`); :func:`key` declares a field with the
 cases that give it, the label and format of its report row, and whether it is left out where a run has none.
 Adding a key that every case gives is one field and the line that computes it.
+
+Reading a folder's summary.json is here too (:func:`read_summary`, :func:`finished_summary`); writing it is
+:func:`opalflow.runs.record.finish`'s, which returns what it wrote as the run's result class.
 """
 from __future__ import annotations
 
 import dataclasses
+import json
+import os
 from dataclasses import dataclass, field
+from pathlib import Path
 
-from opalflow.runs.record import finished_summary
+from opalflow.store import SUMMARY
+
+
+def read_summary(folder: str | os.PathLike) -> dict | None:
+    """The summary.json of ``folder`` (None where there is none or it is cut short)."""
+    try:
+        data = json.loads((Path(folder) / SUMMARY).read_text())
+    except (OSError, ValueError):
+        return None
+    return data if isinstance(data, dict) else None
+
+
+def finished_summary(folder: str | os.PathLike) -> dict | None:
+    """The summary of a finished run in ``folder`` (not ``build``'s), else None."""
+    s = read_summary(folder)
+    return s if s is not None and s.get("state", "finished") != "built" else None
+
+
+def is_finished(folder: str | os.PathLike) -> bool:
+    return finished_summary(folder) is not None
 
 
 def key(*cases: str, label: str = "", fmt: str = "{:.4g}", optional: bool = False, default=None):

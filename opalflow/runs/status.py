@@ -12,7 +12,8 @@ from collections import Counter
 from pathlib import Path
 
 from opalflow import registry
-from opalflow.runs.record import RunRecord, is_finished, read_summary
+from opalflow.runs.record import RunRecord
+from opalflow.runs.result import is_finished, read_summary
 from opalflow.spec import InputError, SpecError
 from opalflow.store import RECORD, SUMMARY, DamagedFile, lock_owner, process_alive, read_json
 

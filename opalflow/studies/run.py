@@ -28,6 +28,7 @@ from opalflow.materials import material
 from opalflow.registry import resolve
 from opalflow.resources import DATA, resource
 from opalflow.runs.record import finish
+from opalflow.runs.result import Result
 from opalflow.spec import SpecError
 from opalflow.store import new_figure, save_figure
 from opalflow.studies.spec import STUDY_TYPES, StudyWorkflow
@@ -817,7 +818,7 @@ def study_result(spec: StudyWorkflow, out: Path, say):
     return resolve(kind.analyse)(spec, todo, sweep(spec, out, todo, say))
 
 
-def run(spec: StudyWorkflow, out: Path, say=print, executor=None) -> dict:
+def run(spec: StudyWorkflow, out: Path, say=print, executor=None) -> Result:
     """Run the study's jobs (cached) through its executor (``executor`` in place of the spec's
     ``[executor]``, as ``--executor``) and write summary.json and report.md."""
     if executor is not None:

@@ -123,14 +123,13 @@ def _run_start(loss: Loss, start: int, z0: np.ndarray, max_iter: int, gtol: floa
                        seconds=time.perf_counter() - t, message=str(res.message))
 
 
-def multistart(loss_kwargs: dict, *, starts: int = 16, seed: int = 1, max_iter: int = 5000,
+def multistart(loss: Loss, *, starts: int = 16, seed: int = 1, max_iter: int = 5000,
                gtol: float = 1e-9, say=None) -> list[StartResult]:
-    """L-BFGS from ``starts`` uniform random points in the bounds (seeded), best first.
+    """L-BFGS of ``loss`` from ``starts`` uniform random points in its bounds (seeded), best first.
 
     The starts run one after another in this process: the compiled loss is shared, and a
     start takes about a second here, less than a worker process needs to start and compile.
     """
-    loss = Loss(**loss_kwargs)
     z0s = np.random.default_rng(seed).random((starts, len(loss.free)))
     results = []
     for i, z0 in enumerate(z0s):

@@ -35,18 +35,18 @@ def model_for(cutoff: float, a: float) -> DiamondModel:
     return DiamondModel(a=a, neighbor_radius_over_a=neighbor_radius(cutoff, a))
 
 
-def loss_settings(spec: TersoffWorkflow, start: TersoffParameters) -> dict:
-    """Keyword arguments of :class:`fit.Loss`: targets and weights (Table 1, weight 1 unless set),
-    bounds (defaults updated by the spec), fixed parameters at the values of ``start``."""
+def loss_of(spec: TersoffWorkflow, start: TersoffParameters) -> fitting.Loss:
+    """The loss (eq. 13) the spec fits by: targets and weights (Table 1, weight 1 unless set), bounds (defaults
+    updated by the spec), fixed parameters at the values of ``start``."""
     t = spec.tersoff
     ref = fitting.zhuravlev2021()
     fixed = {k: getattr(start, k) for k in t.fixed}
     bounds = {**fitting.DEFAULT_BOUNDS, **{k: tuple(v) for k, v in t.bounds.items()}}
     bounds = {k: v for k, v in bounds.items() if k not in fixed}
     r_max = fixed.get("R", bounds.get("R", (0, 0))[1]) + fixed.get("D", bounds.get("D", (0, 0))[1])
-    return {"targets": {**ref["targets"], **t.targets}, "weights": {**fitting.default_weights(), **t.weights},
-            "bounds": bounds, "fixed": fixed, "a_target": t.lattice_target_A,
-            "neighbor_radius_over_a": neighbor_radius(r_max, t.lattice_target_A)}
+    return fitting.Loss(targets={**ref["targets"], **t.targets}, weights={**fitting.default_weights(), **t.weights},
+                        bounds=bounds, fixed=fixed, a_target=t.lattice_target_A,
+                        neighbor_radius_over_a=neighbor_radius(r_max, t.lattice_target_A))
 
 
 def _errors(values: dict, ref: dict) -> dict:
@@ -125,19 +125,21 @@ def _stability_rows(results: list[stab.BoundaryResult]) -> list[str]:
     return rows
 
 
-def _stability_kwargs(spec: TersoffWorkflow) -> dict:
+def _stability(params: TersoffParameters, folder: Path, spec: TersoffWorkflow, temperatures_K: tuple,
+               say) -> list[stab.BoundaryResult]:
+    """The MD stability check of ``params`` at ``temperatures_K`` with the spec's [stability] settings."""
     s = spec.stability
-    return {"boundaries": tuple(s.boundaries), "workers": s.workers, "cells": s.cells,
-            "time_ps": s.time_ps, "timestep_fs": s.timestep_fs, "seed": s.seed,
-            "criteria": stab.Criteria(s.max_drift_eV, s.min_fourfold, s.max_rms_A)}
+    return stab.check(params, folder, temperatures_K=temperatures_K, say=say, boundaries=tuple(s.boundaries),
+                      workers=s.workers, cells=s.cells, time_ps=s.time_ps, timestep_fs=s.timestep_fs, seed=s.seed,
+                      criteria=stab.Criteria(s.max_drift_eV, s.min_fourfold, s.max_rms_A))
 
 
-def _finish(out: Path, spec: TersoffWorkflow, result: TersoffResult, report: list[str], t0: float) -> dict:
+def _finish(out: Path, spec: TersoffWorkflow, result: TersoffResult, report: list[str], t0: float) -> TersoffResult:
     result.wall_s = time.perf_counter() - t0
     result.spec = spec.to_dict()
     report.append("")
     report.append(f"Wall time {result.wall_s:.1f} s on this machine. opalflow {__version__}.")
-    return finish(out, result.summary(), "\n".join(report))
+    return finish(out, result.summary(), "\n".join(report), result=TersoffResult)
 
 
 def _measured(values: dict) -> dict:
@@ -145,12 +147,12 @@ def _measured(values: dict) -> dict:
     return {k: values[k] for k in ("a0_A", *LABELS)}
 
 
-def run_properties(spec: TersoffWorkflow, out: Path, say=print, suffix: str | None = None) -> dict:
+def run_properties(spec: TersoffWorkflow, out: Path, say=print, suffix: str | None = None) -> TersoffResult:
     with accelerated(suffix):
         return _run_properties(spec, out, say)
 
 
-def _run_properties(spec: TersoffWorkflow, out: Path, say=print) -> dict:
+def _run_properties(spec: TersoffWorkflow, out: Path, say=print) -> TersoffResult:
     t0 = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
     params = load_parameters(spec.tersoff.potential, spec.tersoff.element)
@@ -158,7 +160,7 @@ def _run_properties(spec: TersoffWorkflow, out: Path, say=print) -> dict:
     say(f"properties of {spec.tersoff.potential} ({params.element}) by LAMMPS, strain scan "
         f"{len(spec.tersoff.strain_scan)} sizes")
     ev, values, exact = _lammps_properties(params, spec, out, scan=True)
-    loss = fitting.Loss(**loss_settings(spec, params))
+    loss = loss_of(spec, params)
     rows = _scan_table(ev, exact)
     _plot_scan(rows, out / "strain_scan.png")
     result = TersoffResult(
@@ -197,19 +199,19 @@ def _run_properties(spec: TersoffWorkflow, out: Path, say=print) -> dict:
     return _finish(out, spec, result, report, t0)
 
 
-def run_stability(spec: TersoffWorkflow, out: Path, say=print, suffix: str | None = None) -> dict:
+def run_stability(spec: TersoffWorkflow, out: Path, say=print, suffix: str | None = None) -> TersoffResult:
     with accelerated(suffix):
         return _run_stability(spec, out, say)
 
 
-def _run_stability(spec: TersoffWorkflow, out: Path, say=print) -> dict:
+def _run_stability(spec: TersoffWorkflow, out: Path, say=print) -> TersoffResult:
     t0 = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
     params = load_parameters(spec.tersoff.potential, spec.tersoff.element)
     s = spec.stability
     say(f"stability of {spec.tersoff.potential}: {', '.join(s.boundaries)} at "
         f"{', '.join(f'{t:g}' for t in s.temperatures_K)} K, {s.time_ps:g} ps each")
-    results = stab.check(params, out, temperatures_K=tuple(s.temperatures_K), say=say, **_stability_kwargs(spec))
+    results = _stability(params, out, spec, tuple(s.temperatures_K), say)
     result = TersoffResult(mode="stability", stability=_stability_summary(results, s.temperatures_K[0]))
     verdicts = []
     for temp in s.temperatures_K:
@@ -226,18 +228,17 @@ def _run_stability(spec: TersoffWorkflow, out: Path, say=print) -> dict:
     return _finish(out, spec, result, report, t0)
 
 
-def run_fit(spec: TersoffWorkflow, out: Path, say=print) -> dict:
+def run_fit(spec: TersoffWorkflow, out: Path, say=print) -> TersoffResult:
     t0 = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
     t = spec.tersoff
     start = load_parameters(t.potential, t.element)
-    settings = loss_settings(spec, start)
+    loss = loss_of(spec, start)
     ref = fitting.zhuravlev2021()
     say(f"fit: {t.starts} L-BFGS starts (seed {t.seed}), free {', '.join(k for k in COLUMNS if k not in t.fixed)}; "
         f"fixed {', '.join(f'{k} = {getattr(start, k):g}' for k in t.fixed)}")
-    results = fitting.multistart(settings, starts=t.starts, seed=t.seed, max_iter=t.max_iter, say=say)
+    results = fitting.multistart(loss, starts=t.starts, seed=t.seed, max_iter=t.max_iter, say=say)
     fit_s = time.perf_counter() - t0
-    loss = fitting.Loss(**settings)
     reference_loss = loss(read_tersoff(REFERENCE_POTENTIAL))
     say(f"best loss {results[0].loss:.5f} (Table 2: {reference_loss:.5f}) in {fit_s:.1f} s")
     stab_t = spec.stability.temperatures_K[0]
@@ -245,8 +246,7 @@ def run_fit(spec: TersoffWorkflow, out: Path, say=print) -> dict:
     for rank, r in enumerate(results[:t.rank_top]):
         cand = TersoffParameters.from_values(r.params, start.element)
         say(f"candidate {rank + 1} (start {r.start + 1}, loss {r.loss:.5f}): stability at {stab_t:g} K")
-        res = stab.check(cand, out / f"stability_candidate{rank + 1}", temperatures_K=(stab_t,), say=say,
-                         **_stability_kwargs(spec))
+        res = _stability(cand, out / f"stability_candidate{rank + 1}", spec, (stab_t,), say)
         checks.append((r, res))
         if all(x.passed for x in res):
             chosen = r
@@ -262,7 +262,7 @@ def run_fit(spec: TersoffWorkflow, out: Path, say=print) -> dict:
     result = TersoffResult(
         mode="fit", **_measured(values), loss=chosen.loss, reference_loss=reference_loss,
         fit_s=fit_s, parameters=best.as_dict(),
-        at_bounds=[k for k in COLUMNS if "bound)" in _bound_note(k, getattr(best, k), settings)],
+        at_bounds=[k for k in COLUMNS if "bound)" in _bound_note(k, getattr(best, k), loss)],
         stability=_stability_summary(chosen_checks, stab_t) if chosen_checks else None,
         candidates_checked=[{"start": r.start, "loss": r.loss, "stable": all(x.passed for x in res)}
                             for r, res in checks],
@@ -278,9 +278,9 @@ def run_fit(spec: TersoffWorkflow, out: Path, say=print) -> dict:
                   + ("stable" if summary_stable(chosen_checks) else "NOT stable") + f" at {stab_t:g} K"))
     report = [f"# Tersoff fit ({spec.name})", "",
               f"Loss eq. 13 (seed 003) at a* = {t.lattice_target_A} A, weights "
-              + ", ".join(f"{k} {v:g}" for k, v in settings["weights"].items())
+              + ", ".join(f"{k} {v:g}" for k, v in loss.weights.items())
               + f". L-BFGS-B with JAX gradients from {t.starts} uniform random starts in the bounds (seed {t.seed}); "
-              f"fixed {', '.join(f'{k} = {v:g}' for k, v in settings['fixed'].items())}.", "",
+              f"fixed {', '.join(f'{k} = {v:g}' for k, v in loss.fixed.items())}.", "",
               f"Best loss **{chosen.loss:.5f}** against Table 2's **{reference_loss:.5f}** on the same targets and "
               f"weights; fit time {fit_s:.1f} s (all starts), wall time below.", "",
               "## Parameters (fitted.tersoff)", "",
@@ -288,7 +288,7 @@ def run_fit(spec: TersoffWorkflow, out: Path, say=print) -> dict:
               "fixes their product, not each.", "",
               "| parameter | fitted | Table 2 | search box |", "|---|---|---|---|"]
     table2 = read_tersoff(REFERENCE_POTENTIAL)
-    report += [f"| {k} | {getattr(best, k):.6g} | {getattr(table2, k):g} | {_bound_note(k, getattr(best, k), settings)} |"
+    report += [f"| {k} | {getattr(best, k):.6g} | {getattr(table2, k):g} | {_bound_note(k, getattr(best, k), loss)} |"
                for k in COLUMNS]
     report += ["", "## Properties of the fitted set (LAMMPS at its a0; fit model = exact derivatives, same a0)", "",
                f"a0 = {values['a0_A']:.5f} A; at a* the fit model gives "
@@ -306,10 +306,10 @@ def run_fit(spec: TersoffWorkflow, out: Path, say=print) -> dict:
     return _finish(out, spec, result, report, t0)
 
 
-def _bound_note(name: str, value: float, settings: dict) -> str:
-    if name in settings["fixed"]:
+def _bound_note(name: str, value: float, loss: fitting.Loss) -> str:
+    if name in loss.fixed:
         return "fixed"
-    lo, hi = settings["bounds"][name]
+    lo, hi = loss.bounds[name]
     note = " (at the lower bound)" if value <= lo + 1e-6 * (hi - lo) else (
         " (at the upper bound)" if value >= hi - 1e-6 * (hi - lo) else "")
     return f"[{lo:g}, {hi:g}]{note}"

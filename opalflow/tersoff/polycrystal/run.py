@@ -22,6 +22,7 @@ from opalflow.analysis.elasticity import VOIGT
 from opalflow.progress import Progress
 from opalflow.runs.jobs import Job, job_record, prepare
 from opalflow.runs.record import RunRecord, finish
+from opalflow.runs.result import Result
 from opalflow.store import RESULTS, SUMMARY, h5_bytes, new_figure, save_figure
 from opalflow.tersoff.parameters import load_parameters
 from opalflow.tersoff.polycrystal.crystal import check_sample_hessian, longitudinal_speed_nm_ps, single_crystal
@@ -286,7 +287,7 @@ def tension_jobs(spec: TensionWorkflow) -> list[Job]:
             for i, (n, h) in enumerate(zip(t.cubes, t.cube_nm)) for seed in spec.samples.seeds]
 
 
-def run_tension(spec: TensionWorkflow, out: Path, say=print, resume: bool = False) -> dict:
+def run_tension(spec: TensionWorkflow, out: Path, say=print, resume: bool = False) -> Result:
     t0 = time.perf_counter()
     params, crystal, samples, bounds = setup(spec, out)
     t = spec.tension
@@ -528,7 +529,7 @@ def wave_job(spec: WavesWorkflow, samples: Samples, crystal: dict, bounds: Bound
                    wall, wall / steps, times.tolist(), stations.tolist(), arrival.tolist(), profile.tolist()), pc
 
 
-def run_waves(spec: WavesWorkflow, out: Path, say=print, resume: bool = False) -> dict:
+def run_waves(spec: WavesWorkflow, out: Path, say=print, resume: bool = False) -> Result:
     t0 = time.perf_counter()
     params, crystal, samples, bounds = setup(spec, out)
     w = spec.waves
