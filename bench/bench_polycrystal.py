@@ -38,12 +38,11 @@ def main() -> int:
 
     params = load_parameters("Si_zhuravlev2021.tersoff", "Si")
     crystal = single_crystal(params, "Si_zhuravlev2021.tersoff")
-    samples = Samples(params.values(), params.cutoff(), crystal["a0_A"])
+    samples = Samples(params.values(), params.cutoff(), crystal.a0_A)
     rows = []
     for n in args.cubes:
         mesh = block((n, n, n), 10.0, (True, False, False))
-        pc = Polycrystal(mesh, samples, random_rotations(mesh.elements, 1),
-                         (crystal["C11_GPa"], crystal["C12_GPa"], crystal["C44_GPa"]))
+        pc = Polycrystal(mesh, samples, random_rotations(mesh.elements, 1), crystal.constants)
         samples.evaluate(pc.atoms, pc.cells)                      # compile for this shape
         t = time.perf_counter()
         for _ in range(5):

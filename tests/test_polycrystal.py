@@ -3,6 +3,7 @@
 Real parts only: the batched Tersoff is compared with LAMMPS pair_style tersoff, the samples'
 stresses with the potential's own elastic constants, and the workflows run end to end on small
 meshes (48-96 elements)."""
+import dataclasses
 import json
 
 import numpy as np
@@ -25,7 +26,7 @@ POTENTIAL = "Si_zhuravlev2021.tersoff"
 def si():
     params = load_parameters(POTENTIAL, "Si")
     crystal = single_crystal(params, POTENTIAL)
-    return params, crystal, Samples(params.values(), params.cutoff(), crystal["a0_A"])
+    return params, crystal, Samples(params.values(), params.cutoff(), crystal.a0_A)
 
 
 def test_batched_tersoff_equals_lammps(si, tmp_path):
@@ -39,7 +40,7 @@ def test_batched_tersoff_equals_lammps(si, tmp_path):
 
 
 def _linear_stress(crystal, rotations, eps):
-    c = rotated_stiffness(cubic_stiffness(crystal["C11_GPa"], crystal["C12_GPa"], crystal["C44_GPa"]), rotations)
+    c = rotated_stiffness(cubic_stiffness(*crystal.constants), rotations)
     return np.einsum("eijkl,ekl->eij", c, eps)
 
 
@@ -68,7 +69,7 @@ def test_one_element_stress_is_the_rotated_crystal_tensor(si, size, tol_gpa):
     diff = np.abs(relaxed.evaluation.stress - _linear_stress(crystal, rot, eps)).max()
     assert diff < tol_gpa
     if size < 1e-3:     # in the linear range the relaxed C44 is told apart from the unrelaxed C44^0
-        unrelaxed = dict(crystal, C44_GPa=crystal["C44_0_GPa"])
+        unrelaxed = dataclasses.replace(crystal, C44_GPa=crystal.C44_0_GPa)
         assert np.abs(relaxed.evaluation.stress - _linear_stress(unrelaxed, rot, eps)).max() > 3 * diff
 
 
@@ -102,8 +103,7 @@ def test_uniform_stress_gives_eq11_face_forces_and_interior_equilibrium(si):
     stress leaves every interior vertex in equilibrium and loads the surface with the traction S n."""
     _, crystal, samples = si
     mesh = block((2, 2, 2), 3.0, (False, False, False))
-    pc = Polycrystal(mesh, samples, random_rotations(mesh.elements, 1), (crystal["C11_GPa"], crystal["C12_GPa"],
-                                                                         crystal["C44_GPa"]))
+    pc = Polycrystal(mesh, samples, random_rotations(mesh.elements, 1), crystal.constants)
     stress = np.array([[1.0, 0.3, -0.2], [0.3, -0.5, 0.1], [-0.2, 0.1, 0.7]])
     pc.element_stresses = lambda deformation: np.broadcast_to(stress, (mesh.elements, 3, 3))
     f = pc.forces()

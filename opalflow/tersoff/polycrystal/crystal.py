@@ -9,6 +9,7 @@ phonon at the sample's wave vectors): the polycrystal would have nothing to rela
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
@@ -17,27 +18,49 @@ from opalflow.spec import SpecError
 from opalflow.tersoff.parameters import TersoffParameters
 
 
+@dataclass(frozen=True)
+class Crystal:
+    """The diamond single crystal at its zero-pressure lattice constant ``a0_A``: cohesive energy (eV), the
+    residual dE/da (eV/A per atom), bulk modulus, C' and the cubic elastic constants (GPa; C44 relaxed, C44^0
+    without the internal relaxation): :meth:`opalflow.tersoff.model.DiamondModel.evaluate` at a0."""
+
+    a0_A: float
+    Ec_eV: float
+    dE_da_eV_per_A: float
+    B_GPa: float
+    Cprime_GPa: float
+    C11_GPa: float
+    C12_GPa: float
+    C44_0_GPa: float
+    C44_GPa: float
+
+    @property
+    def constants(self) -> tuple[float, float, float]:
+        """(C11, C12, C44) in GPa: the cubic stiffness of each grain."""
+        return self.C11_GPa, self.C12_GPa, self.C44_GPa
+
+
 @lru_cache(maxsize=8)
-def _constants(values: tuple, element: str) -> dict:
+def _crystal(values: tuple, element: str) -> Crystal | None:
     from opalflow.tersoff.model import DiamondModel, neighbor_radius
     p = TersoffParameters.from_values(values, element)
     model = DiamondModel(a=5.431, neighbor_radius_over_a=neighbor_radius(p.cutoff(), 5.431))
     try:
         a0 = model.lattice_constant(p.values())
     except RuntimeError:
-        return {"a0_A": None}
-    return {"a0_A": a0, **model.evaluate(p, a0)}
+        return None
+    return Crystal(a0_A=a0, **model.evaluate(p, a0)) if np.isfinite(a0) else None
 
 
-def single_crystal(params: TersoffParameters, potential: str, where: str = "tersoff.potential") -> dict:
-    """a0 (A), Ec (eV) and the elastic constants (GPa) of the diamond crystal; SpecError if unstable."""
-    c = _constants(tuple(float(v) for v in params.values()), params.element)
-    if c["a0_A"] is None or not np.isfinite(c["a0_A"]):
+def single_crystal(params: TersoffParameters, potential: str, where: str = "tersoff.potential") -> Crystal:
+    """The diamond crystal of ``params``; SpecError if it has no lattice constant or is unstable."""
+    c = _crystal(tuple(float(v) for v in params.values()), params.element)
+    if c is None:
         raise SpecError(where, potential, "fails the stability check: no zero-pressure diamond lattice constant")
-    c11, c12, c44 = c["C11_GPa"], c["C12_GPa"], c["C44_GPa"]
-    if not (c11 - c12 > 0 and c11 + 2 * c12 > 0 and c44 > 0 and c["Ec_eV"] < 0):
+    c11, c12, c44 = c.constants
+    if not (c11 - c12 > 0 and c11 + 2 * c12 > 0 and c44 > 0 and c.Ec_eV < 0):
         raise SpecError(where, potential, f"fails the stability check: C11 = {c11:.1f}, C12 = {c12:.1f}, "
-                        f"C44 = {c44:.1f} GPa, Ec = {c['Ec_eV']:.3f} eV (needs C11 - C12 > 0, C11 + 2 C12 > 0, "
+                        f"C44 = {c44:.1f} GPa, Ec = {c.Ec_eV:.3f} eV (needs C11 - C12 > 0, C11 + 2 C12 > 0, "
                         "C44 > 0 (Born) and Ec < 0)")
     return c
 
@@ -51,15 +74,16 @@ def check_sample_hessian(samples, potential: str, where: str = "tersoff.potentia
                         "negative eigenvalue (a soft phonon; the sample would not relax to the crystal)")
 
 
-def longitudinal_speed_nm_ps(crystal: dict) -> float:
+def longitudinal_speed_nm_ps(crystal: Crystal) -> float:
     """Voigt estimate of the longitudinal (plate) wave speed, the fastest the polycrystal carries (nm/ps)."""
-    bulk = (crystal["C11_GPa"] + 2 * crystal["C12_GPa"]) / 3.0
-    shear = (crystal["C11_GPa"] - crystal["C12_GPa"] + 3 * crystal["C44_GPa"]) / 5.0
-    density = 8 * 28.0855 * 1.66053907e-27 / (crystal["a0_A"] * 1e-10) ** 3
+    c11, c12, c44 = crystal.constants
+    bulk = (c11 + 2 * c12) / 3.0
+    shear = (c11 - c12 + 3 * c44) / 5.0
+    density = 8 * 28.0855 * 1.66053907e-27 / (crystal.a0_A * 1e-10) ** 3
     return float(np.sqrt((bulk + 4 * shear / 3) * 1e9 / density)) * 1e-3
 
 
-def quasi_static_rate(crystal: dict, strain_step: float, length_nm: float) -> float:
+def quasi_static_rate(crystal: Crystal, strain_step: float, length_nm: float) -> float:
     """Largest strain rate (1/ns) at which a strain step lasts one longitudinal transit of ``length_nm``.
 
     Quasi-static loading needs the loading time of each step to exceed the time a wave needs to

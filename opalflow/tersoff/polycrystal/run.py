@@ -25,7 +25,8 @@ from opalflow.runs.record import RunRecord, finish
 from opalflow.runs.result import Result
 from opalflow.store import RESULTS, SUMMARY, h5_bytes, new_figure, save_figure
 from opalflow.tersoff.parameters import load_parameters
-from opalflow.tersoff.polycrystal.crystal import check_sample_hessian, longitudinal_speed_nm_ps, single_crystal
+from opalflow.tersoff.polycrystal.crystal import (Crystal, check_sample_hessian, longitudinal_speed_nm_ps,
+                                                  single_crystal)
 from opalflow.tersoff.polycrystal.dynamics import M_PER_S, Bounds, Polycrystal, WaveSpeeds, polycrystal_bounds, speeds
 from opalflow.tersoff.polycrystal.mesh import block
 from opalflow.tersoff.polycrystal.output import plot_mesh, write_vtu
@@ -45,10 +46,10 @@ def setup(spec: PolycrystalWorkflow, out: Path) -> tuple:
     before the run folder is started."""
     params = load_parameters(spec.tersoff.potential, spec.tersoff.element)
     crystal = single_crystal(params, spec.tersoff.potential)
-    samples = Samples(params.values(), params.cutoff(), crystal["a0_A"])
+    samples = Samples(params.values(), params.cutoff(), crystal.a0_A)
     check_sample_hessian(samples, spec.tersoff.potential)
     start_folder(out, spec)
-    return params, crystal, samples, polycrystal_bounds(*constants(crystal), samples.density_kg_m3)
+    return params, crystal, samples, polycrystal_bounds(*crystal.constants, samples.density_kg_m3)
 
 
 def start_folder(out: Path, spec: PolycrystalWorkflow) -> None:
@@ -172,10 +173,6 @@ def run_experiments(jobs: list[Job], out: Path, resume: bool, compute, read, say
     return {j.label: results[j.label] for j in jobs}
 
 
-def constants(crystal: dict) -> tuple[float, float, float]:
-    return crystal["C11_GPa"], crystal["C12_GPa"], crystal["C44_GPa"]
-
-
 def realised_bounds(pc: Polycrystal) -> dict[str, Realised]:
     """Voigt and Reuss bounds of E_x and nu for the orientations this mesh actually drew.
 
@@ -196,13 +193,13 @@ def slope(x: np.ndarray, y: np.ndarray) -> float:
 
 
 # ---------------------------------------------------------------- tension
-def tension_job(spec: TensionWorkflow, samples: Samples, crystal: dict, cubes: int, cube_nm: float, seed: int,
+def tension_job(spec: TensionWorkflow, samples: Samples, crystal: Crystal, cubes: int, cube_nm: float, seed: int,
                 say, label: str) -> tuple[TensionRun, Polycrystal]:
     """One tension experiment: periodic along x, free sides; stress-strain and volume-strain."""
     t = spec.tension
     t0 = time.perf_counter()
     mesh = block((cubes, cubes, cubes), cube_nm, (True, False, False))
-    pc = Polycrystal(mesh, samples, random_rotations(mesh.elements, seed), constants(crystal),
+    pc = Polycrystal(mesh, samples, random_rotations(mesh.elements, seed), crystal.constants,
                      spec.samples.relaxation, spec.samples.force_tol_eV_A)
     length = cubes * cube_nm
     dt = pc.stable_timestep(t.timestep_safety)
@@ -291,8 +288,8 @@ def run_tension(spec: TensionWorkflow, out: Path, say=print, resume: bool = Fals
     t0 = time.perf_counter()
     params, crystal, samples, bounds = setup(spec, out)
     t = spec.tension
-    say(f"polycrystal tension with {spec.tersoff.potential}: a0 = {crystal['a0_A']:.5f} A, C11 {crystal['C11_GPa']:.1f}, "
-        f"C12 {crystal['C12_GPa']:.1f}, C44 {crystal['C44_GPa']:.1f} GPa; Voigt E {bounds.voigt.E_GPa:.1f}, "
+    say(f"polycrystal tension with {spec.tersoff.potential}: a0 = {crystal.a0_A:.5f} A, C11 {crystal.C11_GPa:.1f}, "
+        f"C12 {crystal.C12_GPa:.1f}, C44 {crystal.C44_GPa:.1f} GPa; Voigt E {bounds.voigt.E_GPa:.1f}, "
         f"Reuss E {bounds.reuss.E_GPa:.1f} GPa")
     check = _lammps_check(spec, params, samples, out)
     relax_cmp = relaxation_comparison(samples, spec.samples.seeds[0], spec.samples.force_tol_eV_A)
@@ -405,9 +402,9 @@ def _bounds_rows(bounds: Bounds) -> list[str]:
 
 
 def _crystal_lines(summary: dict, spec, bounds: Bounds) -> list[str]:
-    c = summary["single_crystal"]
-    lines = [f"Potential `{spec.tersoff.potential}`: a0 = {c['a0_A']:.5f} A, C11 = {c['C11_GPa']:.2f}, C12 = "
-             f"{c['C12_GPa']:.2f}, C44 = {c['C44_GPa']:.2f} GPa (relaxed; C44^0 = {c['C44_0_GPa']:.2f}), sample density "
+    c: Crystal = summary["single_crystal"]
+    lines = [f"Potential `{spec.tersoff.potential}`: a0 = {c.a0_A:.5f} A, C11 = {c.C11_GPa:.2f}, C12 = "
+             f"{c.C12_GPa:.2f}, C44 = {c.C44_GPa:.2f} GPa (relaxed; C44^0 = {c.C44_0_GPa:.2f}), sample density "
              f"{summary['density_kg_m3']:.1f} kg/m^3. Isotropic averages of this single crystal (the polycrystal's "
              "bounds) and the speeds they imply:", "", *_bounds_rows(bounds), ""]
     chk = summary.get("lammps_check")
@@ -472,7 +469,7 @@ WAVE_AXIS = {"plate": 2, "rod": 2, "shear": 0}          # velocity component the
 WAVE_KEY = {"plate": "wave_speed_plate_m_s", "rod": "wave_speed_rod_m_s", "shear": "wave_speed_shear_m_s"}
 
 
-def wave_job(spec: WavesWorkflow, samples: Samples, crystal: dict, bounds: Bounds, name: str,
+def wave_job(spec: WavesWorkflow, samples: Samples, crystal: Crystal, bounds: Bounds, name: str,
              say) -> tuple[WaveRun, Polycrystal]:
     """A piston on z = 0 drives the column; the front is where the section-averaged velocity reaches half the
     piston's.
@@ -487,7 +484,7 @@ def wave_job(spec: WavesWorkflow, samples: Samples, crystal: dict, bounds: Bound
     t0 = time.perf_counter()
     lateral = name != "rod"
     mesh = block(tuple(w.cubes), w.cube_nm, (lateral, lateral, False))
-    pc = Polycrystal(mesh, samples, random_rotations(mesh.elements, w.seed), constants(crystal),
+    pc = Polycrystal(mesh, samples, random_rotations(mesh.elements, w.seed), crystal.constants,
                      spec.samples.relaxation, spec.samples.force_tol_eV_A)
     dt = pc.stable_timestep(w.timestep_safety)
     length = w.cubes[2] * w.cube_nm

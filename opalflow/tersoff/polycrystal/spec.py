@@ -77,7 +77,7 @@ class PolycrystalWorkflow(WorkflowSpec):
         check(1e-8 <= s.force_tol_eV_A <= 1e-2, "samples.force_tol_eV_A", s.force_tol_eV_A, "must be in [1e-8, 1e-2] eV/A")
         check(0 <= s.lammps_check <= 100, "samples.lammps_check", s.lammps_check, "must be in [0, 100]")
 
-    def crystal(self) -> dict:
+    def crystal(self):
         """The potential's single crystal (SpecError if the file fails its stability check)."""
         from opalflow.tersoff.parameters import load_parameters
         from opalflow.tersoff.polycrystal.crystal import single_crystal
