@@ -7,7 +7,9 @@ Counts, over every module of the package:
 - ``string_subscripts``: ``x["key"]`` (an ``ast.Subscript`` whose index is a str constant), read or
   written: a dict, an HDF5 file or a TOML table indexed by name;
 - ``dict_functions``: functions annotated ``-> dict...`` or with a ``return`` of a dict display,
-  dict comprehension or ``dict(...)`` call;
+  dict comprehension or ``dict(...)`` call; of them ``mapping_functions``: those annotated ``dict[K, V]``
+  (a mapping keyed by data: label -> result, material -> stress) or returning only comprehensions, the rest
+  record-shaped (a bare ``dict`` or a display with string keys: a record that could be a class);
 - ``file_literals``: the modules that spell ``results.h5``, ``summary.json``, ``run.json`` in code (docstrings,
   which name the files to the reader, are not counted);
 - ``long_functions``: functions (methods included) over 80 lines;
@@ -40,6 +42,15 @@ def _returns_dict(fn: ast.AST) -> bool:
     return False
 
 
+def _mapping(fn: ast.AST) -> bool:
+    """A dict-returning function whose dict is a mapping keyed by data, not a record."""
+    ann = getattr(fn, "returns", None)
+    if ann is not None and isinstance(ann, ast.Subscript) and ast.unparse(ann.value) in ("dict", "Dict"):
+        return True
+    values = [n.value for n in ast.walk(fn) if isinstance(n, ast.Return) and n.value is not None]
+    return bool(values) and all(isinstance(v, ast.DictComp) for v in values)
+
+
 def _string_import(node: ast.Call) -> bool:
     name = node.func.attr if isinstance(node.func, ast.Attribute) else getattr(node.func, "id", "")
     return (name in ("resolve", "import_module") and node.args and isinstance(node.args[0], ast.Constant)
@@ -47,7 +58,7 @@ def _string_import(node: ast.Call) -> bool:
 
 
 def shape(package: Path = PACKAGE) -> dict:
-    subs, dict_fns, long_fns, string_imports = Counter(), [], [], []
+    subs, dict_fns, mapping_fns, long_fns, string_imports = Counter(), [], [], [], []
     literals = {f: set() for f in FILES}
     for path in sorted(package.rglob("*.py")):
         rel = str(path.relative_to(package.parent))
@@ -62,6 +73,8 @@ def shape(package: Path = PACKAGE) -> dict:
             elif isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
                 if _returns_dict(node):
                     dict_fns.append(f"{rel}:{node.name}")
+                    if _mapping(node):
+                        mapping_fns.append(f"{rel}:{node.name}")
                 length = node.end_lineno - node.lineno + 1
                 if length > LONG:
                     long_fns.append(f"{rel}:{node.name} ({length} lines)")
@@ -74,6 +87,7 @@ def shape(package: Path = PACKAGE) -> dict:
     return {"string_subscripts": sum(subs.values()),
             "string_subscripts_by_module": dict(subs.most_common()),
             "dict_functions": len(dict_fns), "dict_function_names": dict_fns,
+            "mapping_functions": len(mapping_fns), "mapping_function_names": mapping_fns,
             "file_literals": {f: sorted(m) for f, m in literals.items()},
             "long_functions": long_fns,
             "string_imports": string_imports}
@@ -88,7 +102,8 @@ def main(argv=None) -> int:
     print(f"string subscripts: {s['string_subscripts']}")
     for mod, n in list(s["string_subscripts_by_module"].items())[:a.top]:
         print(f"  {n:5d} {mod}")
-    print(f"functions returning dict: {s['dict_functions']}")
+    print(f"functions returning dict: {s['dict_functions']} ({s['mapping_functions']} of them mappings keyed by data, "
+          f"{s['dict_functions'] - s['mapping_functions']} record-shaped)")
     for f, mods in s["file_literals"].items():
         print(f"{f!r} spelled in {len(mods)} modules: {', '.join(mods)}")
     print(f"functions over {LONG} lines: {len(s['long_functions'])}: {', '.join(s['long_functions'])}")

@@ -223,15 +223,15 @@ def test_glued_dynamic_modulus_matches_the_static_solver(glued_runs):
     neighbours that touch as the network folds stiffen the dynamic run (+12 % here), and the static
     solve has none."""
     dynamic, static, _ = glued_runs
-    assert dynamic["complete"] and dynamic["youngs_modulus_GPa"] > 0
-    assert dynamic["youngs_modulus_GPa"] == pytest.approx(static["youngs_modulus_GPa"], rel=0.05)
+    assert dynamic.complete and dynamic.youngs_modulus_GPa > 0
+    assert dynamic.youngs_modulus_GPa == pytest.approx(static.youngs_modulus_GPa, rel=0.05)
 
 
 def test_contact_bonds_are_far_softer_than_parallel_bonds(glued_runs):
     """Bonds without moments leave the tree-like network a mechanism: E drops by orders of magnitude."""
     dynamic, _, contact = glued_runs
-    assert contact["complete"]
-    assert contact["youngs_modulus_GPa"] < 0.2 * dynamic["youngs_modulus_GPa"]
+    assert contact.complete
+    assert contact.youngs_modulus_GPa < 0.2 * dynamic.youngs_modulus_GPa
 
 
 def test_glued_aerogel_passes_the_stability_check(tmp_path):

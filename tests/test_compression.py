@@ -42,8 +42,8 @@ def test_simple_cubic_modulus_matches_bond_stiffness(lattice_run):
     spec, out, summary = lattice_run
     E_b = material("silica")["bond_youngs_modulus_GPa"]
     analytic = math.pi / 4 * E_b
-    assert summary["youngs_modulus_specimen_GPa"] == pytest.approx(analytic, rel=0.02)
-    assert summary["elastic_fit_r2"] > 0.999
+    assert summary.youngs_modulus_specimen_GPa == pytest.approx(analytic, rel=0.02)
+    assert summary.elastic_fit_r2 > 0.999
 
 
 def test_simple_cubic_particle_stress_equals_applied(lattice_run):
@@ -73,7 +73,7 @@ def test_outputs_of_a_run(lattice_run):
     with h5py.File(out / "results.h5") as h:
         assert json.loads(h["provenance"].attrs["spec"])["name"] == "lattice_sc"
         assert h["provenance"].attrs["git_commit"]
-    assert summary["broken_bonds"] == 0
+    assert summary.broken_bonds == 0
 
 
 # --- acceptance 4: which scene options add which LAMMPS commands
@@ -126,8 +126,8 @@ def test_run_sh_gives_the_same_modulus_as_in_process(tmp_path, lattice_run):
     assert proc.returncode == 0, proc.stdout[-2000:]
     assert main(["analyze", str(out)]) == 0
     alone = json.loads((out / "summary.json").read_text())
-    assert alone["youngs_modulus_GPa"] == pytest.approx(summary["youngs_modulus_GPa"], rel=1e-6)
-    assert alone["peak_stress_MPa"] == pytest.approx(summary["peak_stress_MPa"], rel=1e-6)   # unbreakable bonds
+    assert alone["youngs_modulus_GPa"] == pytest.approx(summary.youngs_modulus_GPa, rel=1e-6)
+    assert alone["peak_stress_MPa"] == pytest.approx(summary.peak_stress_MPa, rel=1e-6)   # unbreakable bonds
 
 
 def test_killed_run_resumes(tmp_path, lattice_run):
@@ -147,9 +147,9 @@ def test_killed_run_resumes(tmp_path, lattice_run):
     assert 0 < steps_done < info["steps"]
     assert main(["run", "--out", str(out), "--resume"]) == 0
     resumed = json.loads((out / "summary.json").read_text())
-    assert resumed["youngs_modulus_GPa"] == pytest.approx(summary["youngs_modulus_GPa"], rel=0.01)
-    assert resumed["peak_stress_MPa"] == pytest.approx(summary["peak_stress_MPa"], rel=0.01)
-    assert resumed["steps"] == summary["steps"]
+    assert resumed["youngs_modulus_GPa"] == pytest.approx(summary.youngs_modulus_GPa, rel=0.01)
+    assert resumed["peak_stress_MPa"] == pytest.approx(summary.peak_stress_MPa, rel=0.01)
+    assert resumed["steps"] == summary.steps
 
 
 def test_failed_run_keeps_earlier_results(tmp_path, capsys):
@@ -184,7 +184,7 @@ def test_rate_check_switch_reports_the_half_speed_run(tmp_path):
     """Acceptance 2 (mechanics of the switch; the quickstart figures are in the closing note)."""
     out = tmp_path / "rate"
     summary = run_workflow(lattice_spec("compression.check_rate=true"), out, say=lambda *_: None)
-    rc = summary["rate_check"]
+    rc = summary.rate_check
     assert (out / "rate_half" / "summary.json").exists()
     # the lattice's bonds do not break: no strength, so only E is compared
     assert abs(rc["youngs_modulus_change"]) < 0.02 and rc["strength_change"] is None
@@ -203,7 +203,7 @@ def test_datafile_scene_runs_a_users_file(tmp_path, lattice_run):
                  "--set", f'datafile.path="{tmp_path / "mine.lmp"}"',
                  "--set", 'datafile.materials=["silica","substrate"]']) == 0
     mine = json.loads((out / "summary.json").read_text())
-    assert mine["youngs_modulus_GPa"] == pytest.approx(summary["youngs_modulus_GPa"], rel=1e-6)
+    assert mine["youngs_modulus_GPa"] == pytest.approx(summary.youngs_modulus_GPa, rel=1e-6)
 
 
 def test_mpi_run_matches(tmp_path, lattice_run):
@@ -212,7 +212,7 @@ def test_mpi_run_matches(tmp_path, lattice_run):
     out = tmp_path / "mpi"
     assert main(["run", "lattice_sc", "--out", str(out), "--np", "2"]) == 0
     mpi = json.loads((out / "summary.json").read_text())
-    assert mpi["youngs_modulus_GPa"] == pytest.approx(summary["youngs_modulus_GPa"], rel=1e-3)
+    assert mpi["youngs_modulus_GPa"] == pytest.approx(summary.youngs_modulus_GPa, rel=1e-3)
 
 
 def test_opal_run_carries_its_structure_statistics(tmp_path, quick_spec, quick_structure):
@@ -473,13 +473,13 @@ def test_three_point_bending_of_a_lattice_beam_meets_beam_theory(tmp_path, capsy
     spec = load_spec(WORKFLOWS / "lattice_bending.toml", [])
     static = run_workflow(load_spec(WORKFLOWS / "lattice_bending.toml", ["compression.method=static"]),
                           tmp_path / "static", say=lambda *_: None)
-    reference = static["reference"]["youngs_modulus_GPa"]["value"]
-    assert "Timoshenko" in static["reference"]["youngs_modulus_GPa"]["source"]
-    assert static["youngs_modulus_GPa"] == pytest.approx(reference, rel=0.01)
+    reference = static.reference["youngs_modulus_GPa"]["value"]
+    assert "Timoshenko" in static.reference["youngs_modulus_GPa"]["source"]
+    assert static.youngs_modulus_GPa == pytest.approx(reference, rel=0.01)
     # Euler-Bernoulli alone (no shear) is 2.4 % stiffer: the check tells the two apart
-    assert abs(static["youngs_modulus_GPa"] / reference - 1) < 0.3 * 0.024
+    assert abs(static.youngs_modulus_GPa / reference - 1) < 0.3 * 0.024
     dynamic = run_workflow(spec, tmp_path / "dynamic", say=lambda *_: None)
-    assert dynamic["youngs_modulus_GPa"] == pytest.approx(reference, rel=0.02)
+    assert dynamic.youngs_modulus_GPa == pytest.approx(reference, rel=0.02)
     deck = (tmp_path / "dynamic" / "in.lmp").read_text()
     assert "fix             pin pin setforce 0.0 0.0 0.0" in deck and "v_substrate_fz" in deck
     assert "wall/gran" not in deck and "boundary        m m m" in deck
