@@ -22,7 +22,7 @@ import importlib
 from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from opalflow.spec import InputError, SpecError, WorkflowSpec, apply_overrides, convert, read_toml
 from opalflow.store import folder_lock
@@ -34,9 +34,6 @@ OPTIONS = {"np": "np_", "suffix": "suffix", "resume": "resume", "executor": "exe
 DEFAULT_KIND = "opal"
 
 ENTRY_POINT_GROUP = "opalflow.kinds"
-
-if TYPE_CHECKING:                   # the registry does not import the run layer (it names it)
-    from opalflow.runs.result import Result
 
 
 def resolve(target: str) -> Any:
@@ -103,9 +100,10 @@ class Kind:
         return resolve(self.result or "opalflow.runs.result:Result")
 
     def run_workflow(self, spec: WorkflowSpec, out: Path, *, say=print, np_: int = 1, resume: bool = False,
-                     suffix: str | None = None, executor=None) -> Result:
-        """Run ``spec`` into ``out``; options the kind does not take must be at their defaults (``executor``:
-        an :class:`opalflow.runs.spec.ExecutorSpec` for kinds that run many jobs)."""
+                     suffix: str | None = None, executor=None):
+        """Run ``spec`` into ``out`` -> its result (an instance of :meth:`result_class`); options the kind does not
+        take must be at their defaults (``executor``: an :class:`opalflow.runs.spec.ExecutorSpec` for kinds that run
+        many jobs).  The registry names the run layer's classes, it does not import them."""
         given = {"np": np_ != 1, "resume": resume, "suffix": suffix is not None, "executor": executor is not None}
         if any(on and o not in self.options for o, on in given.items()):
             raise SpecError("/".join(f"--{o}" for o in OPTIONS if o != "executor"), self.name,
@@ -128,7 +126,8 @@ class Kind:
         with folder_lock(out):
             return resolve(self.check)(spec, out, say=say, **options)
 
-    def analyze_folder(self, folder: Path) -> Result:
+    def analyze_folder(self, folder: Path):
+        """The results of a run folder whose deck ran outside opalflow -> its result (as :meth:`run_workflow`)."""
         if not self.analyze:
             raise SpecError("folder", str(folder), f"a {self.name} run has no analysis of its own: its run "
                             "writes the results")
