@@ -231,9 +231,9 @@ def check(workflow: str | Path | dict | WorkflowSpec, out: str | Path, *, set: S
 
 def analyze(folder: str | Path) -> dict:
     """The results of a run folder whose deck ran outside opalflow (``bash run.sh``): writes and returns them."""
-    folder = Path(folder)
     from opalflow.runs.result import read_summary
 
+    folder = Path(folder)
     kind = run_json(folder)["spec"].get("kind", registry.DEFAULT_KIND)
     registry.get(kind).analyze_folder(folder)
     return read_summary(folder)

@@ -30,10 +30,9 @@ from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
 
+from opalflow.runs.result import Result, is_finished, read_summary
 from opalflow.spec import InputError, SpecError
 from opalflow.store import RECORD, SUMMARY, DamagedFile, json_text, read_json, staged_files, write_json_atomic
-
-from opalflow.runs.result import Result, is_finished, read_summary
 
 #: version of the run.json layout; :meth:`RunRecord.read` upgrades older files (schema 2: a study job's state
 #: in job.json beside it)
