@@ -110,14 +110,14 @@ def scene_text(spec, sample, speed_m_s: float, plate: bool = False, legacy: bool
     mat = names.pop()
     m = material(mat, spec.materials)
     c = contact_properties(mat)
-    rho = m["density_kg_m3"]
+    rho = m.density_kg_m3
     E_c, nu_c = c.youngs_modulus_MPa * 1e6, c.poisson_ratio
-    sigma = m["bond_strength_MPa"] * 1e6
+    sigma = m.bond_strength_MPa * 1e6
     lines = []
     for key, density in (("particle", rho), ("held", HEAVY * rho), ("driven", HEAVY * rho)):
         lines.append(f"32 {key} {key} 0 {num(density)} 7 {num(E_c)} 10 {num(nu_c)}")
-    lines.append(f"32 bond bond 0 {num(rho)} 7 {num(m['bond_youngs_modulus_GPa'] * 1e9)} "
-                 f"10 {num(m['bond_poisson_ratio'])} "
+    lines.append(f"32 bond bond 0 {num(rho)} 7 {num(m.bond_youngs_modulus_GPa * 1e9)} "
+                 f"10 {num(m.bond_poisson_ratio)} "
                  f"8 {num(sigma)} 9 {num(sigma)}")
     keys = ("particle", "held", "driven")
     for a in keys:
@@ -125,7 +125,7 @@ def scene_text(spec, sample, speed_m_s: float, plate: bool = False, legacy: bool
             lines.append(f"33 {a} {b} 200 {num(c.restitution)} 201 {num(c.friction)} 202 0")
     if plate:
         d = contact_properties("diamond")
-        lines.append(f"32 plate plate 0 {num(material('diamond', {})['density_kg_m3'])} 7 "
+        lines.append(f"32 plate plate 0 {num(material('diamond', {}).density_kg_m3)} 7 "
                      f"{num(d.youngs_modulus_MPa * 1e6)} 10 {num(d.poisson_ratio)}")
         for a in keys:
             lines.append(f"33 {a} plate 200 {num(d.restitution)} 201 {num(d.friction)} 202 0")

@@ -116,7 +116,7 @@ def run(workflow: str | Path | dict | WorkflowSpec | None, out: str | Path, *, s
     if suffix:
         from opalflow.lammps.engine import lammps_info
 
-        usable = lammps_info()["accelerators"]
+        usable = lammps_info().accelerators
         if suffix not in usable:
             raise SpecError("--suffix", suffix, f"this LAMMPS build offers {', '.join(usable) or 'none'}")
     from opalflow.runs.record import refuse_finished, run_kind
@@ -252,8 +252,10 @@ def workflows() -> dict[str, dict]:
 def info() -> dict:
     """opalflow's version, the LAMMPS library's version, packages and accelerators, the executables found
     (lmp, mpiexec, liggghts) and the workflow kinds."""
+    import dataclasses
+
     from opalflow.lammps.engine import lammps_info
     from opalflow.version import __version__
 
-    return {"opalflow_version": __version__, **lammps_info(),
+    return {"opalflow_version": __version__, **dataclasses.asdict(lammps_info()),
             "kinds": {k.name: k.summary for k in registry.kinds().values()}}

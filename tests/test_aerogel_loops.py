@@ -194,15 +194,15 @@ def test_isotropic_average_of_known_tensors():
     C[range(3), range(3)] = lam + 2 * mu
     C[range(3, 6), range(3, 6)] = mu
     iso = isotropic_average(C)
-    assert iso["hill"]["E"] == pytest.approx(E) and iso["hill"]["nu"] == pytest.approx(nu)
-    assert iso["anisotropy_index"] == pytest.approx(0, abs=1e-12)
+    assert iso.hill.E == pytest.approx(E) and iso.hill.nu == pytest.approx(nu)
+    assert iso.anisotropy_index == pytest.approx(0, abs=1e-12)
     # silicon (C11 165.7, C12 63.9, C44 79.6 GPa): Voigt > Reuss, A^U = 0.24
     C = np.zeros((6, 6))
     C[:3, :3] = 63.9
     C[range(3), range(3)] = 165.7
     C[range(3, 6), range(3, 6)] = 79.6
     iso = isotropic_average(C)
-    assert iso["voigt"]["G"] > iso["reuss"]["G"] and iso["anisotropy_index"] == pytest.approx(0.24, abs=0.01)
+    assert iso.voigt.G > iso.reuss.G and iso.anisotropy_index == pytest.approx(0.24, abs=0.01)
 
 
 @pytest.mark.parametrize("chunk", [1 << 20, 7])

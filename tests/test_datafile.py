@@ -199,7 +199,7 @@ def test_a_lammps_hybrid_lj_data_file_runs_with_its_substrate_and_length_unit(tm
     from opalflow.lammps.datafile import read_data
     from opalflow.materials import material
 
-    silica = material("silica")["density_kg_m3"]
+    silica = material("silica").density_kg_m3
 
     data = read_data(tmp_path / "static" / "data.lmp", periodic=(False, False, False))
     assert np.allclose(data.densities * 1e6, silica, rtol=0.01) and np.allclose(data.diameters, 10.0)

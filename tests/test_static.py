@@ -210,7 +210,7 @@ def test_periodic_lattice_stiffness_tensor_is_analytic(tmp_path, capsys):
     C = np.array(s["stiffness_tensor_GPa"])
     m = material("silica")
     a, r_b = 20.0, 10.0
-    E_b, nu = m["bond_youngs_modulus_GPa"], m["bond_poisson_ratio"]
+    E_b, nu = m.bond_youngs_modulus_GPa, m.bond_poisson_ratio
     c11 = E_b * np.pi * r_b**2 / a**2
     c44 = E_b / (2 * (1 + nu)) * np.pi * r_b**2 / (2 * a**2)
     assert np.allclose(np.diag(C)[:3], c11, rtol=1e-9) and np.allclose(np.diag(C)[3:], c44, rtol=1e-9)

@@ -279,7 +279,7 @@ def test_bulk_study_by_static_solves(tmp_path):
     """study.method = "static": K_E from one linear solve per diameter; no strength columns; the job's
     summary says method static; a calibration cannot be static."""
     spec = load_spec(WORKFLOWS / "bulk_silica.toml", ["study.method=static", "study.diameters_nm=[60.0]"])
-    summary = studies.run(spec, tmp_path, say=lambda m: None)
+    summary = studies.run(spec, tmp_path, say=lambda m: None).summary()     # (a study: the generic Result)
     row = summary["by_diameter"]["60"]
     assert row["strength_MPa"] is None and 0.5 < row["K_E"] < 6
     jobs = list((tmp_path / "jobs").iterdir())
@@ -297,7 +297,7 @@ def test_porosity_study_by_quasistatic_jobs_fits_the_strength(tmp_path):
         "study.method=quasistatic", "study.porosities=[0.36, 0.49, 0.62]", "study.seeds=[1]",
         'study.set=["compression.strain_max=0.02","compression.snapshot_strains=[]","pores.cells_x=2",'
         '"packing.diameter_nm=110.0","pores.porosity_tolerance=0.04"]'])
-    summary = studies.run(spec, tmp_path, say=lambda m: None)
+    summary = studies.run(spec, tmp_path, say=lambda m: None).summary()     # (a study: the generic Result)
     assert "strength_exponential" in summary["fits"] and len(summary["runs"]) == 3
     assert all(r["strength_MPa"] > 0 for r in summary["runs"])
     job = json.loads(next((tmp_path / "jobs").glob("*/summary.json")).read_text())
@@ -310,7 +310,7 @@ def test_coating_study_by_quasistatic_jobs_gives_the_strength_ratio(tmp_path):
     spec = load_spec(WORKFLOWS / "coating_strength.toml", [
         "study.base=opal_quick", 'study.set=["compression.strain_max=0.03","compression.snapshot_strains=[]",'
         '"bonds.smooth=false","compression.event_tolerance=0.2"]'])
-    summary = studies.run(spec, tmp_path, say=lambda m: None)
+    summary = studies.run(spec, tmp_path, say=lambda m: None).summary()     # (a study: the generic Result)
     rows = {r["case"]: r for r in summary["table"]}
     assert set(rows) == {"uncoated", "low", "mean", "high"}
     assert rows["uncoated"]["strength_vs_uncoated"] == 1.0

@@ -66,7 +66,7 @@ def periodic_structure(agg: Aggregate, cutoff: float, material_name: str, overri
     """The whole aggregate bonded within ``cutoff`` x (r_i + r_j), periodic in x, y and z (no substrate)."""
     box = np.full(3, agg.box)
     x, bonds = network_bonds(agg, cutoff)
-    rho = density_to_nano(material(material_name, overrides)["density_kg_m3"])
+    rho = density_to_nano(material(material_name, overrides).density_kg_m3)
     return Structure(positions=x, diameters=agg.diameters.copy(), types=np.ones(len(x), np.int32),
                      densities=np.full(len(x), rho), box_lo=np.zeros(3), box_hi=box, periodic=np.ones(3, bool),
                      bonds=bonds, bond_types=np.ones(len(bonds), np.int32), type_names=[material_name],
@@ -106,7 +106,7 @@ def slab(agg: Aggregate, cutoff: float, material_name: str, overrides=None) -> S
     n = len(x)
     substrate = x[:, 2] < d_mean
     attached = _attached(x[:, 2], whole, agg.box, d_mean)
-    rho = density_to_nano(material(material_name, overrides)["density_kg_m3"])
+    rho = density_to_nano(material(material_name, overrides).density_kg_m3)
     # z is not periodic: room for the network to bulge or lose pieces without atoms leaving the box
     lo, hi = np.array([0.0, 0.0, -agg.box / 2]), np.array([agg.box, agg.box, 1.5 * agg.box])
     s = Structure(positions=x, diameters=agg.diameters.copy(), types=np.where(substrate, 2, 1).astype(np.int32),

@@ -14,6 +14,8 @@ Ostoja-Starzewski, Phys. Rev. Lett. 101, 055504, 2008).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 #: the Voigt order of a symmetric tensor's index pairs: xx yy zz yz xz xy
@@ -24,7 +26,27 @@ def _young_poisson(K: float, G: float) -> tuple[float, float]:
     return 9 * K * G / (3 * K + G), (3 * K - 2 * G) / (2 * (3 * K + G))
 
 
-def isotropic_average(C: np.ndarray) -> dict:
+@dataclass
+class Moduli:
+    """The isotropic bulk, shear and Young's moduli (the unit of the tensor) and Poisson ratio of one average."""
+
+    K: float
+    G: float
+    E: float
+    nu: float
+
+
+@dataclass
+class IsotropicAverage:
+    """The Voigt, Reuss and Hill averages of a stiffness tensor and its universal anisotropy index A^U."""
+
+    voigt: Moduli
+    reuss: Moduli
+    hill: Moduli
+    anisotropy_index: float
+
+
+def isotropic_average(C: np.ndarray) -> IsotropicAverage:
     """Voigt, Reuss and Hill K, G, E, nu of the 6 x 6 tensor C (any unit; E, K, G in it) and A^U."""
     C = np.asarray(C, float)
     S = np.linalg.inv(C)
@@ -32,9 +54,6 @@ def isotropic_average(C: np.ndarray) -> dict:
     K_V, G_V = (tr + 2 * off) / 9, (tr - off + 3 * shear) / 15
     str_, soff, sshear = np.trace(S[:3, :3]), S[0, 1] + S[1, 2] + S[0, 2], np.trace(S[3:, 3:])
     K_R, G_R = 1 / (str_ + 2 * soff), 15 / (4 * str_ - 4 * soff + 3 * sshear)
-    out = {}
-    for name, K, G in (("voigt", K_V, G_V), ("reuss", K_R, G_R), ("hill", (K_V + K_R) / 2, (G_V + G_R) / 2)):
-        E, nu = _young_poisson(K, G)
-        out[name] = {"K": float(K), "G": float(G), "E": float(E), "nu": float(nu)}
-    out["anisotropy_index"] = float(5 * G_V / G_R + K_V / K_R - 6)
-    return out
+    voigt, reuss, hill = (Moduli(float(K), float(G), *(float(x) for x in _young_poisson(K, G)))
+                          for K, G in ((K_V, G_V), (K_R, G_R), ((K_V + K_R) / 2, (G_V + G_R) / 2)))
+    return IsotropicAverage(voigt, reuss, hill, float(5 * G_V / G_R + K_V / K_R - 6))

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -54,7 +55,7 @@ def omp_drops_contact_history(spec, suffix: str | None) -> bool:
     if effective_suffix(suffix) != "omp" or not spec.contacts.enabled:
         return False
 
-    return int(lammps_info()["version"]) <= OMP_HISTORY_BUG_UNTIL
+    return int(lammps_info().version) <= OMP_HISTORY_BUG_UNTIL
 
 
 def dynamic_steps(spec: BpmWorkflow, deck: CompressionDeck) -> int:
@@ -198,7 +199,7 @@ def analyze(out: Path, started: float | None = None, lammps_s: float | None = No
         complete=bool(curve.step[-1] > sample.steps - sample.output_every_steps),
         steps_planned=sample.steps, lammps_s=lammps_s, wall_s=wall_s,
         broken_bonds=int(broken[-1]), n_particles=sample.n_particles, n_bonds=sample.n_bonds,
-        stress_by_material={f"{v['strain']:.4f}": v["by_material"] for v in snapshots.values()},
+        stress_by_material={f"{v.strain:.4f}": v.by_material for v in snapshots.values()},
         solid_fraction=sample.solid_fraction, bond_stiffness_error_max=sample.bond_stiffness_error_max,
         timestep_estimate_s=sample.timestep_estimate_s, build_timings_s=sample.build_timings_s,
         statistics=sample.statistics or {}, rate_check=rate_check)
@@ -232,7 +233,17 @@ def analyze(out: Path, started: float | None = None, lammps_s: float | None = No
                   result=type(result), files=files, record=record, started=started)
 
 
-def read_snapshots(out: Path, sample: SampleFacts, curve: mech.Curve, strain: np.ndarray) -> tuple[dict, dict]:
+@dataclass
+class BondStrainHistogram:
+    """The fraction of the intact bonds in each bin of bond strain r / r0 - 1 (Fig. 7) at one strain of the run."""
+
+    strain: float
+    fraction: np.ndarray
+    edges: np.ndarray
+
+
+def read_snapshots(out: Path, sample: SampleFacts, curve: mech.Curve,
+                   strain: np.ndarray) -> tuple[dict[int, fracture.Snapshot], dict[int, BondStrainHistogram]]:
     """The run's snapshots, by step: particles (positions, radii, types, the stress of eq. 21 and its means by
     material, bonds broken so far) and the histograms of the bonds' strains (Fig. 7), each at its strain."""
     # curve rows are averages over the preceding `every` steps: they belong to the middle step
@@ -242,16 +253,17 @@ def read_snapshots(out: Path, sample: SampleFacts, curve: mech.Curve, strain: np
         dump = mech.read_dump_custom(path)
         sigma = mech.particle_stress(dump)
         types = dump["type"].astype(np.int32)
-        snapshots[step] = {"strain": float(np.interp(step, mid_step, strain)), "id": dump["id"].astype(np.int64),
-                           "position_nm": np.column_stack([dump["x"], dump["y"], dump["z"]]),
-                           "radius_nm": dump["radius"], "type": types, "sigma_MPa": sigma,
-                           "broken_bonds": dump.get("broken_bonds", np.zeros(len(types))).astype(np.int32),
-                           "by_material": mech.stress_by_material(sigma, types, sample.type_names)}
+        snapshots[step] = fracture.Snapshot(
+            strain=float(np.interp(step, mid_step, strain)),
+            position_nm=np.column_stack([dump["x"], dump["y"], dump["z"]]), radius_nm=dump["radius"],
+            broken_bonds=dump.get("broken_bonds", np.zeros(len(types))).astype(np.int32), sigma_MPa=sigma,
+            id=dump["id"].astype(np.int64), type=types,
+            by_material=mech.stress_by_material(sigma, types, sample.type_names))
     bond_strains = {step: mech.bond_strains(mech.read_dump_local(path))
                     for step, path in mech.snapshot_files(out, "bonds").items()}
     edges = mech.strain_bins(list(bond_strains.values()))
-    histograms = {step: {"strain": float(np.interp(step, mid_step, strain)),
-                         "fraction": mech.histogram_fraction(e, edges), "edges": edges}
+    histograms = {step: BondStrainHistogram(float(np.interp(step, mid_step, strain)), mech.histogram_fraction(e, edges),
+                                            edges)
                   for step, e in bond_strains.items()}
     return snapshots, histograms
 
@@ -270,19 +282,19 @@ def _fill_h5(h, run: RunFacts, curve, strain, stress, stress_plate, stress_subst
                                        "height; stress_MPa = mean of plate and substrate stress (compression +)")
     for step, snap in snapshots.items():
         g = h.create_group(f"snapshots/{step}")
-        g.attrs["strain"] = snap["strain"]
-        put(g, "id", snap["id"], "1")
-        put(g, "type", snap["type"], "1", type_names=run.sample.type_names)
-        put(g, "position_nm", snap["position_nm"], "nm", ["x", "y", "z"])
-        put(g, "radius_nm", snap["radius_nm"], "nm")
-        put(g, "sigma_MPa", snap["sigma_MPa"], "MPa", mech.STRESS_COLUMNS,
+        g.attrs["strain"] = snap.strain
+        put(g, "id", snap.id, "1")
+        put(g, "type", snap.type, "1", type_names=run.sample.type_names)
+        put(g, "position_nm", snap.position_nm, "nm", ["x", "y", "z"])
+        put(g, "radius_nm", snap.radius_nm, "nm")
+        put(g, "sigma_MPa", snap.sigma_MPa, "MPa", mech.STRESS_COLUMNS,
             description="Cauchy stress per particle, eq. 21 with V_p = 4/3 pi r^3, tension positive")
-        put(g, "broken_bonds", snap["broken_bonds"], "1", description="bonds of the particle that broke so far")
+        put(g, "broken_bonds", snap.broken_bonds, "1", description="bonds of the particle that broke so far")
     for step, hist in histograms.items():
         g = h.create_group(f"bond_strain_histograms/{step}")
-        g.attrs["strain"] = hist["strain"]
-        put(g, "fraction", hist["fraction"], "1", description="fraction of intact bonds per bin")
-        put(g, "edges", hist["edges"], "1", description="bin edges of the bond strain r / r0 - 1")
+        g.attrs["strain"] = hist.strain
+        put(g, "fraction", hist.fraction, "1", description="fraction of intact bonds per bin")
+        put(g, "edges", hist.edges, "1", description="bin edges of the bond strain r / r0 - 1")
     result.h5_attrs(h, run)
 
 
@@ -294,17 +306,17 @@ def _plots(stage, strain, stress, stress_plate, stress_substrate, fit, snapshots
     xs = np.array(fit.window)
     ax.plot(100 * xs, fit.modulus_MPa * xs + fit.intercept_MPa, "--", label=f"E = {fit.modulus_MPa / 1e3:.3g} GPa")
     for snap in snapshots.values():
-        ax.axvline(100 * snap["strain"], color="0.85", lw=0.8, zorder=0)
+        ax.axvline(100 * snap.strain, color="0.85", lw=0.8, zorder=0)
     ax.set_xlabel("strain (%)")
     ax.set_ylabel("stress (MPa)")
     ax.legend()
     save_figure(fig, stage("stress_strain.png"))
     if snapshots:
-        mech.plot_stress_histograms(stage("stress_hist.png"), [(s["strain"], s["sigma_MPa"], s["type"])
+        mech.plot_stress_histograms(stage("stress_hist.png"), [(s.strain, s.sigma_MPa, s.type)
                                                                for s in snapshots.values()], type_names)
     if histograms:
-        mech.plot_bond_strains(stage("bond_strain.png"), next(iter(histograms.values()))["edges"],
-                               {f"strain {100 * h['strain']:.2f} %": h["fraction"] for h in histograms.values()})
+        mech.plot_bond_strains(stage("bond_strain.png"), next(iter(histograms.values())).edges,
+                               {f"strain {100 * h.strain:.2f} %": h.fraction for h in histograms.values()})
 
 
 def analyze_folder(out: Path) -> CompressionResult:
@@ -348,11 +360,11 @@ def run_dynamic(spec: BpmWorkflow, out: Path, *, np_: int = 1, resume: bool = Fa
         fast_fit = mech.fit_elastic(fast_strain, fast_stress)
         fast_strength = float(np.max(fast_stress))
         rate_check = {
-            "youngs_modulus_change": slow["youngs_modulus_GPa"] / (fast_fit.modulus_MPa / 1e3) - 1,
-            "strength_change": (slow["strength_MPa"] / fast_strength - 1 if slow["strength_MPa"] is not None
+            "youngs_modulus_change": slow.youngs_modulus_GPa / (fast_fit.modulus_MPa / 1e3) - 1,
+            "strength_change": (slow.strength_MPa / fast_strength - 1 if slow.strength_MPa is not None
                                 else None),
-            "half_speed_youngs_modulus_GPa": slow["youngs_modulus_GPa"],
-            "half_speed_strength_MPa": slow["strength_MPa"]}
+            "half_speed_youngs_modulus_GPa": slow.youngs_modulus_GPa,
+            "half_speed_strength_MPa": slow.strength_MPa}
     return analyze(out, started=t, lammps_s=lammps_s, rate_check=rate_check, record=record)
 
 

@@ -16,6 +16,8 @@ from dataclasses import dataclass, field
 
 from opalflow import registry
 from opalflow.bpm.spec import BpmWorkflow
+from opalflow.materials import Material
+from opalflow.runs.result import typed
 from opalflow.spec import InputError
 from opalflow.store import RECORD
 
@@ -57,7 +59,7 @@ class SampleFacts:
     # the structure as prepared for the dynamic deck
     mean_diameter_nm: float | None = None
     box_nm: list | None = None
-    materials: dict = field(default_factory=dict)          # each particle material's properties
+    materials: dict[str, Material] = field(default_factory=dict)    # each particle material's properties
     statistics: dict | None = None                          # the scene's statistics (build's summary.json)
     structure: dict | None = None                           # those of them each run summary carries
     build_timings_s: dict | None = None
@@ -98,10 +100,7 @@ class SampleFacts:
         if unknown:
             raise InputError(f"{RECORD}'s deck: unknown facts {', '.join(unknown)} (facts version "
                              f"{raw.get('facts_version', 1)}; this opalflow reads version {FACTS_VERSION})")
-        out = cls(**raw)
-        if out.bond_types is not None:
-            out.bond_types = [t if isinstance(t, BondType) else BondType(**t) for t in out.bond_types]
-        return out
+        return typed(cls, raw)
 
     @classmethod
     def read(cls, record) -> SampleFacts:

@@ -187,7 +187,7 @@ class PlateCompression(Loading):
 
     name, sense, glued, title = "plate", 1, False, "uniaxial compression by a plate"
 
-    def blocks(self, sample, v, substrate_type, top_layer_z, plate_args):
+    def blocks(self, sample, v, substrate_type, top_layer_z, plate_args) -> dict[str, str]:
         return {"groups": render("groups", substrate_type=num(substrate_type), top_layer_z=num(top_layer_z)),
                 "plate": render("plate", plate_speed=num(v), plate_z0=num(sample.plate_z0_nm),
                                 plate_contact=plate_args)}
@@ -268,7 +268,7 @@ class ThreePointBending(Loading):
         return Supports(held=held, drive=drive, loaded=nose, anchored=m["pin"] | m["roller"], sense=1,
                         area_nm2=sample.area_nm2, gauge_nm=sample.height_nm)
 
-    def blocks(self, sample, v, substrate_type, top_layer_z, plate_args):
+    def blocks(self, sample, v, substrate_type, top_layer_z, plate_args) -> dict[str, str]:
         m = sample.marks
         return {"groups": render("groups_bending", **{k: num(m[k]) for k in ("pin_x", "roller_x", "bottom_z",
                                                                             "nose_lo", "nose_hi", "nose_z")}),

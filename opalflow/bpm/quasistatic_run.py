@@ -243,7 +243,7 @@ def _broken_per_particle(net, alive: np.ndarray) -> np.ndarray:
     return np.bincount(net.i[dead], minlength=net.n_particles) + np.bincount(net.j[dead], minlength=net.n_particles)
 
 
-def _frames(net, data, res) -> list[tuple[str, dict]]:
+def _frames(net, data, res) -> list[fracture.Frame]:
     """Fracture pictures at the peak and at the end (the snapshots of :mod:`opalflow.analysis.fracture`)."""
     if not res.events:
         return []
@@ -252,10 +252,10 @@ def _frames(net, data, res) -> list[tuple[str, dict]]:
     def snap(alive, x, strain):
         """The particles displaced (x: None after a resume, which keeps no displacements: zero stress drawn)."""
         x = np.zeros((data.n_particles, 6)) if x is None else x
-        return {"strain": strain, "position_nm": data.positions + x[:, :3], "radius_nm": data.diameters / 2,
-                "type": data.types, "id": np.arange(1, data.n_particles + 1),
-                "broken_bonds": _broken_per_particle(net, alive),
-                "sigma_MPa": particle_stress(net.part(alive), x[:, :3], x[:, 3:], volumes)}
+        return fracture.Snapshot(strain, data.positions + x[:, :3], data.diameters / 2,
+                                 _broken_per_particle(net, alive),
+                                 particle_stress(net.part(alive), x[:, :3], x[:, 3:], volumes),
+                                 id=np.arange(1, data.n_particles + 1), type=data.types)
 
     p, last = res.peak, res.events[-1]
     peak_alive = res.peak_alive if res.peak_alive is not None else res.alive
@@ -264,14 +264,14 @@ def _frames(net, data, res) -> list[tuple[str, dict]]:
              snap(res.alive, res.end_x, last.strain))]
 
 
-def _write_dump(path: Path, data, snap: dict) -> None:
+def _write_dump(path: Path, data, snap: fracture.Snapshot) -> None:
     """A LAMMPS text dump (OVITO reads it): id type x y z radius broken_bonds (positions displaced)."""
     lo, hi = data.box_lo, data.box_hi
     bounds = "pp" if data.periodic[0] else "ff"
     head = ["ITEM: TIMESTEP", "0", "ITEM: NUMBER OF ATOMS", str(data.n_particles),
             f"ITEM: BOX BOUNDS {bounds} {bounds} ff"] + [f"{float(lo[k])!r} {float(hi[k])!r}" for k in range(3)]
     head.append("ITEM: ATOMS id type x y z radius broken_bonds")
-    rows = np.column_stack([snap["id"], data.types, snap["position_nm"], data.diameters / 2, snap["broken_bonds"]])
+    rows = np.column_stack([snap.id, data.types, snap.position_nm, data.diameters / 2, snap.broken_bonds])
     with open(path, "w") as f:
         f.write("\n".join(head) + "\n")
         np.savetxt(f, rows, fmt=["%d", "%d", "%.6f", "%.6f", "%.6f", "%.6f", "%d"])

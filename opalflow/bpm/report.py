@@ -116,9 +116,9 @@ def _inputs(run: RunFacts, result) -> list[str]:
     if "density_kg_m3" in structure:
         rows.append(("density", f"{structure['density_kg_m3']:.0f} kg/m^3"))
     for name, m in sample.materials.items():
-        rows.append((f"material {name}", f"bond E_b {m['bond_youngs_modulus_GPa']:g} GPa, nu "
-                     f"{m['bond_poisson_ratio']:g}, strength {m['bond_strength_MPa']:g} MPa, density "
-                     f"{m['density_kg_m3']:g} kg/m^3 ({m.get('source', 'workflow')})"))
+        rows.append((f"material {name}", f"bond E_b {m.bond_youngs_modulus_GPa:g} GPa, nu "
+                     f"{m.bond_poisson_ratio:g}, strength {m.bond_strength_MPa:g} MPa, density "
+                     f"{m.density_kg_m3:g} kg/m^3 ({m.source})"))
     types = sample.bond_types
     if types and types[0].kr_pN is not None:
         rows.append(("bond coefficients", f"{len(types)} types (material x length bin, bpm/rotational normalize yes): "
@@ -290,9 +290,8 @@ def network_inputs(run: RunFacts, loaded) -> list[str]:
         rows.append(("porosity", f"{structure['porosity']:.4f} (macro-pores)"))
     for name in sorted(set(loaded.bins.materials)):
         m = material(name, spec.materials)
-        rows.append((f"material {name}", f"bond E_b {m['bond_youngs_modulus_GPa']:g} GPa, nu "
-                     f"{m['bond_poisson_ratio']:g}, strength {m['bond_strength_MPa']:g} MPa "
-                     f"({m.get('source', 'workflow')})"))
+        rows.append((f"material {name}", f"bond E_b {m.bond_youngs_modulus_GPa:g} GPa, nu "
+                     f"{m.bond_poisson_ratio:g}, strength {m.bond_strength_MPa:g} MPa ({m.source})"))
     rows.append(("loading", f"{c.loading}, to strain {c.strain_max:g} ({c.method})"))
     if c.method == "quasistatic":
         rows.append(("breaking rule", f"`{b.breaking}`: {BREAKING_RULES[b.breaking]}"))

@@ -13,6 +13,7 @@ import dataclasses
 from dataclasses import dataclass, field
 
 from opalflow import registry
+from opalflow.analysis.elasticity import IsotropicAverage
 from opalflow.bpm.report import provenance_group, reference_errors, why
 from opalflow.runs.result import Result, key
 from opalflow.store import json_text
@@ -101,7 +102,7 @@ class CompressionResult(Result):
     youngs_modulus_isotropic_GPa: float = key(TENSOR)
     poisson_ratio_isotropic: float = key(TENSOR)
     anisotropy_index: float = key(TENSOR)
-    isotropic_average_GPa: dict = key(TENSOR)
+    isotropic_average_GPa: IsotropicAverage = key(TENSOR)
     # the sample and the run
     n_particles: int = key(*LOADED, TENSOR)
     n_bonds: int = key(*LOADED, TENSOR)
@@ -143,14 +144,6 @@ class CompressionResult(Result):
         """summary.json: the method's keys and the structure's, the scene's other statistics beside."""
         out = super().summary()
         return {**out, **{k: v for k, v in self.statistics.items() if k not in out}}
-
-    @classmethod
-    def from_summary(cls, summary: dict) -> CompressionResult:
-        """The result a summary.json holds (the quasi-static events' facts as :class:`EventFacts`)."""
-        out = super().from_summary(summary)
-        if isinstance(out.quasistatic, dict):
-            out.quasistatic = EventFacts(**out.quasistatic)
-        return out
 
     def rest(self, keys: dict) -> None:
         """Read back: summary.json's keys that no field declares are the scene's statistics (and the run's state)."""

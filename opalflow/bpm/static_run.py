@@ -138,11 +138,7 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> CompressionResult:
     total = sum(parts.values())
     energy_split = {k: v / total for k, v in parts.items()} if total > 0 else {}
     types = data.types
-    snapshots = {}
-    for e in c.snapshot_strains:
-        sigma = sigma_unit * e
-        snapshots[e] = {"sigma_MPa": sigma,
-                        "by_material": mech.stress_by_material(sigma, types, data.type_names)}
+    snapshots = {e: sigma_unit * e for e in c.snapshot_strains}       # strain -> the particles' stresses (MPa)
     result = CompressionResult.of(
         spec.kind, facts.structure or {}, workflow=spec.name, method="static", loading=c.loading,
         youngs_modulus_GPa=E_GPa, youngs_modulus_specimen_GPa=E_GPa,
@@ -155,7 +151,8 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> CompressionResult:
         timings_s={**facts.timings_s, "setup": res.setup_seconds, "solve": res.seconds - res.setup_seconds,
                    "analysis": time.perf_counter() - t},
         build_s=facts.build_s, loose_particles_left_out=res.loose, energy_split=energy_split,
-        stress_by_material={f"{e:.4f}": v["by_material"] for e, v in snapshots.items()},
+        stress_by_material={f"{e:.4f}": mech.stress_by_material(sigma, types, data.type_names)
+                            for e, sigma in snapshots.items()},
         bond_strain_per_strain={"mean": float(strain_unit.mean()), "std": float(strain_unit.std()),
                                 "min": float(strain_unit.min()), "max": float(strain_unit.max())},
         headline=f"E = {E_GPa:.4g} GPa (static, {res.solver}: {res.iterations} iterations, residual "
@@ -189,10 +186,10 @@ def _write_h5(path: Path, data, res: StaticResult, sigma_unit, strain_unit, snap
             description="particle stress (eq. 21) per unit macroscopic strain")
         put(g, "bond_strain_per_strain", strain_unit, "1", description="bond strain per unit macroscopic strain")
         put(g, "residual_history", np.asarray(res.history), "1", description="relative residual per iteration")
-        for e, snap in snapshots.items():
+        for e, sigma in snapshots.items():
             sg = h.create_group(f"snapshots/{e:.4f}")
             sg.attrs["strain"] = e
-            put(sg, "sigma_MPa", snap["sigma_MPa"], "MPa", mech.STRESS_COLUMNS)
+            put(sg, "sigma_MPa", sigma, "MPa", mech.STRESS_COLUMNS)
     path.write_bytes(h5_bytes(fill))
 
 
@@ -205,8 +202,8 @@ def _plots(stage, data, res: StaticResult, snapshots, strain_unit, strains) -> N
     ax.set_title("displacement per unit strain (static)")
     save_figure(fig, stage("displacement.png"))
     if snapshots:
-        mech.plot_stress_histograms(stage("stress_hist.png"), [(e, snap["sigma_MPa"], data.types)
-                                                               for e, snap in snapshots.items()], data.type_names)
+        mech.plot_stress_histograms(stage("stress_hist.png"), [(e, sigma, data.types)
+                                                               for e, sigma in snapshots.items()], data.type_names)
         edges = mech.strain_bins([strain_unit * max(strains)])
         mech.plot_bond_strains(stage("bond_strain.png"), edges, {
             f"strain {100 * e:.2f} %": mech.histogram_fraction(strain_unit * e, edges) for e in strains})
@@ -259,8 +256,8 @@ def run_tensor(spec: BpmWorkflow, s, out: Path, t0: float, say=print) -> Compres
         spec.kind, {}, workflow=spec.name, method="static", loading="periodic", stiffness_tensor_GPa=C.tolist(),
         youngs_modulus_GPa=float(E[2]), youngs_moduli_GPa={"x": float(E[0]), "y": float(E[1]), "z": float(E[2])},
         poisson_ratio_zx=float(-S[0, 2] / S[2, 2]), bulk_modulus_GPa=float(1.0 / S[:3, :3].sum()),
-        youngs_modulus_isotropic_GPa=iso["hill"]["E"], poisson_ratio_isotropic=iso["hill"]["nu"],
-        anisotropy_index=iso["anisotropy_index"], isotropic_average_GPa=iso,
+        youngs_modulus_isotropic_GPa=iso.hill.E, poisson_ratio_isotropic=iso.hill.nu,
+        anisotropy_index=iso.anisotropy_index, isotropic_average_GPa=iso,
         n_particles=s.n_particles, n_bonds=s.n_bonds, solver=res.solver, iterations=res.iterations,
         relative_residual=res.residual, static_s=res.seconds, peak_memory_MiB=res.peak_memory_MiB,
         build_s=build_s, loose_particles_left_out=res.loose,
@@ -278,10 +275,10 @@ def run_tensor(spec: BpmWorkflow, s, out: Path, t0: float, say=print) -> Compres
     lines += ["", f"Young's moduli x / y / z: {E[0]:.4g} / {E[1]:.4g} / {E[2]:.4g} GPa; Poisson ratio zx "
               f"{result.poisson_ratio_zx:.4f}; bulk modulus (Reuss) {result.bulk_modulus_GPa:.4g} GPa.", "",
               "Isotropic averages (opalflow/analysis/elasticity.py: Voigt, Reuss, Hill; universal anisotropy index "
-              f"A^U = {iso['anisotropy_index']:.3g}, 0 for an isotropic tensor):", "",
+              f"A^U = {iso.anisotropy_index:.3g}, 0 for an isotropic tensor):", "",
               "| average | K (GPa) | G (GPa) | E (GPa) | nu |", "|---|---|---|---|---|",
-              *(f"| {k} | {iso[k]['K']:.4g} | {iso[k]['G']:.4g} | {iso[k]['E']:.4g} | {iso[k]['nu']:.4f} |"
-                for k in ("voigt", "reuss", "hill")), ""]
+              *(f"| {k} | {m.K:.4g} | {m.G:.4g} | {m.E:.4g} | {m.nu:.4f} |"
+                for k, m in (("voigt", iso.voigt), ("reuss", iso.reuss), ("hill", iso.hill))), ""]
     for k, r in result.reference.items():
         lines.append(f"Reference {k}: {r['value']:.6g} ({r['source']}); error {100 * r['error']:+.4f} %.")
     lines += ["", f"Solver `{res.solver}`: iterations per loading {res.iterations}, worst relative residual "

@@ -90,7 +90,7 @@ class BondNetwork:
         self._loads(np.hstack([u, theta]), _NO_ROWS if stretch is None else stretch, F)
         return F
 
-    def energy_parts(self, u: np.ndarray, theta: np.ndarray, stretch: np.ndarray | None = None) -> dict:
+    def energy_parts(self, u: np.ndarray, theta: np.ndarray, stretch: np.ndarray | None = None) -> dict[str, float]:
         """The strain energy of the bonds split by deformation mode (totals, in the network's units):
         stretching 1/2 a_r (n . du)^2, shear 1/2 a_s |s|^2 with s = P du + L/2 n x (theta_i + theta_j) (the
         shear force is a_s s and the shear torque L/2 n x a_s s), bending 1/2 kb |P dtheta|^2 and twisting
@@ -107,7 +107,7 @@ class BondNetwork:
                 parts[k] += v
         return parts
 
-    def _energy_parts(self, u: np.ndarray, theta: np.ndarray, stretch: np.ndarray | None) -> dict:
+    def _energy_parts(self, u: np.ndarray, theta: np.ndarray, stretch: np.ndarray | None) -> dict[str, float]:
         n = self.n
         F = self.bond_forces(u, theta, stretch)
         Fr = np.einsum("ij,ij->i", n, F)

@@ -80,7 +80,7 @@ def read_scene(spec: DatafileWorkflow, progress=None) -> Structure:
     if len(others) > 1:
         raise SpecError("datafile.materials", d.materials, "at most one material besides the matrix")
     source = d.density_source()
-    want = np.array([material(particle_material(n, spec.material), spec.materials)["density_kg_m3"]
+    want = np.array([material(particle_material(n, spec.material), spec.materials).density_kg_m3
                      for n in type_names])
     if source == "material":
         s.densities = want[s.types - 1] / KG_M3_PER_AG_NM3

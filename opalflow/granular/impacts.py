@@ -27,9 +27,9 @@ from pathlib import Path
 import numpy as np
 
 from opalflow.granular.decks import Contact, Wall, liggghts_executable, run_engine, write_decks, write_spheres
+from opalflow.granular.result import ImpactCase, ImpactsResult
 from opalflow.granular.spec import ImpactsWorkflow
 from opalflow.runs.record import RunRecord, finish
-from opalflow.runs.result import Result
 from opalflow.store import new_figure, save_figure
 
 #: a friction coefficient no impact here reaches: the contact sticks throughout
@@ -74,8 +74,9 @@ def contact_time(spec: ImpactsWorkflow) -> float:
     return 2.94 * delta_max / i.speed_m_s
 
 
-def build_case(spec: ImpactsWorkflow, case: Case, out: Path) -> dict:
-    """data.lmp, the decks and the wall of one case in ``out``."""
+def build_case(spec: ImpactsWorkflow, case: Case, out: Path) -> tuple[float, int, float, float]:
+    """data.lmp, the decks and the wall of one case in ``out``; its time step (s), steps, contact time (s) and
+    friction."""
     i, m = spec.impact, spec.material
     d, v = i.diameter_m, i.speed_m_s
     theta = math.radians(i.angle_deg) if case.oblique else 0.0
@@ -96,7 +97,7 @@ def build_case(spec: ImpactsWorkflow, case: Case, out: Path) -> dict:
     write_decks(out, f"{spec.name} {case.name}", contact, boundary="f f f", skin=0.2 * d, timestep=dt, steps=steps,
                 every=max(1, steps // 400), rotation=case.rotation, walls=walls, box=box, observe="projectile",
                 start=(f"set             atom 2 vx 0.0 vy 0.0 vz {-v!r}", "fix             hold held freeze"))
-    return {"timestep_s": dt, "steps": steps, "contact_time_s": t_c, "friction": contact.friction}
+    return dt, steps, t_c, contact.friction
 
 
 def difference(a: np.ndarray, b: np.ndarray, speed: float, radius: float) -> np.ndarray:
@@ -107,7 +108,7 @@ def difference(a: np.ndarray, b: np.ndarray, speed: float, radius: float) -> np.
     return np.maximum(dv, dw)
 
 
-def run_impacts(spec: ImpactsWorkflow, out: Path, say=print) -> Result:
+def run_impacts(spec: ImpactsWorkflow, out: Path, say=print) -> ImpactsResult:
     liggghts_executable("kind", "granular_impacts")
     t0 = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
@@ -117,28 +118,25 @@ def run_impacts(spec: ImpactsWorkflow, out: Path, say=print) -> Result:
     for case in CASES:
         folder = out / case.name
         folder.mkdir(exist_ok=True)
-        scene = build_case(spec, case, folder)
-        say(f"{spec.name}: {case.name}, {scene['steps']} steps on lammps and liggghts")
+        dt, steps, t_c, friction = build_case(spec, case, folder)
+        say(f"{spec.name}: {case.name}, {steps} steps on lammps and liggghts")
         curves = {e: run_engine(e, folder)[0] for e in ("lammps", "liggghts")}
-        diff = difference(curves["lammps"], curves["liggghts"], i.speed_m_s, i.diameter_m / 2)
-        diffs[case.name] = (curves["lammps"][: len(diff), 0], diff)
+        lammps = curves["lammps"]
+        diff = difference(lammps, curves["liggghts"], i.speed_m_s, i.diameter_m / 2)
+        diffs[case.name] = (lammps[: len(diff), 0], diff)
         over = np.flatnonzero(diff > TOLERANCE)
-        verdict = "agree" if not len(over) else "part"
-        row = {"case": case.name, **scene, "rotation": case.rotation,
-               "max_relative_difference": float(diff.max(initial=0.0)), "verdict": verdict,
-               "why": case.why,
-               "first_step_over_tolerance": int(curves["lammps"][over[0], 0]) if len(over) else None,
-               "final": {e: {"vx": float(c[-1, 1]), "vz": float(c[-1, 2]), "omegay": float(c[-1, 3])}
-                         for e, c in curves.items()}}
-        if case.name == "head_on":
-            row["restitution"] = {e: c[-1, 2] / i.speed_m_s for e, c in curves.items()}
-        rows.append(row)
-    head = rows[0]["restitution"]["lammps"]
-    summary = {"workflow": spec.name, "cases": rows, "tolerance": TOLERANCE,
-               "restitution_asked": m.restitution, "restitution_measured": head,
-               "restitution_error": head / m.restitution - 1,
-               "headline": ", ".join(f"{r['case']} {r['verdict']} ({r['max_relative_difference']:.1e})" for r in rows)}
-    summary["wall_s"] = time.perf_counter() - t0
+        rows.append(ImpactCase(
+            case.name, dt, steps, t_c, friction, case.rotation, float(diff.max(initial=0.0)),
+            "agree" if not len(over) else "part", case.why, int(lammps[over[0], 0]) if len(over) else None,
+            {e: {"vx": float(c[-1, 1]), "vz": float(c[-1, 2]), "omegay": float(c[-1, 3])} for e, c in curves.items()},
+            {e: c[-1, 2] / i.speed_m_s for e, c in curves.items()} if case.name == "head_on" else None))
+    head = rows[0].restitution["lammps"]
+    result = ImpactsResult(
+        workflow=spec.name, cases=rows, tolerance=TOLERANCE, restitution_asked=m.restitution,
+        restitution_measured=head, restitution_error=head / m.restitution - 1,
+        headline=", ".join(f"{r.case} {r.verdict} ({r.max_relative_difference:.1e})" for r in rows),
+        wall_s=time.perf_counter() - t0)
+
     def files(stage):
         fig, ax = new_figure(figsize=(6, 3.8))
         for name, (steps, diff) in diffs.items():   # second_contact dashed: it starts as oblique_sticking
@@ -150,25 +148,25 @@ def run_impacts(spec: ImpactsWorkflow, out: Path, say=print) -> Result:
         ax.legend(fontsize=7)
         save_figure(fig, stage("impacts.png"))
 
-    return finish(out, summary, _report(spec, summary), files=files)
+    return finish(out, result, _report(spec, result), files=files)
 
 
-def _report(spec: ImpactsWorkflow, s: dict) -> str:
+def _report(spec: ImpactsWorkflow, s: ImpactsResult) -> str:
     i, m = spec.impact, spec.material
     lines = [f"# {spec.name}: single impacts on LAMMPS and LIGGGHTS", "",
              f"A sphere (d = {i.diameter_m:g} m, {m.density_kg_m3:g} kg/m^3, E = {m.youngs_modulus_Pa:g} Pa, "
              f"nu = {m.poisson_ratio:g}, restitution {m.restitution:g}) thrown at {i.speed_m_s:g} m/s at a held "
              f"sphere of the same size, head-on or at {i.angle_deg:g} degrees to the line of centres "
              "(after Chung and Ooi, Granular Matter 13, 643 (2011)). The engines agree where the projectile's "
-             f"velocity and spin differ by less than {s['tolerance']:g} of the impact speed at every output step.",
+             f"velocity and spin differ by less than {s.tolerance:g} of the impact speed at every output step.",
              "", "| case | friction | spin | steps | largest difference | verdict | why |",
              "|---|---|---|---|---|---|---|"]
-    lines += [f"| {r['case']} | {r['friction']:g} | {'yes' if r['rotation'] else 'no'} | {r['steps']} | "
-              f"{r['max_relative_difference']:.2e} | {r['verdict']}"
-              + (f" (step {r['first_step_over_tolerance']})" if r["first_step_over_tolerance"] is not None else "")
-              + f" | {r['why']} |" for r in s["cases"]]
-    lines += ["", f"Head-on restitution: asked {s['restitution_asked']:g}, measured {s['restitution_measured']:.6f} "
-              f"(error {100 * s['restitution_error']:+.2f} %; the damping of both codes, -2 sqrt(5/6) beta "
+    lines += [f"| {r.case} | {r.friction:g} | {'yes' if r.rotation else 'no'} | {r.steps} | "
+              f"{r.max_relative_difference:.2e} | {r.verdict}"
+              + (f" (step {r.first_step_over_tolerance})" if r.first_step_over_tolerance is not None else "")
+              + f" | {r.why} |" for r in s.cases]
+    lines += ["", f"Head-on restitution: asked {s.restitution_asked:g}, measured {s.restitution_measured:.6f} "
+              f"(error {100 * s.restitution_error:+.2f} %; the damping of both codes, -2 sqrt(5/6) beta "
               "sqrt(S_n m*), gives the asked value only approximately for a Hertz contact).", "",
               "![impacts](impacts.png)", "",
               "Files: one folder per case with data.lmp, in.lammps, in.liggghts and their logs; the mapping of "

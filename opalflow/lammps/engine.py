@@ -19,6 +19,7 @@ import threading
 import time
 import weakref
 from contextlib import contextmanager
+from dataclasses import dataclass
 from functools import lru_cache
 from importlib import metadata
 from pathlib import Path
@@ -232,7 +233,7 @@ def _finalize_at_exit(lib) -> None:
 
 def _kokkos_on_gpu() -> bool:
     """Whether this LAMMPS's KOKKOS runs on a GPU (its CUDA, HIP or SYCL backend), from :func:`lammps_info`."""
-    return any(a in lammps_info()["kokkos_backends"] for a in ("cuda", "hip", "sycl"))
+    return any(a in lammps_info().kokkos_backends for a in ("cuda", "hip", "sycl"))
 
 
 def executable(name: str) -> str | None:
@@ -254,18 +255,32 @@ def lammps_version() -> int:
     LAMMPS took 0.3 in a fresh process: a static or quasi-static run's provenance no longer starts LAMMPS, which
     it never runs."""
     version = int(getattr(sys.modules[_lammps_class().__module__], "__version__", 0) or 0)
-    return version or int(lammps_info()["version"])
+    return version or int(lammps_info().version)
+
+
+@dataclass(frozen=True)
+class LammpsInfo:
+    """The LAMMPS library opalflow runs: its version (LAMMPS date code), where its Python module and (with
+    ``OPALFLOW_LAMMPS``) its prefix are, KOKKOS's backends, all installed packages, ``reported`` ({package: bool}
+    for REPORTED_PACKAGES), the usable accelerator suffixes ('omp', 'kk', 'gpu'), whether it sees a GPU, and the
+    executables found (mpiexec, lmp, liggghts; None where not)."""
+
+    version: int
+    module: str
+    prefix: str
+    kokkos_backends: list[str]
+    packages: list[str]
+    reported: dict[str, bool]
+    accelerators: list[str]
+    has_gpu_device: bool
+    mpi_launcher: str | None
+    lmp: str | None
+    liggghts: str | None
 
 
 @lru_cache(maxsize=1)
-def lammps_info() -> dict:
-    """Version, packages and accelerators of the LAMMPS library opalflow runs.
-
-    Returns a dict with keys ``version`` (LAMMPS date code), ``packages`` (all
-    installed packages), ``reported`` ({package: bool} for REPORTED_PACKAGES),
-    ``accelerators`` (usable suffixes: 'omp', 'kk', 'gpu'), ``has_gpu_device``,
-    ``mpi_launcher``, ``lmp`` and ``liggghts`` (paths or None).
-    """
+def lammps_info() -> LammpsInfo:
+    """Version, packages and accelerators of the LAMMPS library opalflow runs, the executables beside it."""
     lmp = new_lammps(suffix="")          # (plain: a suffix's switches are derived from what this finds)
     try:
         packages = sorted(lmp.installed_packages)
@@ -279,19 +294,11 @@ def lammps_info() -> dict:
     # KOKKOS runs on host threads (OpenMP, Serial) or a device; the GPU package needs a device
     accelerators = [sfx for pkg, sfx in (("OPENMP", "omp"), ("KOKKOS", "kk"), ("GPU", "gpu"))
                     if reported[pkg] and (sfx != "gpu" or has_gpu)]
-    return {
-        "version": version,
-        "module": str(Path(module).resolve().parent),
-        "prefix": str(lammps_prefix() or ""),
-        "kokkos_backends": list(config.get("KOKKOS", {}).get("api", [])),
-        "packages": packages,
-        "reported": reported,
-        "accelerators": accelerators,
-        "has_gpu_device": has_gpu,
-        "mpi_launcher": executable("mpiexec"),
-        "lmp": executable("lmp"),
-        "liggghts": shutil.which("liggghts") or shutil.which("lmp_auto"),
-    }
+    return LammpsInfo(version=version, module=str(Path(module).resolve().parent), prefix=str(lammps_prefix() or ""),
+                      kokkos_backends=list(config.get("KOKKOS", {}).get("api", [])), packages=packages,
+                      reported=reported, accelerators=accelerators, has_gpu_device=has_gpu,
+                      mpi_launcher=executable("mpiexec"), lmp=executable("lmp"),
+                      liggghts=shutil.which("liggghts") or shutil.which("lmp_auto"))
 
 
 class EngineError(RuntimeError):

@@ -47,7 +47,7 @@ def build_lattice(spec: LatticeWorkflow, progress=None) -> Structure:
     substrate = x[:, 2] < x[:, 2].min() + 0.5 * d if held else np.zeros(len(x), bool)
     types = np.where(substrate, 2, 1).astype(np.int32)
     bonds = find_bonds(x, diameters, box, periodic, spec.bonds.cutoff_factor, spec.bonds.min_length_factor)
-    rho = density_to_nano(material(spec.material, spec.materials)["density_kg_m3"])
+    rho = density_to_nano(material(spec.material, spec.materials).density_kg_m3)
     return Structure(positions=x, diameters=diameters, types=types, densities=np.full(len(x), rho),
                      box_lo=np.zeros(3), box_hi=box, periodic=periodic, bonds=bonds,
                      bond_types=bond_types_by_material(bonds, np.zeros(len(x), bool)),

@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 from opalflow.bpm.methods import METHODS
 from opalflow.bpm.spec import BoundarySpec, BpmWorkflow
-from opalflow.materials import material
+from opalflow.materials import Material, material
 from opalflow.spec import check
 
 LATTICES = ("sc", "fcc")
@@ -44,16 +44,16 @@ class LatticeWorkflow(BpmWorkflow):
             return {"youngs_modulus_GPa": (self.flexural_modulus(props, r), "beam theory: Timoshenko's simply "
                                            "supported beam with the lattice's EI and GA (LatticeWorkflow.flexural_modulus)")}
         if self.lattice.periodic_z:      # C11 = C22 = C33, C12 = 0: E along each axis is C11
-            return {"youngs_modulus_GPa": (math.pi * r**2 * props["bond_youngs_modulus_GPa"],
+            return {"youngs_modulus_GPa": (math.pi * r**2 * props.bond_youngs_modulus_GPa,
                                            "analytic: C11 = E_b pi r_b^2 / a^2, C12 = 0 (periodic simple-cubic lattice)")}
-        refs = {"youngs_modulus_specimen_GPa": (math.pi * r**2 * props["bond_youngs_modulus_GPa"],
+        refs = {"youngs_modulus_specimen_GPa": (math.pi * r**2 * props.bond_youngs_modulus_GPa,
                                                 "analytic: E_b pi r_b^2 / a^2 (simple-cubic lattice)")}
         if self.compression.loading == "tension" and self.bonds.breakable:
-            refs["strength_MPa"] = (math.pi * r**2 * props["bond_strength_MPa"],
+            refs["strength_MPa"] = (math.pi * r**2 * props.bond_strength_MPa,
                                     "analytic: sigma_b pi r_b^2 / a^2 (simple-cubic lattice in tension)")
         return refs
 
-    def flexural_modulus(self, props: dict, r: float, shear: bool = True) -> float:
+    def flexural_modulus(self, props: Material, r: float, shear: bool = True) -> float:
         """The flexural modulus E_f = F L^3 / (4 b h^3 delta) (ASTM D790) that beam theory gives a simple-cubic
         beam of n_x x n_y x n_z cells (spacing a, bond radius r_b = r a) in three-point bending over the span
         L = (n_x - 1) a between its bottom end particles: Timoshenko's mid-span deflection (Timoshenko and Gere,
@@ -67,11 +67,11 @@ class LatticeWorkflow(BpmWorkflow):
         lat = self.lattice
         a, n = lat.spacing_nm, lat.cells_z
         span, depth, width = (lat.cells_x - 1) * a, n * a, lat.cells_y * a
-        E_b = props["bond_youngs_modulus_GPa"]
+        E_b = props.bond_youngs_modulus_GPa
         area_b, i_b = math.pi * (r * a) ** 2, math.pi * (r * a) ** 4 / 4
         heights = [(k - (n - 1) / 2) * a for k in range(n)]
         EI = lat.cells_y * E_b * (area_b * sum(h * h for h in heights) + n * i_b)
-        GA = E_b / (2 * (1 + props["bond_poisson_ratio"])) * area_b / (2 * a**2) * width * depth
+        GA = E_b / (2 * (1 + props.bond_poisson_ratio)) * area_b / (2 * a**2) * width * depth
         compliance = span**3 / (48 * EI) + (span / (4 * 5 / 6 * GA) if shear else 0.0)
         return span**3 / (4 * width * depth**3 * compliance)
 

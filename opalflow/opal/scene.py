@@ -119,9 +119,9 @@ def build_opal(spec: OpalWorkflow, progress=None) -> tuple[Structure, dict]:
     if coated_k.any():
         type_names.append(spec.coating.material)
         types[coated_k] = len(type_names)
-    densities = np.full(len(positions), density_to_nano(material(spec.material, spec.materials)["density_kg_m3"]))
+    densities = np.full(len(positions), density_to_nano(material(spec.material, spec.materials).density_kg_m3))
     if coated_k.any():
-        densities[coated_k] = density_to_nano(material(spec.coating.material, spec.materials)["density_kg_m3"])
+        densities[coated_k] = density_to_nano(material(spec.coating.material, spec.materials).density_kg_m3)
 
     t = time.perf_counter()
     bonds = find_bonds(positions, diameters, box, periodic, spec.bonds.cutoff_factor, spec.bonds.min_length_factor)

@@ -260,12 +260,13 @@ def command_run(folder: str | os.PathLike, started: float) -> None:
     _COMMAND.update(folder=Path(folder).resolve(), started=started)
 
 
-def finish(folder: str | os.PathLike, summary: dict, report: str | Callable[[], str], *,
+def finish(folder: str | os.PathLike, summary: dict | Result, report: str | Callable[[], str], *,
            result: type[Result] = Result, files: Callable[[Callable[[str], Path]], None] | None = None,
            record: RunRecord | None = None, started: float | None = None) -> Result:
     """Write a run's results all or none and mark it finished; returns the summary as written (JSON's types)
     read back as ``result``, the run's :class:`opalflow.runs.result.Result` class (the kind's ``result``; the
-    generic class keeps every key in ``extra``).
+    generic class keeps every key in ``extra``).  ``summary``: a table, or the run's result object (then its class
+    is ``result``, and its summary is taken after ``files`` and ``wall_s``, which may still fill it).
 
     ``files(stage)`` writes the other result files (results.h5, plots) to ``stage(name)``; report.md (``report``
     or, when it is a function, what it returns after ``files``) and then summary.json (the mark of a
@@ -280,10 +281,16 @@ def finish(folder: str | os.PathLike, summary: dict, report: str | Callable[[], 
     with staged_files(folder) as stage:
         if files is not None:
             files(stage)
+        made = summary if isinstance(summary, Result) else None
         if started is not None:
             if _COMMAND.get("folder") == folder.resolve():
                 started = min(started, _COMMAND["started"])
-            summary["wall_s"] = time.perf_counter() - started
+            if made is not None:
+                made.wall_s = time.perf_counter() - started
+            else:
+                summary["wall_s"] = time.perf_counter() - started
+        if made is not None:
+            result, summary = type(made), made.summary()
         if before is not None and before.get("state") == "built":
             summary = {**{k: v for k, v in before.items() if k not in ("state", "headline", "timings_s")},
                        **summary, **({"build_timings_s": before["timings_s"]} if "timings_s" in before else {})}

@@ -12,8 +12,11 @@ Reading a folder's summary.json is here too (:func:`read_summary`, :func:`finish
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import os
+import types
+import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -39,10 +42,39 @@ def is_finished(folder: str | os.PathLike) -> bool:
     return finished_summary(folder) is not None
 
 
-def key(*cases: str, label: str = "", fmt: str = "{:.4g}", optional: bool = False, default=None):
+@functools.cache
+def _hints(cls: type) -> dict[str, type]:
+    return typing.get_type_hints(cls)
+
+
+def typed(hint, value):
+    """``value`` as JSON gives it (tables, lists) read as the type ``hint`` says: a dataclass from its table (its
+    fields typed the same way, down to the leaves), ``list[X]``, ``dict[str, X]`` and ``X | None`` of them;
+    anything else as it is."""
+    if value is None:
+        return None
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin in (typing.Union, types.UnionType):
+        inner = [a for a in args if a is not type(None)]
+        return typed(inner[0], value) if len(inner) == 1 else value
+    if dataclasses.is_dataclass(hint) and isinstance(value, dict):
+        hints = _hints(hint)
+        return hint(**{k: typed(hints[k], v) for k, v in value.items()})
+    if origin is list and args and isinstance(value, list):
+        return [typed(args[0], v) for v in value]
+    if origin is dict and len(args) == 2 and isinstance(value, dict):
+        return {k: typed(args[1], v) for k, v in value.items()}
+    return value
+
+
+def key(*cases: str, label: str = "", fmt: str = "{:.4g}", optional: bool = False, default=None,
+        default_factory=dataclasses.MISSING):
     """A result key: the cases that give it, its report row (``label``, ``fmt``; none without a label),
-    ``optional``: left out where the run has none (None)."""
-    return field(default=default, metadata={"cases": cases, "label": label, "fmt": fmt, "optional": optional})
+    ``optional``: left out where the run has none (None); its default (``default_factory`` for a list or table)."""
+    meta = {"cases": cases, "label": label, "fmt": fmt, "optional": optional}
+    if default_factory is not dataclasses.MISSING:
+        return field(default_factory=default_factory, metadata=meta)
+    return field(default=default, metadata=meta)
 
 
 @dataclass
@@ -58,9 +90,11 @@ class Result:
 
     @classmethod
     def from_summary(cls, summary: dict) -> Result:
-        """The result a summary.json holds: each key a field of this class, the others :meth:`rest`."""
+        """The result a summary.json holds: each key a field of this class (typed as the field says:
+        :func:`typed`), the others :meth:`rest`."""
         names = {f.name for f in dataclasses.fields(cls) if f.init and f.name != "extra"}
-        out = cls(**{k: v for k, v in summary.items() if k in names})
+        hints = _hints(cls)
+        out = cls(**{k: typed(hints[k], v) for k, v in summary.items() if k in names})
         out.rest({k: v for k, v in summary.items() if k not in names})
         return out
 
@@ -77,7 +111,8 @@ class Result:
 
     @property
     def case(self) -> str:
-        raise NotImplementedError
+        """The run's case (a subclass names it; the generic class has none: its keys are all in ``extra``)."""
+        return ""
 
     def keys(self) -> list[str]:
         """The keys this run's case gives, in the order declared."""

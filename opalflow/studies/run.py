@@ -23,11 +23,12 @@ import numpy as np
 
 from opalflow.analysis import fracture
 from opalflow.analysis.fits import Fit, fit_exponential, fit_power, fit_power_law
+from opalflow.bpm.facts import SampleFacts
 from opalflow.bpm.methods import METHODS
 from opalflow.materials import material
 from opalflow.registry import resolve
 from opalflow.resources import DATA, resource
-from opalflow.runs.record import finish
+from opalflow.runs.record import RunRecord, finish
 from opalflow.runs.result import Result
 from opalflow.spec import SpecError
 from opalflow.store import new_figure, save_figure
@@ -162,8 +163,8 @@ def _calibration_start(spec: StudyWorkflow) -> np.ndarray:
     """Bond E_b and strength where the iteration starts (the study's, else the material's)."""
     base = job_spec(spec)
     silica = material(base.material, base.materials)
-    return np.array([spec.study.start_E_GPa or silica["bond_youngs_modulus_GPa"],
-                     spec.study.start_strength_MPa or silica["bond_strength_MPa"]])
+    return np.array([spec.study.start_E_GPa or silica.bond_youngs_modulus_GPa,
+                     spec.study.start_strength_MPa or silica.bond_strength_MPa])
 
 
 def _fd_points(spec: StudyWorkflow, x: np.ndarray) -> list[np.ndarray]:
@@ -317,7 +318,7 @@ def bulk_analyse(spec: StudyWorkflow, jobs: list[Job], results: dict) -> Bulk | 
     for job in jobs:
         if job.label in results:
             r, (d,) = results[job.label], job.at
-            e_b = material(job.spec.material, job.spec.materials)["bond_youngs_modulus_GPa"]
+            e_b = material(job.spec.material, job.spec.materials).bond_youngs_modulus_GPa
             rows[label_number(d)] = BulkRow(d, r.youngs_modulus_specimen_GPa, r.youngs_modulus_specimen_GPa / e_b,
                                             r.youngs_modulus_GPa, r.youngs_modulus_GPa / e_b, r.strength_MPa,
                                             r.strain_at_peak, r.broken_bonds, r.n_particles, r.wall_s)
@@ -779,9 +780,11 @@ def sides_render(spec: StudyWorkflow, sides: Sides, out: Path) -> list[str]:
     """The table and where the bonds break (sides.png, from each job's snapshots)."""
     runs = {}
     for job in sides_jobs(spec):
-        frames, box, d = fracture.load_frames(job.folder(out)) if job.at[0] in sides.table else ([], None, None)
+        result = sides.table.get(job.at[0])
+        frames = fracture.load_frames(job.folder(out), result.strain_at_peak) if result is not None else []
         if frames:
-            runs[f"{job.at[0]} sides"] = (frames, box, d)
+            sample = SampleFacts.read(RunRecord.read(job.folder(out)))
+            runs[f"{job.at[0]} sides"] = (frames, sample.box_nm, sample.mean_diameter_nm)
     if runs:
         fracture.plot_sides(out / "sides.png", runs)
     rows = [f"| {how} | {r.n_particles} | {r.n_bonds} | {r.youngs_modulus_GPa:.4g} | "

@@ -149,7 +149,7 @@ class DiamondModel:
 
         self._properties = jax.jit(properties)
 
-    def properties(self, x, a: float | None = None) -> dict:
+    def properties(self, x, a: float | None = None) -> dict[str, float]:
         """Ec (eV), dE/da (eV/A per atom), d2E/da2 and the elastic constants (GPa) at lattice constant a."""
         return self._properties(x, self.a if a is None else a)
 

@@ -15,6 +15,7 @@ import numpy as np
 from opalflow.lammps.engine import session
 from opalflow.tersoff.model import EV_PER_A3_GPA
 from opalflow.tersoff.parameters import TersoffParameters, write_tersoff
+from opalflow.tersoff.polycrystal.result import LammpsCheck
 from opalflow.tersoff.polycrystal.samples import Samples, random_rotations
 from opalflow.tersoff.properties import SI_MASS
 
@@ -26,7 +27,8 @@ def lammps_frame(cell: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return r * sign, sign[:, None] * u
 
 
-def lammps_sample(folder: Path, params: TersoffParameters, x: np.ndarray, cell: np.ndarray) -> dict:
+def lammps_sample(folder: Path, params: TersoffParameters, x: np.ndarray,
+                  cell: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
     """Energy (eV), forces (N, 3; eV/A) and virial (3, 3; eV) of one sample by LAMMPS, in the sample's frame."""
     r, u = lammps_frame(cell)
     xl = x @ r                                    # R^T x for every atom
@@ -60,11 +62,11 @@ run 0 post no
     volume = abs(np.linalg.det(u))
     pl = np.array([[p[0], p[3], p[4]], [p[3], p[1], p[5]], [p[4], p[5], p[2]]])
     virial = -pl * volume / nktv2p               # sum r (x) dE/dr = -W (eV)
-    return {"energy": energy, "forces": f @ r.T, "virial": r @ virial @ r.T}
+    return energy, f @ r.T, r @ virial @ r.T
 
 
 def compare_with_lammps(samples: Samples, params: TersoffParameters, folder: Path, count: int = 4,
-                        strain: float = 0.01, displacement_A: float = 0.05, seed: int = 7) -> dict:
+                        strain: float = 0.01, displacement_A: float = 0.05, seed: int = 7) -> LammpsCheck:
     """Largest relative differences batched - LAMMPS over ``count`` random samples.
 
     Each sample: a uniformly random rotation, a random symmetric strain with entries up to
@@ -79,11 +81,11 @@ def compare_with_lammps(samples: Samples, params: TersoffParameters, folder: Pat
     cells = np.einsum("eab,ebc->eac", np.eye(3) + eps, samples.reference_cells(rot))
     x = samples.positions(cells) + rng.normal(0.0, displacement_A, (count, samples.n, 3))
     ev = samples.evaluate(x, cells)
-    worst = {"energy": 0.0, "forces": 0.0, "virial": 0.0}
+    worst = np.zeros(3)                          # energy, forces, virial
     for e in range(count):
-        ref = lammps_sample(folder, params, x[e], cells[e])
+        energy, forces, virial_ref = lammps_sample(folder, params, x[e], cells[e])
         virial = ev.stress[e] * abs(np.linalg.det(cells[e])) / EV_PER_A3_GPA
-        worst["energy"] = max(worst["energy"], abs(ev.energy[e] - ref["energy"]) / abs(ref["energy"]))
-        worst["forces"] = max(worst["forces"], np.abs(ev.forces[e] - ref["forces"]).max() / np.abs(ref["forces"]).max())
-        worst["virial"] = max(worst["virial"], np.abs(virial - ref["virial"]).max() / np.abs(ref["virial"]).max())
-    return {"samples": count, "strain": strain, "displacement_A": displacement_A, **{f"max_relative_{k}": v for k, v in worst.items()}}
+        worst = np.maximum(worst, [abs(ev.energy[e] - energy) / abs(energy),
+                                   np.abs(ev.forces[e] - forces).max() / np.abs(forces).max(),
+                                   np.abs(virial - virial_ref).max() / np.abs(virial_ref).max()])
+    return LammpsCheck(count, strain, displacement_A, *(float(w) for w in worst))

@@ -5,7 +5,7 @@ Each run folder gets ``results.h5`` (every dataset with ``units``, tables with `
 ``wall_s``; written last), ``report.md`` beside the references, the plots, ``.vtu`` meshes, and
 ``jobs/``: each experiment a :class:`opalflow.runs.jobs.Job` (its own spec, one mesh and seed, in a folder named by
 its label and spec hash, with its record and its result: :class:`TensionRun`, :class:`WaveRun`,
-:class:`Measured`), so ``--resume`` skips what is done with the same inputs, a changed experiment runs anew, and
+:class:`Measured` of :mod:`opalflow.tersoff.polycrystal.result`), so ``--resume`` skips what is done with the same inputs, a changed experiment runs anew, and
 ``status`` lists them.
 """
 from __future__ import annotations
@@ -13,7 +13,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -22,23 +21,21 @@ from opalflow.analysis.elasticity import VOIGT
 from opalflow.progress import Progress
 from opalflow.runs.jobs import Job, job_record, prepare
 from opalflow.runs.record import RunRecord, finish
-from opalflow.runs.result import Result
+from opalflow.runs.result import typed
 from opalflow.store import RESULTS, SUMMARY, h5_bytes, new_figure, save_figure
 from opalflow.tersoff.parameters import load_parameters
 from opalflow.tersoff.polycrystal.crystal import (Crystal, check_sample_hessian, longitudinal_speed_nm_ps,
                                                   single_crystal)
-from opalflow.tersoff.polycrystal.dynamics import M_PER_S, Bounds, Polycrystal, WaveSpeeds, polycrystal_bounds, speeds
+from opalflow.tersoff.polycrystal.dynamics import M_PER_S, Bounds, Polycrystal, polycrystal_bounds, speeds
 from opalflow.tersoff.polycrystal.mesh import block
 from opalflow.tersoff.polycrystal.output import plot_mesh, write_vtu
+from opalflow.tersoff.polycrystal.result import (REFERENCE, LammpsCheck, Measured, Realised, RelaxationComparison,
+                                                 Stats, TensionExperiment, TensionResult, TensionRun, WaveExperiment,
+                                                 WaveRun, WavesResult)
 from opalflow.tersoff.polycrystal.samples import Samples, random_rotations, relax_md, relax_minimize
 from opalflow.tersoff.polycrystal.spec import PolycrystalWorkflow, TensionWorkflow, WavesWorkflow
 from opalflow.version import __version__
 
-#: seed 003, section 3: polycrystalline silicon (their ref. 30)
-REFERENCE = {"youngs_modulus_GPa": 160.0, "poisson_ratio": 0.22, "wave_speed_plate_m_s": 8850.0,
-             "wave_speed_rod_m_s": 8290.0, "wave_speed_shear_m_s": 5280.0}
-SOURCE = ("Zhuravlev, Abgaryan, Reviznikov, Multiscale Discrete Element Modeling, Symmetry 13, 219 (2021), "
-          "doi:10.3390/sym13020219, section 3")
 
 
 def setup(spec: PolycrystalWorkflow, out: Path) -> tuple:
@@ -58,110 +55,20 @@ def start_folder(out: Path, spec: PolycrystalWorkflow) -> None:
     RunRecord.new(spec, folder=out).begin(out)
 
 
-@dataclass
-class Stats:
-    """Mean, standard deviation (n - 1), extremes and count of one quantity over runs."""
-
-    mean: float
-    std: float
-    min: float
-    max: float
-    n: int
-
-    @classmethod
-    def of(cls, values) -> Stats:
-        v = np.asarray(values, dtype=float)
-        return cls(float(v.mean()), float(v.std(ddof=1)) if len(v) > 1 else 0.0, float(v.min()), float(v.max()), len(v))
-
-
-@dataclass
-class Realised:
-    """E along x and nu of a finite set of orientations, by one of the two averages."""
-
-    E_GPa: float
-    nu: float
-
-
-@dataclass
-class TensionRun:
-    """One tension experiment (a mesh and an orientation seed): its moduli, the bounds of the orientations it drew,
-    the curve (columns in ``curve_columns``) and its cost."""
-
-    cubes: int
-    cube_nm: float
-    seed: int
-    elements: int
-    edge_nm: float
-    method: str
-    timestep_ps: float
-    damping_per_ps: float
-    deform_steps: int
-    macro_steps: int
-    evaluations: int
-    youngs_modulus_GPa: float
-    poisson_ratio: float
-    bounds_realised: dict[str, Realised]
-    wall_s: float
-    curve_columns: list[str]
-    curve: list
-    s_per_macro_step: float | None = None
-
-    @classmethod
-    def from_dict(cls, raw: dict) -> TensionRun:
-        run = cls(**raw)
-        run.bounds_realised = {k: Realised(**v) for k, v in raw["bounds_realised"].items()}
-        return run
-
-
-@dataclass
-class Measured(WaveSpeeds):
-    """E and nu of the same potential by a static tension, and the wave speeds they imply."""
-
-    youngs_modulus_GPa: float = 0.0
-    poisson_ratio: float = 0.0
-    elements: int = 0
-    seed: int = 0
-    wall_s: float = 0.0
-
-
-@dataclass
-class WaveRun:
-    """One wave experiment: the front's speed (least squares over the stations used) and what it took."""
-
-    experiment: str
-    elements: int
-    cubes: list[int]
-    cube_nm: float
-    length_nm: float
-    lateral: str
-    piston_m_s: float
-    timestep_ps: float
-    macro_steps: int
-    evaluations: int
-    speed_m_s: float
-    speed_stderr_m_s: float
-    stations_used: int
-    wall_s: float
-    s_per_macro_step: float
-    times_ps: list
-    stations_nm: list
-    arrival_ps: list
-    profile: list
-
-
 def experiment_job(spec: PolycrystalWorkflow, label: str, at: tuple = (), **sections) -> Job:
     """An experiment as a job: the run's spec with the sections that make it one experiment (``tension``,
     ``samples``, ``waves`` replaced), named by its label, so its spec hash is that of what it computes."""
     return Job(label, dataclasses.replace(spec, name=label, description="", **sections), at)
 
 
-def run_experiments(jobs: list[Job], out: Path, resume: bool, compute, read, say) -> dict:
-    """label -> each job's result: read from its folder where ``--resume`` finds it done with the same spec hash,
-    else ``compute(job)`` (its record running, then finished with the result as its summary)."""
+def run_experiments(jobs: list[Job], out: Path, resume: bool, compute, kind: type, say) -> list:
+    """Each job's result (of class ``kind``), in order: read from its folder where ``--resume`` finds it done with
+    the same spec hash, else ``compute(job)`` (its record running, then finished with the result as its summary)."""
     done, todo = prepare(jobs, out)
     if not resume:
         todo, done = jobs, {}
-    results = {label: read({k: v for k, v in summary.items() if k != "state"}) for label, summary in done.items()}
+    results = {label: typed(kind, {k: v for k, v in summary.items() if k != "state"})
+               for label, summary in done.items()}
     for label in results:
         say(f"{label}: done before (resume)")
     for job in todo:
@@ -170,7 +77,7 @@ def run_experiments(jobs: list[Job], out: Path, resume: bool, compute, read, say
         results[job.label] = result = compute(job)
         finish(folder, dataclasses.asdict(result),
                f"# {job.label}\n\nAn experiment of the run in {out} (its {SUMMARY} holds the result).")
-    return {j.label: results[j.label] for j in jobs}
+    return [results[j.label] for j in jobs]
 
 
 def realised_bounds(pc: Polycrystal) -> dict[str, Realised]:
@@ -255,7 +162,7 @@ def _stretch(pc: Polycrystal, length: float) -> None:
     pc.x[:, 0] *= ratio
 
 
-def relaxation_comparison(samples: Samples, seed: int, force_tol: float, count: int = 8) -> dict:
+def relaxation_comparison(samples: Samples, seed: int, force_tol: float, count: int = 8) -> RelaxationComparison:
     """Both steady states of eq. 8 on ``count`` elements strained by 0.5 % in random directions."""
     rng = np.random.default_rng(seed)
     rot = random_rotations(count, seed + 1000)
@@ -269,10 +176,11 @@ def relaxation_comparison(samples: Samples, seed: int, force_tol: float, count: 
     t = time.perf_counter()
     md, _ = relax_md(samples, x, cells, force_tol)
     t_md = time.perf_counter() - t
-    return {"elements": count, "strain_rms": 0.005, "minimize_evaluations": mini.evaluations, "minimize_s": t_min,
-            "md_steps": md.evaluations, "md_s": t_md,
-            "max_stress_difference_GPa": float(np.abs(mini.evaluation.stress - md.evaluation.stress).max()),
-            "max_stress_GPa": float(np.abs(mini.evaluation.stress).max())}
+    return RelaxationComparison(
+        elements=count, strain_rms=0.005, minimize_evaluations=mini.evaluations, minimize_s=t_min,
+        md_steps=md.evaluations, md_s=t_md,
+        max_stress_difference_GPa=float(np.abs(mini.evaluation.stress - md.evaluation.stress).max()),
+        max_stress_GPa=float(np.abs(mini.evaluation.stress).max()))
 
 
 def tension_jobs(spec: TensionWorkflow) -> list[Job]:
@@ -284,7 +192,7 @@ def tension_jobs(spec: TensionWorkflow) -> list[Job]:
             for i, (n, h) in enumerate(zip(t.cubes, t.cube_nm)) for seed in spec.samples.seeds]
 
 
-def run_tension(spec: TensionWorkflow, out: Path, say=print, resume: bool = False) -> Result:
+def run_tension(spec: TensionWorkflow, out: Path, say=print, resume: bool = False) -> TensionResult:
     t0 = time.perf_counter()
     params, crystal, samples, bounds = setup(spec, out)
     t = spec.tension
@@ -293,8 +201,8 @@ def run_tension(spec: TensionWorkflow, out: Path, say=print, resume: bool = Fals
         f"Reuss E {bounds.reuss.E_GPa:.1f} GPa")
     check = _lammps_check(spec, params, samples, out)
     relax_cmp = relaxation_comparison(samples, spec.samples.seeds[0], spec.samples.force_tol_eV_A)
-    say(f"relaxation: minimize {relax_cmp['minimize_evaluations']} evaluations, damped MD {relax_cmp['md_steps']} "
-        f"steps; stresses differ by {relax_cmp['max_stress_difference_GPa']:.1e} GPa")
+    say(f"relaxation: minimize {relax_cmp.minimize_evaluations} evaluations, damped MD {relax_cmp.md_steps} "
+        f"steps; stresses differ by {relax_cmp.max_stress_difference_GPa:.1e} GPa")
     todo, last = tension_jobs(spec), {}
 
     def compute(job: Job) -> TensionRun:
@@ -306,8 +214,8 @@ def run_tension(spec: TensionWorkflow, out: Path, say=print, resume: bool = Fals
             f"steps, {run.evaluations} sample evaluations, {run.wall_s:.1f} s)")
         return run
 
-    jobs = list(run_experiments(todo, out, resume, compute, TensionRun.from_dict, say).values())
-    summary = _tension_summary(spec, jobs, bounds, check, relax_cmp, crystal, samples)
+    jobs = run_experiments(todo, out, resume, compute, TensionRun, say)
+    result = _tension_result(spec, jobs, bounds, check, relax_cmp, crystal, samples)
 
     def files(stage):
         _plot_curves(stage("stress_strain.png"), stage("volume_strain.png"), jobs)
@@ -319,43 +227,43 @@ def run_tension(spec: TensionWorkflow, out: Path, say=print, resume: bool = Fals
             plot_mesh(stage("mesh.png"), pc, f"{pc.mesh.elements} elements at strain {t.max_strain:g} "
                       f"(seed {spec.samples.seeds[-1]})")
         stage(RESULTS).write_bytes(_tension_h5(jobs))
-        summary["wall_s"] = time.perf_counter() - t0
+        result.wall_s = time.perf_counter() - t0
 
-    return finish(out, summary, lambda: _tension_report(spec, summary, jobs), files=files)
+    return finish(out, result, lambda: _tension_report(spec, result, jobs), files=files)
 
 
-def _lammps_check(spec: PolycrystalWorkflow, params, samples: Samples, out: Path) -> dict | None:
+def _lammps_check(spec: PolycrystalWorkflow, params, samples: Samples, out: Path) -> LammpsCheck | None:
     if spec.samples.lammps_check == 0:
         return None
     from opalflow.tersoff.polycrystal.check import compare_with_lammps
     return compare_with_lammps(samples, params, out / "lammps_check", count=spec.samples.lammps_check)
 
 
-def _tension_summary(spec, jobs: list[TensionRun], bounds: Bounds, check, relax_cmp, crystal, samples) -> dict:
+def _tension_result(spec, jobs: list[TensionRun], bounds: Bounds, check, relax_cmp, crystal, samples) -> TensionResult:
     groups: dict[tuple, list[TensionRun]] = {}
     for j in jobs:
         groups.setdefault((j.cubes, j.cube_nm), []).append(j)
-    experiments = [{"elements": 6 * n ** 3, "cubes": n, "cube_nm": h, "edge_nm": n * h,
-                    "youngs_modulus_GPa": Stats.of([j.youngs_modulus_GPa for j in js]),
-                    "poisson_ratio": Stats.of([j.poisson_ratio for j in js]),
-                    "wall_s": Stats.of([j.wall_s for j in js]),
-                    "s_per_macro_step": Stats.of([j.s_per_macro_step for j in js]) if js[0].s_per_macro_step else None,
-                    "inside_realised_bounds": all(j.bounds_realised["reuss"].E_GPa <= j.youngs_modulus_GPa
-                                                  <= j.bounds_realised["voigt"].E_GPa for j in js)}
-                   for (n, h), js in groups.items()]
+    experiments = [TensionExperiment(
+        elements=6 * n ** 3, cubes=n, cube_nm=h, edge_nm=n * h,
+        youngs_modulus_GPa=Stats.of([j.youngs_modulus_GPa for j in js]),
+        poisson_ratio=Stats.of([j.poisson_ratio for j in js]), wall_s=Stats.of([j.wall_s for j in js]),
+        s_per_macro_step=Stats.of([j.s_per_macro_step for j in js]) if js[0].s_per_macro_step else None,
+        inside_realised_bounds=all(j.bounds_realised["reuss"].E_GPa <= j.youngs_modulus_GPa
+                                   <= j.bounds_realised["voigt"].E_GPa for j in js))
+        for (n, h), js in groups.items()]
     e_all, nu_all = Stats.of([j.youngs_modulus_GPa for j in jobs]), Stats.of([j.poisson_ratio for j in jobs])
     e, nu = e_all.mean, nu_all.mean
-    return {"youngs_modulus_GPa": e, "poisson_ratio": nu, "youngs_modulus": e_all, "poisson": nu_all,
-            "experiments": experiments, "reference": REFERENCE | {"source": SOURCE},
-            "error_vs_reference": {"youngs_modulus_relative": (e - REFERENCE["youngs_modulus_GPa"]) / 160.0,
-                                   "poisson_ratio_absolute": nu - REFERENCE["poisson_ratio"]},
-            "bounds": bounds, "inside_bounds": bounds.reuss.E_GPa <= e <= bounds.voigt.E_GPa,
-            "single_crystal": crystal, "density_kg_m3": samples.density_kg_m3, "lammps_check": check,
-            "relaxation_comparison": relax_cmp, "potential": spec.tersoff.potential, "method": spec.tension.method,
-            "opalflow_version": __version__, "spec": spec.to_dict(),
-            "headline": (f"E = {e:.2f} +- {e_all.std:.2f} GPa ({100 * (e - 160.0) / 160.0:+.1f} % of 160; Voigt "
-                         f"{bounds.voigt.E_GPa:.1f}, Reuss {bounds.reuss.E_GPa:.1f}), nu = {nu:.4f} +- "
-                         f"{nu_all.std:.4f} (0.22), {len(jobs)} runs")}
+    return TensionResult(
+        youngs_modulus_GPa=e, poisson_ratio=nu, youngs_modulus=e_all, poisson=nu_all, experiments=experiments,
+        error_vs_reference={"youngs_modulus_relative": (e - REFERENCE["youngs_modulus_GPa"]) / 160.0,
+                            "poisson_ratio_absolute": nu - REFERENCE["poisson_ratio"]},
+        bounds=bounds, inside_bounds=bounds.reuss.E_GPa <= e <= bounds.voigt.E_GPa,
+        single_crystal=crystal, density_kg_m3=samples.density_kg_m3, lammps_check=check,
+        relaxation_comparison=relax_cmp, potential=spec.tersoff.potential, method=spec.tension.method,
+        spec=spec.to_dict(),
+        headline=(f"E = {e:.2f} +- {e_all.std:.2f} GPa ({100 * (e - 160.0) / 160.0:+.1f} % of 160; Voigt "
+                  f"{bounds.voigt.E_GPa:.1f}, Reuss {bounds.reuss.E_GPa:.1f}), nu = {nu:.4f} +- "
+                  f"{nu_all.std:.4f} (0.22), {len(jobs)} runs"))
 
 
 def _plot_curves(stress_path: Path, volume_path: Path, jobs: list[TensionRun]) -> None:
@@ -401,25 +309,24 @@ def _bounds_rows(bounds: Bounds) -> list[str]:
     return rows
 
 
-def _crystal_lines(summary: dict, spec, bounds: Bounds) -> list[str]:
-    c: Crystal = summary["single_crystal"]
+def _crystal_lines(result: TensionResult | WavesResult, spec, bounds: Bounds) -> list[str]:
+    c = result.single_crystal
     lines = [f"Potential `{spec.tersoff.potential}`: a0 = {c.a0_A:.5f} A, C11 = {c.C11_GPa:.2f}, C12 = "
              f"{c.C12_GPa:.2f}, C44 = {c.C44_GPa:.2f} GPa (relaxed; C44^0 = {c.C44_0_GPa:.2f}), sample density "
-             f"{summary['density_kg_m3']:.1f} kg/m^3. Isotropic averages of this single crystal (the polycrystal's "
+             f"{result.density_kg_m3:.1f} kg/m^3. Isotropic averages of this single crystal (the polycrystal's "
              "bounds) and the speeds they imply:", "", *_bounds_rows(bounds), ""]
-    chk = summary.get("lammps_check")
+    chk = result.lammps_check
     if chk:
-        lines += [f"Batched Tersoff (JAX) against LAMMPS `pair_style tersoff` on {chk['samples']} random samples "
-                  f"(strain up to {chk['strain']:g}, thermal displacements {chk['displacement_A']:g} A): largest relative "
-                  f"differences energy {chk['max_relative_energy']:.1e}, forces {chk['max_relative_forces']:.1e}, virial "
-                  f"{chk['max_relative_virial']:.1e}.", ""]
+        lines += [f"Batched Tersoff (JAX) against LAMMPS `pair_style tersoff` on {chk.samples} random samples "
+                  f"(strain up to {chk.strain:g}, thermal displacements {chk.displacement_A:g} A): largest relative "
+                  f"differences energy {chk.max_relative_energy:.1e}, forces {chk.max_relative_forces:.1e}, virial "
+                  f"{chk.max_relative_virial:.1e}.", ""]
     return lines
 
 
-def _tension_report(spec, summary: dict, jobs: list[TensionRun]) -> str:
+def _tension_report(spec, result: TensionResult, jobs: list[TensionRun]) -> str:
     t, s = spec.tension, spec.samples
-    e, nu, bounds = summary["youngs_modulus"], summary["poisson"], summary["bounds"]
-    rc = summary["relaxation_comparison"]
+    e, nu, bounds, rc = result.youngs_modulus, result.poisson, result.bounds, result.relaxation_comparison
     lines = [f"# Polycrystal tension ({spec.name})", "",
              f"Cubes split into 6 tetrahedra, each with a 64-atom Tersoff sample in a uniformly random orientation; "
              f"periodic along x, free sides, stretched along x to {t.max_strain:g} in steps of {t.strain_step:g} "
@@ -428,12 +335,12 @@ def _tension_report(spec, summary: dict, jobs: list[TensionRun]) -> str:
                 if t.method == "dynamic" else f"(static: modified Newton to residual {t.residual_tol:g})")
              + f". Samples relaxed by {s.relaxation} to a largest atomic force of {s.force_tol_eV_A:g} eV/A. E = slope of "
              "the volume-averaged sigma_xx against strain; nu = (1 - dV/V0/d strain) / 2 (seed 003, Figs. 3-4).", "",
-             *_crystal_lines(summary, spec, bounds),
+             *_crystal_lines(result, spec, bounds),
              "## Result", "",
              "| quantity | this run | reference (seed 003) | error |", "|---|---|---|---|",
              f"| E (GPa) | {e.mean:.2f} +- {e.std:.2f} | 160 | {100 * (e.mean - 160) / 160:+.2f} % |",
              f"| nu | {nu.mean:.4f} +- {nu.std:.4f} | 0.22 | {nu.mean - 0.22:+.4f} |", "",
-             f"E lies {'inside' if summary['inside_bounds'] else 'OUTSIDE'} the isotropic Reuss-Voigt interval of the "
+             f"E lies {'inside' if result.inside_bounds else 'OUTSIDE'} the isotropic Reuss-Voigt interval of the "
              f"potential ({bounds.reuss.E_GPa:.2f} - {bounds.voigt.E_GPa:.2f} GPa). "
              "The reference is measured polycrystalline silicon; the model can only give what its potential's single "
              "crystal bounds, and with one grain per element (constant strain in each) it sits near the Voigt (uniform "
@@ -449,18 +356,18 @@ def _tension_report(spec, summary: dict, jobs: list[TensionRun]) -> str:
                      f"{j.macro_steps} | {j.evaluations} | {j.timestep_ps:.4f} | {j.wall_s:.1f} |")
     lines += ["", "| elements | edge (nm) | E (GPa) mean +- std | nu mean +- std | wall per run (s) | s per macro step |",
               "|---|---|---|---|---|---|"]
-    for x in summary["experiments"]:
-        sp, ex, px = x["s_per_macro_step"], x["youngs_modulus_GPa"], x["poisson_ratio"]
-        lines.append(f"| {x['elements']} | {x['edge_nm']:g} | {ex.mean:.2f} +- {ex.std:.2f} | {px.mean:.4f} +- "
-                     f"{px.std:.4f} | {x['wall_s'].mean:.1f} | " + (f"{sp.mean:.3f} |" if sp else "- |"))
+    for x in result.experiments:
+        sp, ex, px = x.s_per_macro_step, x.youngs_modulus_GPa, x.poisson_ratio
+        lines.append(f"| {x.elements} | {x.edge_nm:g} | {ex.mean:.2f} +- {ex.std:.2f} | {px.mean:.4f} +- "
+                     f"{px.std:.4f} | {x.wall_s.mean:.1f} | " + (f"{sp.mean:.3f} |" if sp else "- |"))
     lines += ["", "## Steady state of the samples (eq. 8): minimisation against damped MD", "",
-              f"{rc['elements']} elements strained by {rc['strain_rms']:g} rms in random directions: preconditioned "
-              f"Newton minimisation {rc['minimize_evaluations']} force evaluations ({rc['minimize_s']:.2f} s), damped "
-              f"MD (1 fs, gamma 20/ps) {rc['md_steps']} steps ({rc['md_s']:.2f} s); the stresses differ by at most "
-              f"{rc['max_stress_difference_GPa']:.1e} GPa (largest stress {rc['max_stress_GPa']:.2f} GPa).", "",
+              f"{rc.elements} elements strained by {rc.strain_rms:g} rms in random directions: preconditioned "
+              f"Newton minimisation {rc.minimize_evaluations} force evaluations ({rc.minimize_s:.2f} s), damped "
+              f"MD (1 fs, gamma 20/ps) {rc.md_steps} steps ({rc.md_s:.2f} s); the stresses differ by at most "
+              f"{rc.max_stress_difference_GPa:.1e} GPa (largest stress {rc.max_stress_GPa:.2f} GPa).", "",
               "![stress-strain](stress_strain.png)", "", "![volume-strain](volume_strain.png)", "",
               "![mesh](mesh.png)", "",
-              f"Wall time {summary['wall_s']:.1f} s on this machine. opalflow {__version__}."]
+              f"Wall time {result.wall_s:.1f} s on this machine. opalflow {__version__}."]
     return "\n".join(lines) + "\n"
 
 
@@ -526,7 +433,7 @@ def wave_job(spec: WavesWorkflow, samples: Samples, crystal: Crystal, bounds: Bo
                    wall, wall / steps, times.tolist(), stations.tolist(), arrival.tolist(), profile.tolist()), pc
 
 
-def run_waves(spec: WavesWorkflow, out: Path, say=print, resume: bool = False) -> Result:
+def run_waves(spec: WavesWorkflow, out: Path, say=print, resume: bool = False) -> WavesResult:
     t0 = time.perf_counter()
     params, crystal, samples, bounds = setup(spec, out)
     w = spec.waves
@@ -544,8 +451,7 @@ def run_waves(spec: WavesWorkflow, out: Path, say=print, resume: bool = False) -
                         youngs_modulus_GPa=run.youngs_modulus_GPa, poisson_ratio=run.poisson_ratio,
                         elements=run.elements, seed=w.seed, wall_s=run.wall_s)
 
-    measured = next(iter(run_experiments([experiment_job(tension, "static_tension")], out, resume, measure,
-                                         lambda raw: Measured(**raw), say).values()))
+    measured, = run_experiments([experiment_job(tension, "static_tension")], out, resume, measure, Measured, say)
     states = {}
 
     def wave(job: Job) -> WaveRun:
@@ -557,8 +463,8 @@ def run_waves(spec: WavesWorkflow, out: Path, say=print, resume: bool = False) -
 
     todo = [experiment_job(spec, f"wave_{name}", waves=dataclasses.replace(w, experiments=[name]),
                            samples=dataclasses.replace(spec.samples, lammps_check=0)) for name in w.experiments]
-    jobs = list(run_experiments(todo, out, resume, wave, lambda raw: WaveRun(**raw), say).values())
-    summary = _waves_summary(spec, jobs, bounds, measured, check, crystal, samples)
+    jobs = run_experiments(todo, out, resume, wave, WaveRun, say)
+    result = _waves_result(spec, jobs, bounds, measured, check, crystal, samples)
 
     def files(stage):
         _plot_fronts(stage("wavefront.png"), jobs)
@@ -569,24 +475,26 @@ def run_waves(spec: WavesWorkflow, out: Path, say=print, resume: bool = False) -
             name, pc = next(iter(states.items()))
             plot_mesh(stage("mesh.png"), pc, f"{name} wave: {pc.mesh.elements} elements at the end of the run")
         stage(RESULTS).write_bytes(_waves_h5(jobs))
-        summary["wall_s"] = time.perf_counter() - t0
+        result.wall_s = time.perf_counter() - t0
 
-    return finish(out, summary, lambda: _waves_report(spec, summary, jobs), files=files)
+    return finish(out, result, lambda: _waves_report(spec, result, jobs), files=files)
 
 
-def _waves_summary(spec, jobs: list[WaveRun], bounds: Bounds, measured: Measured, check, crystal, samples) -> dict:
-    out = {"bounds": bounds, "measured_moduli": measured, "single_crystal": crystal, "density_kg_m3": samples.density_kg_m3,
-           "lammps_check": check, "reference": REFERENCE | {"source": SOURCE}, "potential": spec.tersoff.potential,
-           "opalflow_version": __version__, "spec": spec.to_dict(), "experiments": {}}
+def _waves_result(spec, jobs: list[WaveRun], bounds: Bounds, measured: Measured, check, crystal,
+                  samples) -> WavesResult:
+    out = WavesResult(bounds=bounds, measured_moduli=measured, single_crystal=crystal,
+                      density_kg_m3=samples.density_kg_m3, lammps_check=check, potential=spec.tersoff.potential,
+                      spec=spec.to_dict())
     parts = []
+    curves = ("times_ps", "profile", "arrival_ps", "stations_nm")
     for j in jobs:
         ref, pred = REFERENCE[WAVE_KEY[j.experiment]], measured.of(j.experiment)
-        out[WAVE_KEY[j.experiment]] = j.speed_m_s
-        out["experiments"][j.experiment] = {
-            k: v for k, v in dataclasses.asdict(j).items() if k not in ("times_ps", "profile", "arrival_ps", "stations_nm")
-        } | {"error_vs_reference": (j.speed_m_s - ref) / ref, "error_vs_measured_moduli": (j.speed_m_s - pred) / pred}
+        setattr(out, WAVE_KEY[j.experiment], j.speed_m_s)
+        out.experiments[j.experiment] = WaveExperiment(
+            **{k: v for k, v in dataclasses.asdict(j).items() if k not in curves},
+            error_vs_reference=(j.speed_m_s - ref) / ref, error_vs_measured_moduli=(j.speed_m_s - pred) / pred)
         parts.append(f"{j.experiment} {j.speed_m_s:.0f} m/s ({100 * (j.speed_m_s - ref) / ref:+.1f} % of {ref:.0f})")
-    out["headline"] = "; ".join(parts)
+    out.headline = "; ".join(parts)
     return out
 
 
@@ -638,16 +546,16 @@ def _waves_h5(jobs: list[WaveRun]) -> bytes:
     return h5_bytes(write)
 
 
-def _waves_report(spec, summary: dict, jobs: list[WaveRun]) -> str:
+def _waves_report(spec, result: WavesResult, jobs: list[WaveRun]) -> str:
     w = spec.waves
-    m, b = summary["measured_moduli"], summary["bounds"]
+    m, b = result.measured_moduli, result.bounds
     lines = [f"# Polycrystal waves ({spec.name})", "",
              f"A column of {w.cubes[0]} x {w.cubes[1]} x {w.cubes[2]} cubes of {w.cube_nm:g} nm "
              f"({6 * int(np.prod(w.cubes))} tetrahedra, 64-atom samples, orientation seed {w.seed}); a piston on z = 0 moves "
              f"at {w.piston_m_s:g} m/s from t = 0 (held). Velocity Verlet on the vertices, no damping. Front = where the "
              "section-averaged velocity reaches half the piston's; speed = least-squares slope of station position "
              f"against arrival time over {w.fit_range[0]:g}-{w.fit_range[1]:g} of the length.", "",
-             *_crystal_lines(summary, spec, b),
+             *_crystal_lines(result, spec, b),
              f"E and nu measured on the same potential (static tension, {m.elements} elements, seed {m.seed}): "
              f"E = {m.youngs_modulus_GPa:.2f} GPa, nu = {m.poisson_ratio:.4f}; the speeds they imply are the "
              "'from measured E, nu' column.", "",
@@ -660,5 +568,5 @@ def _waves_report(spec, summary: dict, jobs: list[WaveRun]) -> str:
                      f"{b.reuss.of(j.experiment):.0f} - {b.voigt.of(j.experiment):.0f} | {j.macro_steps} | {j.wall_s:.1f} |")
     lines += ["", "The references are measured polycrystalline silicon; the speeds the potential can give are bounded by "
               "its Reuss and Voigt averages.", "", "![wavefront](wavefront.png)", "", "![profiles](profiles.png)", "",
-              "![mesh](mesh.png)", "", f"Wall time {summary['wall_s']:.1f} s on this machine. opalflow {__version__}."]
+              "![mesh](mesh.png)", "", f"Wall time {result.wall_s:.1f} s on this machine. opalflow {__version__}."]
     return "\n".join(lines) + "\n"
