@@ -28,12 +28,24 @@ FILES = ("results.h5", "summary.json", "run.json")
 LONG = 80
 
 
+def _own_returns(fn: ast.AST):
+    """The return statements of ``fn`` itself (not of the functions and lambdas defined inside it)."""
+    todo = list(ast.iter_child_nodes(fn))
+    while todo:
+        node = todo.pop()
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda, ast.ClassDef)):
+            continue
+        if isinstance(node, ast.Return):
+            yield node
+        todo.extend(ast.iter_child_nodes(node))
+
+
 def _returns_dict(fn: ast.AST) -> bool:
     ann = getattr(fn, "returns", None)
     if ann is not None and ast.unparse(ann).split("[")[0].strip() in ("dict", "Dict"):
         return True
-    for node in ast.walk(fn):
-        if isinstance(node, ast.Return) and node.value is not None:
+    for node in _own_returns(fn):
+        if node.value is not None:
             v = node.value
             if isinstance(v, (ast.Dict, ast.DictComp)):
                 return True
@@ -47,7 +59,7 @@ def _mapping(fn: ast.AST) -> bool:
     ann = getattr(fn, "returns", None)
     if ann is not None and isinstance(ann, ast.Subscript) and ast.unparse(ann.value) in ("dict", "Dict"):
         return True
-    values = [n.value for n in ast.walk(fn) if isinstance(n, ast.Return) and n.value is not None]
+    values = [n.value for n in _own_returns(fn) if n.value is not None]
     return bool(values) and all(isinstance(v, ast.DictComp) for v in values)
 
 

@@ -2,17 +2,56 @@
 ``progress.json`` for ``python -m opalflow status`` (:mod:`opalflow.runs.status`).
 
 The one writer of ``progress.json``: a counted loop (a LAMMPS run's steps, a polycrystal's macro steps, an MD
-check) through :class:`Progress`, a job's last message through :func:`note`.
+check) through :class:`Progress`, a job's last message through :func:`note`; both write a :class:`ProgressNote`,
+and status reads one back (:meth:`ProgressNote.read`).
 """
 from __future__ import annotations
 
+import dataclasses
+import math
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
-from opalflow.store import write_json_atomic
+from opalflow.store import read_json, write_json_atomic
 
 PROGRESS_FILE = "progress.json"
+
+
+def finite_number(x) -> float | None:
+    """``x`` where it is a finite int or float (not a bool) as a float, else None."""
+    return float(x) if isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) else None
+
+
+@dataclass
+class ProgressNote:
+    """What progress.json holds: a counted loop's step of ``total`` (in ``unit``s), its rate (per second), the
+    seconds left and the strain reached, or a job's last ``message``; and when (``time``, epoch seconds)."""
+
+    time: float | None = None
+    message: str | None = None
+    step: float | None = None
+    total: float | None = None
+    rate_steps_s: float | None = None
+    left_s: float | None = None
+    strain: float | None = None
+    unit: str = "step"
+
+    def write(self, folder: Path) -> None:
+        write_json_atomic(Path(folder) / PROGRESS_FILE,
+                          {k: v for k, v in dataclasses.asdict(self).items() if v is not None})
+
+    @classmethod
+    def read(cls, folder: Path) -> ProgressNote:
+        """The note in ``folder`` with the values of the wrong type left out (status judges what is left);
+        :class:`opalflow.store.DamagedFile` where the file cannot be read as a table."""
+        raw = read_json(Path(folder) / PROGRESS_FILE, "the run's progress", "")
+        message, unit = raw.get("message"), raw.get("unit")
+        return cls(time=finite_number(raw.get("time")), message=message if isinstance(message, str) else None,
+                   step=finite_number(raw.get("step")), total=finite_number(raw.get("total")),
+                   rate_steps_s=finite_number(raw.get("rate_steps_s")), left_s=finite_number(raw.get("left_s")),
+                   strain=finite_number(raw.get("strain")), unit=unit if isinstance(unit, str) else "step")
 
 
 class Progress:
@@ -40,11 +79,10 @@ class Progress:
         self.say(f"{self.label}{self.unit} {step}/{self.total} ({100 * step / self.total:.0f} %){strain_txt}, "
                  f"{rate_txt} {self.unit}s/s, {left:.0f} s left{extra}")
         if self.folder is not None:
-            write_json_atomic(Path(self.folder) / PROGRESS_FILE, {
-                "step": step, "total": self.total, "rate_steps_s": rate, "left_s": left if rate > 0 else None,
-                "strain": strain, "unit": self.unit, "time": time.time()})
+            ProgressNote(time.time(), step=step, total=self.total, rate_steps_s=rate,
+                         left_s=left if rate > 0 else None, strain=strain, unit=self.unit).write(self.folder)
 
 
 def note(folder: Path, message: str) -> None:
     """A job's last message (it counts no steps of its own) into ``folder/progress.json``."""
-    write_json_atomic(Path(folder) / PROGRESS_FILE, {"message": message, "time": time.time()})
+    ProgressNote(time.time(), message).write(folder)

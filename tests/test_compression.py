@@ -187,7 +187,7 @@ def test_rate_check_switch_reports_the_half_speed_run(tmp_path):
     rc = summary.rate_check
     assert (out / "rate_half" / "summary.json").exists()
     # the lattice's bonds do not break: no strength, so only E is compared
-    assert abs(rc["youngs_modulus_change"]) < 0.02 and rc["strength_change"] is None
+    assert abs(rc.youngs_modulus_change) < 0.02 and rc.strength_change is None
     assert "Rate check (half plate speed): E changes by" in (out / "report.md").read_text()
 
 

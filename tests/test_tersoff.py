@@ -80,10 +80,10 @@ def test_truncated_file_is_refused(tmp_path):
 # ----------------------------------------------------------------------------- properties
 def test_table2_reproduces_table1_calculated_column(table2_lammps):
     """Acceptance 1: LAMMPS on Table 2's set gives Table 1's calculated column (1.5 GPa, 0.01 eV)."""
-    ev, tol = table2_lammps, REF["tolerance"]
-    assert ev.Ec_eV == pytest.approx(REF["calculated"]["Ec_eV"], abs=tol["energy_eV"])
+    ev = table2_lammps
+    assert ev.Ec_eV == pytest.approx(REF.calculated["Ec_eV"], abs=REF.tolerance_energy_eV)
     for key, value in ev.values.items():
-        assert value == pytest.approx(REF["calculated"][key], abs=tol["modulus_GPa"]), key
+        assert value == pytest.approx(REF.calculated[key], abs=REF.tolerance_modulus_GPa), key
     assert ev.a0_A == pytest.approx(5.429, abs=0.002)
 
 
@@ -106,7 +106,7 @@ def test_model_energy_does_not_depend_on_the_neighbour_list():
 
 # ----------------------------------------------------------------------------- gradients and fit
 def _loss():
-    return fitting.Loss(targets=REF["targets"], weights=fitting.default_weights(),
+    return fitting.Loss(targets=REF.targets, weights=fitting.default_weights(),
                         bounds=fitting.DEFAULT_BOUNDS, fixed=fitting.DEFAULT_FIXED)
 
 
@@ -132,14 +132,14 @@ def test_loss_of_table2_and_of_its_own_properties():
     loss = _loss()
     props = loss.model.evaluate(TABLE2)
     by_hand = math.sqrt((props["dE_da_eV_per_A"] ** 2 + sum(
-        ((props[k] - t) / t) ** 2 for k, t in REF["targets"].items())) / 8)
+        ((props[k] - t) / t) ** 2 for k, t in REF.targets.items())) / 8)
     assert loss(TABLE2) == pytest.approx(by_hand, rel=1e-12)
     assert loss(TABLE2) == pytest.approx(0.031146, abs=2e-6)
 
 
 def test_fit_from_random_starts_beats_table2():
     """Acceptance 2 (small): 4 seeded random starts reach a loss no larger than Table 2's."""
-    loss = fitting.Loss(REF["targets"], fitting.default_weights(), fitting.DEFAULT_BOUNDS, fitting.DEFAULT_FIXED)
+    loss = fitting.Loss(REF.targets, fitting.default_weights(), fitting.DEFAULT_BOUNDS, fitting.DEFAULT_FIXED)
     results = fitting.multistart(loss, starts=4, seed=1)
     assert results[0].loss <= loss(TABLE2)
     assert [r.loss for r in results] == sorted(r.loss for r in results)
@@ -183,7 +183,7 @@ def test_properties_workflow_with_set_potential(tmp_path, capsys):
         assert key in s
     assert s["mode"] == "properties" and "parameters" not in s        # TersoffResult: no key of the fit's
     # a stronger repulsion A: less binding and a longer bond than Table 2's set
-    assert s["Ec_eV"] > REF["calculated"]["Ec_eV"] + 0.01 and s["a0_A"] > 5.44
+    assert s["Ec_eV"] > REF.calculated["Ec_eV"] + 0.01 and s["a0_A"] > 5.44
     assert s["reference_loss"] == pytest.approx(0.031146, abs=2e-6)
     assert (out / "report.md").exists() and (out / "strain_scan.png").exists()
     assert read_tersoff(out / "potential.tersoff") == TABLE2.replace(A=3900.0)

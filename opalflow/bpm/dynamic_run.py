@@ -21,7 +21,7 @@ from opalflow.bpm.deck import CompressionDeck, compression_deck
 from opalflow.bpm.facts import RunFacts, SampleFacts
 from opalflow.bpm.methods import METHODS
 from opalflow.bpm.pipeline import prepare
-from opalflow.bpm.result import CompressionResult
+from opalflow.bpm.result import CompressionResult, RateCheck
 from opalflow.bpm.spec import BpmWorkflow
 from opalflow.lammps.engine import EngineError, run_in_process, run_subprocess, session
 from opalflow.runs import launch
@@ -160,7 +160,7 @@ def curve_strain_stress(curve: mech.Curve, sample: SampleFacts) -> tuple[np.ndar
 
 
 def analyze(out: Path, started: float | None = None, lammps_s: float | None = None,
-            rate_check: dict | None = None, record: RunRecord | None = None) -> CompressionResult:
+            rate_check: RateCheck | None = None, record: RunRecord | None = None) -> CompressionResult:
     """Curves, modulus, strength, particle stresses -> results.h5, summary.json, report.md, plots
     (:class:`opalflow.bpm.result.CompressionResult`).
     ``started``: when the run began (``time.perf_counter()``): its wall time then covers this analysis too;
@@ -212,7 +212,7 @@ def analyze(out: Path, started: float | None = None, lammps_s: float | None = No
         record.sessions[-1].last_step = result.steps
         record.sessions[-1].wall_s = wall_s
         record.sessions[-1].ended = "finished"
-        result.sessions = [dataclasses.asdict(x) for x in record.sessions]
+        result.sessions = [dataclasses.replace(x) for x in record.sessions]     # as they stand now
         result.requeues = record.requeues
     summary = result.summary()
     plots = METHODS["dynamic"].draws_plots(spec.compression.plots)
@@ -359,12 +359,10 @@ def run_dynamic(spec: BpmWorkflow, out: Path, *, np_: int = 1, resume: bool = Fa
         fast_strain, fast_stress, _, _ = curve_strain_stress(fast_curve, SampleFacts.read(record))
         fast_fit = mech.fit_elastic(fast_strain, fast_stress)
         fast_strength = float(np.max(fast_stress))
-        rate_check = {
-            "youngs_modulus_change": slow.youngs_modulus_GPa / (fast_fit.modulus_MPa / 1e3) - 1,
-            "strength_change": (slow.strength_MPa / fast_strength - 1 if slow.strength_MPa is not None
-                                else None),
-            "half_speed_youngs_modulus_GPa": slow.youngs_modulus_GPa,
-            "half_speed_strength_MPa": slow.strength_MPa}
+        rate_check = RateCheck(
+            youngs_modulus_change=slow.youngs_modulus_GPa / (fast_fit.modulus_MPa / 1e3) - 1,
+            strength_change=slow.strength_MPa / fast_strength - 1 if slow.strength_MPa is not None else None,
+            half_speed_youngs_modulus_GPa=slow.youngs_modulus_GPa, half_speed_strength_MPa=slow.strength_MPa)
     return analyze(out, started=t, lammps_s=lammps_s, rate_check=rate_check, record=record)
 
 

@@ -16,6 +16,7 @@ from opalflow.analysis import compression as mech
 from opalflow.bpm.facts import RunFacts, SampleFacts
 from opalflow.bpm.loading import LOADINGS
 from opalflow.resources import DATA, ROOT
+from opalflow.runs.record import Session
 from opalflow.store import RECORD, RESULTS, SUMMARY
 
 
@@ -150,11 +151,11 @@ def fraction_rows(sample: SampleFacts) -> list[tuple[str, str]]:
     return rows
 
 
-def _session_row(k: int, x: dict) -> str:
-    last = "?" if x["last_step"] is None else x["last_step"]
-    wall = "-" if x["wall_s"] is None else f"{x['wall_s']:.1f}"
-    return (f"| {k} | {x['started']} | {x['launcher']} | {x['restart'] or 'start'} | {x['first_step']}-{last} | "
-            f"{wall} | {x['ended'] or 'running'} |")
+def _session_row(k: int, x: Session) -> str:
+    last = "?" if x.last_step is None else x.last_step
+    wall = "-" if x.wall_s is None else f"{x.wall_s:.1f}"
+    return (f"| {k} | {x.started} | {x.launcher} | {x.restart or 'start'} | {x.first_step}-{last} | "
+            f"{wall} | {x.ended or 'running'} |")
 
 
 def compression_report(run: RunFacts, summary: dict, result, fit, fracture: bool, plots: bool = True) -> str:
@@ -176,9 +177,8 @@ def compression_report(run: RunFacts, summary: dict, result, fit, fracture: bool
               f"{100 * result.bond_stiffness_error_max:.2f} %."]
     if result.rate_check is not None:
         rc = result.rate_check
-        strength = ("" if rc["strength_change"] is None
-                    else f", strength by {100 * rc['strength_change']:+.2f} %")
-        lines += ["", f"Rate check (half plate speed): E changes by {100 * rc['youngs_modulus_change']:+.2f} %"
+        strength = "" if rc.strength_change is None else f", strength by {100 * rc.strength_change:+.2f} %"
+        lines += ["", f"Rate check (half plate speed): E changes by {100 * rc.youngs_modulus_change:+.2f} %"
                   f"{strength} (limits 2 % and 5 %)."]
     lines += ["", *figure(plots, "stress-strain", "stress_strain.png")]
     if not plots:
@@ -206,7 +206,7 @@ def compression_report(run: RunFacts, summary: dict, result, fit, fracture: bool
     if summary.get("wall_s") is None:
         cost = "run outside opalflow (analyze only)"
     else:
-        first = sessions[-1]["first_step"] if sessions else 0
+        first = sessions[-1].first_step if sessions else 0
         cost = (f"this session: wall {summary['wall_s']:.1f} s, of which LAMMPS {result.lammps_s:.1f} s, steps "
                 f"{first}-{result.steps} ({result.steps - first} steps)")
     lines += ["## Cost", "", f"{cost}; {result.steps} steps in all of {sample.timestep_s:.3g} s for "

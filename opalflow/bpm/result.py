@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from opalflow import registry
 from opalflow.analysis.elasticity import IsotropicAverage
 from opalflow.bpm.report import provenance_group, reference_errors, why
+from opalflow.runs.record import Session
 from opalflow.runs.result import Result, key
 from opalflow.store import json_text
 from opalflow.version import __version__
@@ -26,6 +27,17 @@ SOLVED = (STATIC, TENSOR)                         # one linear solve
 EVERY_CASE = (*LOADED, TENSOR)
 #: the strength's name by loading (bending: the flexural stress 3FL / (2bh^2) at the peak, ASTM D790)
 STRENGTH = {"plate": "compressive", "glued": "compressive", "tension": "tensile", "bending": "flexural"}
+
+
+@dataclass
+class RateCheck:
+    """The same dynamic run at half the plate speed (``compression.check_rate``): how much E and the strength
+    change (relative; None: no strength), and the half-speed values."""
+
+    youngs_modulus_change: float
+    strength_change: float | None
+    half_speed_youngs_modulus_GPa: float
+    half_speed_strength_MPa: float | None
 
 
 @dataclass
@@ -79,7 +91,7 @@ class CompressionResult(Result):
     wall_s: float | None = key(*LOADED, TENSOR, optional=True)   # finish() sets it (None: analyze only)
     bond_stiffness_error_max: float = key(DYNAMIC)
     timestep_estimate_s: dict = key(DYNAMIC)
-    rate_check: dict | None = key(DYNAMIC, optional=True)
+    rate_check: RateCheck | None = key(DYNAMIC, optional=True)
     # the linear solves
     solver: str = key(*SOLVED)
     iterations: int | list = key(*SOLVED)
@@ -111,7 +123,7 @@ class CompressionResult(Result):
     complete: bool = key(*LOADED, TENSOR, default=True)
     build_s: float = key(STATIC, QUASISTATIC, TENSOR)
     build_timings_s: dict | None = key(DYNAMIC, optional=True)
-    sessions: list | None = key(DYNAMIC, optional=True)
+    sessions: list[Session] | None = key(DYNAMIC, optional=True)
     requeues: int | None = key(DYNAMIC, optional=True)
     opalflow_version: str = key(*LOADED, TENSOR, default=__version__)
     headline: str = key(*LOADED, TENSOR, default="")

@@ -6,44 +6,38 @@ message: :mod:`opalflow.progress`) and ``summary.json`` (the headline of a finis
 """
 from __future__ import annotations
 
-import math
 import time
 from collections import Counter
 from pathlib import Path
 
 from opalflow import registry
+from opalflow.progress import PROGRESS_FILE, ProgressNote, finite_number
 from opalflow.runs.record import RunRecord
 from opalflow.runs.result import is_finished, read_summary
 from opalflow.spec import InputError, SpecError
-from opalflow.store import RECORD, SUMMARY, DamagedFile, lock_owner, process_alive, read_json
+from opalflow.store import RECORD, SUMMARY, DamagedFile, lock_owner, process_alive
 
 #: the record's states (opalflow.runs.record.STATES, built shown as pending) and what status sees besides:
 #: died (running, its process gone) and damaged (the record cannot be read)
 SHOWN = ("pending", "running", "requeued", "interrupted", "died", "finished", "failed", "damaged")
 
 
-def _number(x) -> bool:
-    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
-
-
 def _progress(folder: Path) -> tuple[str, float | None]:
     """What the running job says (step, rate, time left; or its last message) and its seconds left; a
     progress.json that is damaged or holds other types says so instead (the run itself is not judged by it)."""
     try:
-        p = read_json(folder / "progress.json", "the run's progress", "")
+        p = ProgressNote.read(folder)
     except DamagedFile:
-        return ("" if not (folder / "progress.json").exists() else "progress.json unreadable"), None
-    age = time.time() - p["time"] if _number(p.get("time")) else 0.0
+        return ("" if not (folder / PROGRESS_FILE).exists() else f"{PROGRESS_FILE} unreadable"), None
+    age = time.time() - p.time if p.time is not None else 0.0
     stale = f" (as of {age:.0f} s ago)" if age > 30 else ""
-    if isinstance(p.get("message"), str):
-        return p["message"] + stale, None
-    if not all(_number(p.get(k)) for k in ("step", "total", "rate_steps_s")):
-        return "progress.json holds no step count (damaged?)", None
-    left = p.get("left_s") if _number(p.get("left_s")) else None
-    unit = p.get("unit") if isinstance(p.get("unit"), str) else "step"
-    rate = f"{p['rate_steps_s']:.0f}" if p["rate_steps_s"] >= 10 else f"{p['rate_steps_s']:.2g}"
-    return (f"{unit} {p['step']:.0f}/{p['total']:.0f} ({100 * p['step'] / max(p['total'], 1):.0f} %), {rate} {unit}s/s, "
-            f"{'?' if left is None else f'{left:.0f} s'} left{stale}"), left
+    if p.message is not None:
+        return p.message + stale, None
+    if p.step is None or p.total is None or p.rate_steps_s is None:
+        return f"{PROGRESS_FILE} holds no step count (damaged?)", None
+    rate = f"{p.rate_steps_s:.0f}" if p.rate_steps_s >= 10 else f"{p.rate_steps_s:.2g}"
+    return (f"{p.unit} {p.step:.0f}/{p.total:.0f} ({100 * p.step / max(p.total, 1):.0f} %), {rate} {p.unit}s/s, "
+            f"{'?' if p.left_s is None else f'{p.left_s:.0f} s'} left{stale}"), p.left_s
 
 
 def how_to_go_on(folder: str | Path) -> str:
@@ -126,7 +120,7 @@ def status_lines(folder: str | Path, tail: int = 8) -> list[str]:
                             f"analyze {job}` writes it again")
                 continue
             wall = s.get("wall_s")
-            rows.append(f"  finished  {label}: {s['headline']}" + (f" ({wall:.0f} s)" if _number(wall) else ""))
+            rows.append(f"  finished  {label}: {s['headline']}" + (f" ({wall:.0f} s)" if finite_number(wall) is not None else ""))
         elif state in ("failed", "died", "damaged"):
             rows.append(f"  {state.upper():<9} {label}: {meta.get('error') or 'no reason recorded'} [{job}]")
             rows += [f"            | {line}" for line in meta.get("log_tail", "").splitlines()[-tail:]]

@@ -10,11 +10,63 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from opalflow.runs.result import Result, key
+from opalflow.tersoff.stability import BoundaryResult
 from opalflow.version import __version__
 
 PROPERTIES, STABILITY, FIT = "properties", "stability", "fit"
 MEASURED = (PROPERTIES, FIT)                      # the properties measured by LAMMPS
 ALL = (PROPERTIES, STABILITY, FIT)
+
+
+@dataclass
+class Properties:
+    """Table 1's properties of a parameter set: a0 (A), E_c (eV), B, C', C11, C12, C44^0 and C44 (GPa)."""
+
+    a0_A: float
+    Ec_eV: float
+    B_GPa: float
+    Cprime_GPa: float
+    C11_GPa: float
+    C12_GPa: float
+    C44_0_GPa: float
+    C44_GPa: float
+
+    def of(self, name: str) -> float:
+        """The property named ``name`` (a Table 1 key)."""
+        return getattr(self, name)
+
+
+@dataclass
+class PropertyError:
+    """One property against Table 1: its target (the fit's, absolute and relative error) and the authors' own
+    evaluation of Table 2's set (the difference)."""
+
+    value: float
+    target: float
+    error_vs_target: float
+    relative_error_vs_target: float
+    paper_calculated: float
+    difference_vs_paper: float
+
+
+@dataclass
+class ScanRow:
+    """One strain size of the central difference (eq. 16): each modulus's error against the exact (AD) second
+    derivative (GPa), the largest, and the LAMMPS time it took (s)."""
+
+    strain: float
+    errors_GPa: dict[str, float]
+    max_abs_error_GPa: float
+    seconds: float
+
+
+@dataclass
+class StabilitySummary:
+    """The MD stability check at one temperature: whether every boundary passed, and every run's figures."""
+
+    passed: bool
+    temperature_K: float
+    runs: list[BoundaryResult]
 
 
 @dataclass
@@ -33,12 +85,12 @@ class TersoffResult(Result):
     loss: float = key(*MEASURED)                  # eq. 13 of this set (fit model at a*, Table 1 targets)
     reference_loss: float = key(*MEASURED)        # eq. 13 of Table 2's set
     fit_s: float | None = key(*MEASURED)          # None: no fit
-    stability: dict | None = key(*ALL)            # the check at the first temperature (None: none run)
+    stability: StabilitySummary | None = key(*ALL)    # the check at the first temperature (None: none run)
     # properties: the finite-difference strain and its scan against the exact derivatives
     strain: float = key(PROPERTIES)
     spread_GPa: dict = key(PROPERTIES)
     model: dict = key(PROPERTIES)
-    strain_scan: list = key(PROPERTIES)
+    strain_scan: list[ScanRow] = key(PROPERTIES)
     lammps_s: float = key(PROPERTIES)
     # fit: the parameters, the candidates checked for stability, each start of the multistart L-BFGS
     parameters: dict = key(FIT)
@@ -48,7 +100,7 @@ class TersoffResult(Result):
     model_at_target: dict = key(FIT)
     starts: list = key(FIT)
     lammps_minus_model: dict = key(*MEASURED)
-    reference: dict = key(*MEASURED)              # each property against Table 1's target and calculated column
+    reference: dict[str, PropertyError] = key(*MEASURED)   # each property against Table 1's two columns
     headline: str = key(*ALL, default="")
     wall_s: float | None = key(*ALL)
     opalflow_version: str = key(*ALL, default=__version__)

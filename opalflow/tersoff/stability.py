@@ -24,7 +24,7 @@ import multiprocessing
 import os
 import time
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -56,9 +56,6 @@ class BoundaryResult:
     atoms_lost: int
     mean_temperature_K: float
     seconds: float
-
-    def as_dict(self) -> dict:
-        return asdict(self)
 
 
 def run_boundary(params: TersoffParameters, folder: str | Path, boundary: str, *,

@@ -8,6 +8,7 @@ reaches a LAMMPS script.
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 
@@ -22,7 +23,7 @@ from opalflow.tersoff.model import DiamondModel, neighbor_radius
 from opalflow.tersoff.parameters import (COLUMNS, REFERENCE_POTENTIAL, TersoffParameters, load_parameters,
                                          read_tersoff, write_tersoff)
 from opalflow.tersoff.properties import MODULI_KEYS as MODULI, evaluate
-from opalflow.tersoff.result import TersoffResult
+from opalflow.tersoff.result import Properties, PropertyError, ScanRow, StabilitySummary, TersoffResult
 from opalflow.tersoff.spec import TersoffWorkflow
 from opalflow.version import __version__
 
@@ -44,23 +45,21 @@ def loss_of(spec: TersoffWorkflow, start: TersoffParameters) -> fitting.Loss:
     bounds = {**fitting.DEFAULT_BOUNDS, **{k: tuple(v) for k, v in t.bounds.items()}}
     bounds = {k: v for k, v in bounds.items() if k not in fixed}
     r_max = fixed.get("R", bounds.get("R", (0, 0))[1]) + fixed.get("D", bounds.get("D", (0, 0))[1])
-    return fitting.Loss(targets={**ref["targets"], **t.targets}, weights={**fitting.default_weights(), **t.weights},
+    return fitting.Loss(targets={**ref.targets, **t.targets}, weights={**fitting.default_weights(), **t.weights},
                         bounds=bounds, fixed=fixed, a_target=t.lattice_target_A,
                         neighbor_radius_over_a=neighbor_radius(r_max, t.lattice_target_A))
 
 
-def _errors(values: dict, ref: dict) -> dict:
+def _errors(props: Properties, ref: fitting.Table1) -> dict[str, PropertyError]:
     """Error of each property: absolute (same unit) and relative, against targets and the paper's column."""
     out = {}
     for key in LABELS:
-        v, target, calc = values[key], ref["targets"][key], ref["calculated"][key]
-        out[key] = {"value": v, "target": target, "error_vs_target": v - target,
-                    "relative_error_vs_target": (v - target) / abs(target),
-                    "paper_calculated": calc, "difference_vs_paper": v - calc}
+        v, target, calc = props.of(key), ref.targets[key], ref.calculated[key]
+        out[key] = PropertyError(v, target, v - target, (v - target) / abs(target), calc, v - calc)
     return out
 
 
-def _property_rows(values: dict, ref: dict, model: dict | None = None) -> list[str]:
+def _property_rows(props: Properties, ref: fitting.Table1, model: dict | None = None) -> list[str]:
     head = "| property | LAMMPS | target (Table 1) | error | paper's calculated | difference |"
     rule = "|---|---|---|---|---|---|"
     if model is not None:
@@ -68,7 +67,7 @@ def _property_rows(values: dict, ref: dict, model: dict | None = None) -> list[s
         rule += "---|---|"
     rows = [head, rule]
     for key, (label, unit) in LABELS.items():
-        v, tg, calc = values[key], ref["targets"][key], ref["calculated"][key]
+        v, tg, calc = props.of(key), ref.targets[key], ref.calculated[key]
         row = (f"| {label} ({unit}) | {v:.3f} | {tg:g} | {v - tg:+.3f} ({100 * (v - tg) / abs(tg):+.1f} %) | "
                f"{calc:g} | {v - calc:+.3f} |")
         if model is not None:
@@ -81,26 +80,25 @@ def _lammps_properties(params: TersoffParameters, spec: TersoffWorkflow, folder:
     t = spec.tersoff
     ev = evaluate(params, folder, strain=t.strain, scan=tuple(t.strain_scan) if scan else (), cells=t.cells,
                   a_guess=t.lattice_target_A)
-    values = {"a0_A": ev.a0_A, "Ec_eV": ev.Ec_eV, **ev.values}
+    props = Properties(a0_A=ev.a0_A, Ec_eV=ev.Ec_eV, **ev.values)
     exact = model_for(params.cutoff(), t.lattice_target_A).evaluate(params, a=ev.a0_A)
-    return ev, values, exact
+    return ev, props, exact
 
 
-def _scan_table(ev, exact: dict) -> list[dict]:
+def _scan_table(ev, exact: dict) -> list[ScanRow]:
     """Strain size -> error of each modulus against the exact (AD) second derivative, and time."""
     rows = []
-    for h, props in ev.scan.items():
-        err = {k: props[k] - exact[k] for k in MODULI}
-        rows.append({"strain": h, "errors_GPa": err, "max_abs_error_GPa": max(abs(e) for e in err.values()),
-                     "seconds": ev.scan_s[h]})
+    for h, moduli in ev.scan.items():
+        err = {k: moduli[k] - exact[k] for k in MODULI}
+        rows.append(ScanRow(h, err, max(abs(e) for e in err.values()), ev.scan_s[h]))
     return rows
 
 
-def _plot_scan(rows: list[dict], path: Path) -> None:
+def _plot_scan(rows: list[ScanRow], path: Path) -> None:
     fig, ax = new_figure(figsize=(6, 4))
-    h = [r["strain"] for r in rows]
+    h = [r.strain for r in rows]
     for key in MODULI:
-        ax.loglog(h, [max(abs(r["errors_GPa"][key]), 1e-12) for r in rows], "o-", label=LABELS[key][0])
+        ax.loglog(h, [max(abs(r.errors_GPa[key]), 1e-12) for r in rows], "o-", label=LABELS[key][0])
     ax.set_xlabel("strain size e of the central difference (eq. 16)")
     ax.set_ylabel("|LAMMPS - exact| (GPa)")
     ax.set_title("Finite-difference moduli against the AD second derivative")
@@ -109,10 +107,9 @@ def _plot_scan(rows: list[dict], path: Path) -> None:
     save_figure(fig, path)
 
 
-def _stability_summary(results: list[stab.BoundaryResult], temperature: float) -> dict:
+def _stability_summary(results: list[stab.BoundaryResult], temperature: float) -> StabilitySummary:
     at = [r for r in results if r.temperature_K == temperature]
-    return {"passed": all(r.passed for r in at), "temperature_K": temperature,
-            "runs": [r.as_dict() for r in results]}
+    return StabilitySummary(all(r.passed for r in at), temperature, results)
 
 
 def _stability_rows(results: list[stab.BoundaryResult]) -> list[str]:
@@ -142,11 +139,6 @@ def _finish(out: Path, spec: TersoffWorkflow, result: TersoffResult, report: lis
     return finish(out, result.summary(), "\n".join(report), result=TersoffResult)
 
 
-def _measured(values: dict) -> dict:
-    """The LAMMPS properties as :class:`TersoffResult` keywords."""
-    return {k: values[k] for k in ("a0_A", *LABELS)}
-
-
 def run_properties(spec: TersoffWorkflow, out: Path, say=print, suffix: str | None = None) -> TersoffResult:
     with accelerated(suffix):
         return _run_properties(spec, out, say)
@@ -159,26 +151,25 @@ def _run_properties(spec: TersoffWorkflow, out: Path, say=print) -> TersoffResul
     ref = fitting.zhuravlev2021()
     say(f"properties of {spec.tersoff.potential} ({params.element}) by LAMMPS, strain scan "
         f"{len(spec.tersoff.strain_scan)} sizes")
-    ev, values, exact = _lammps_properties(params, spec, out, scan=True)
+    ev, props, exact = _lammps_properties(params, spec, out, scan=True)
     loss = loss_of(spec, params)
     rows = _scan_table(ev, exact)
     _plot_scan(rows, out / "strain_scan.png")
     result = TersoffResult(
-        mode="properties", **_measured(values), loss=loss(params), reference_loss=loss(read_tersoff(REFERENCE_POTENTIAL)),
+        mode="properties", **dataclasses.asdict(props), loss=loss(params), reference_loss=loss(read_tersoff(REFERENCE_POTENTIAL)),
         strain=ev.strain, spread_GPa=ev.spread, model=exact,
-        lammps_minus_model={k: values[k] - exact[k] for k in LABELS},
-        reference=_errors(values, ref), strain_scan=rows, lammps_s=ev.seconds,
-        headline=(f"a0 = {values['a0_A']:.5f} A, Ec = {values['Ec_eV']:.4f} eV, "
-                  f"B = {values['B_GPa']:.2f}, C' = {values['Cprime_GPa']:.2f}, "
-                  f"C11 = {values['C11_GPa']:.2f}, C12 = {values['C12_GPa']:.2f}, "
-                  f"C44^0 = {values['C44_0_GPa']:.2f}, C44 = {values['C44_GPa']:.2f} GPa"))
+        lammps_minus_model={k: props.of(k) - exact[k] for k in LABELS},
+        reference=_errors(props, ref), strain_scan=rows, lammps_s=ev.seconds,
+        headline=(f"a0 = {props.a0_A:.5f} A, Ec = {props.Ec_eV:.4f} eV, B = {props.B_GPa:.2f}, "
+                  f"C' = {props.Cprime_GPa:.2f}, C11 = {props.C11_GPa:.2f}, C12 = {props.C12_GPa:.2f}, "
+                  f"C44^0 = {props.C44_0_GPa:.2f}, C44 = {props.C44_GPa:.2f} GPa"))
     report = [f"# Tersoff properties: {spec.tersoff.potential}", "",
               f"LAMMPS `pair_style tersoff`, `units metal`, {spec.tersoff.cells}^3 conventional cells "
               f"({8 * spec.tersoff.cells ** 3} atoms); lattice constant by `fix box/relax iso 0` "
-              f"+ `minimize`: a0 = {values['a0_A']:.6f} A (target a* = {spec.tersoff.lattice_target_A} A). "
+              f"+ `minimize`: a0 = {props.a0_A:.6f} A (target a* = {spec.tersoff.lattice_target_A} A). "
               f"Moduli by central second differences of the energy (seed 003, eq. 16) at strain "
               f"{ev.strain:g}; C44 with the atoms relaxed (`minimize`) in each sheared box.", "",
-              *_property_rows(values, ref, exact), "",
+              *_property_rows(props, ref, exact), "",
               "Fit model = the exact (automatic-differentiation) second derivatives of the same energy at a0; "
               "the LAMMPS - model column is the finite-difference error.", "",
               f"Loss eq. 13 of this set (fit model at a*, Table 1 targets): {result.loss:.5f}; "
@@ -187,8 +178,8 @@ def _run_properties(spec: TersoffWorkflow, out: Path, say=print) -> TersoffResul
               "| strain | max abs error (GPa) | " + " | ".join(LABELS[k][0] for k in MODULI) + " | time (s) |",
               "|---|---|" + "---|" * len(MODULI) + "---|"]
     for r in rows:
-        report.append(f"| {r['strain']:g} | {r['max_abs_error_GPa']:.2e} | "
-                      + " | ".join(f"{r['errors_GPa'][k]:+.1e}" for k in MODULI) + f" | {r['seconds']:.3f} |")
+        report.append(f"| {r.strain:g} | {r.max_abs_error_GPa:.2e} | "
+                      + " | ".join(f"{r.errors_GPa[k]:+.1e}" for k in MODULI) + f" | {r.seconds:.3f} |")
     report += ["", f"Time per strain size: 8 energies (+e and -e on the four strain paths; for C44 with the atoms relaxed); "
                f"the whole evaluation at one strain, lattice relaxation and set-up included, took "
                f"{ev.seconds - sum(ev.scan_s.values()) + ev.scan_s[ev.strain]:.3f} s of LAMMPS.",
@@ -255,26 +246,26 @@ def run_fit(spec: TersoffWorkflow, out: Path, say=print) -> TersoffResult:
     write_tersoff(out / "fitted.tersoff", best,
                   f"fitted by opalflow {__version__} (workflow {spec.name}): loss eq. 13 = {chosen.loss:.6f}\n"
                   f"{t.starts} L-BFGS starts, seed {t.seed}; start {chosen.start + 1} chosen")
-    ev, values, exact = _lammps_properties(best, spec, out / "lammps", scan=False)
+    ev, props, exact = _lammps_properties(best, spec, out / "lammps", scan=False)
     at_target = loss.model.evaluate(best)
     chosen_checks = next((res for r, res in checks if r is chosen), [])
     _plot_history(results, reference_loss, out / "loss_history.png")
     result = TersoffResult(
-        mode="fit", **_measured(values), loss=chosen.loss, reference_loss=reference_loss,
+        mode="fit", **dataclasses.asdict(props), loss=chosen.loss, reference_loss=reference_loss,
         fit_s=fit_s, parameters=best.as_dict(),
         at_bounds=[k for k in COLUMNS if "bound)" in _bound_note(k, getattr(best, k), loss)],
         stability=_stability_summary(chosen_checks, stab_t) if chosen_checks else None,
         candidates_checked=[{"start": r.start, "loss": r.loss, "stable": all(x.passed for x in res)}
                             for r, res in checks],
         model_at_a0=exact, model_at_target=at_target,
-        lammps_minus_model={k: values[k] - exact[k] for k in LABELS},
-        reference=_errors(values, ref),
+        lammps_minus_model={k: props.of(k) - exact[k] for k in LABELS},
+        reference=_errors(props, ref),
         starts=[{"start": r.start, "loss": r.loss, "iterations": r.iterations, "evaluations": r.evaluations,
                  "seconds": r.seconds, "message": r.message, "history": r.history} for r in results],
         headline=(f"fit loss {chosen.loss:.5f} (Table 2: {reference_loss:.5f}), {t.starts} starts in "
-                  f"{fit_s:.1f} s; LAMMPS: Ec = {values['Ec_eV']:.3f} eV, B = {values['B_GPa']:.1f}, "
-                  f"C11 = {values['C11_GPa']:.1f}, C12 = {values['C12_GPa']:.1f}, "
-                  f"C44^0 = {values['C44_0_GPa']:.1f}, C44 = {values['C44_GPa']:.1f} GPa; "
+                  f"{fit_s:.1f} s; LAMMPS: Ec = {props.Ec_eV:.3f} eV, B = {props.B_GPa:.1f}, "
+                  f"C11 = {props.C11_GPa:.1f}, C12 = {props.C12_GPa:.1f}, "
+                  f"C44^0 = {props.C44_0_GPa:.1f}, C44 = {props.C44_GPa:.1f} GPa; "
                   + ("stable" if summary_stable(chosen_checks) else "NOT stable") + f" at {stab_t:g} K"))
     report = [f"# Tersoff fit ({spec.name})", "",
               f"Loss eq. 13 (seed 003) at a* = {t.lattice_target_A} A, weights "
@@ -291,9 +282,9 @@ def run_fit(spec: TersoffWorkflow, out: Path, say=print) -> TersoffResult:
     report += [f"| {k} | {getattr(best, k):.6g} | {getattr(table2, k):g} | {_bound_note(k, getattr(best, k), loss)} |"
                for k in COLUMNS]
     report += ["", "## Properties of the fitted set (LAMMPS at its a0; fit model = exact derivatives, same a0)", "",
-               f"a0 = {values['a0_A']:.5f} A; at a* the fit model gives "
+               f"a0 = {props.a0_A:.5f} A; at a* the fit model gives "
                + ", ".join(f"{LABELS[k][0]} {at_target[k]:.3f}" for k in LABELS) + ".", "",
-               *_property_rows(values, ref, exact), "",
+               *_property_rows(props, ref, exact), "",
                "## Stability of the best candidates (ranked by loss, first stable one chosen)", ""]
     for rank, (r, res) in enumerate(checks):
         report += [f"Candidate {rank + 1}: start {r.start + 1}, loss {r.loss:.5f}", "", *_stability_rows(res), ""]
