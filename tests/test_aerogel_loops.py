@@ -74,7 +74,7 @@ def test_gel_pair_correlation_and_structure_factor():
 def test_loop_statistics_count_independent_cycles():
     ring = np.array([[0, 1], [1, 2], [2, 3], [3, 0], [4, 5]])       # a square and a separate pair
     st = loop_statistics(6, ring)
-    assert st["loops"] == 1 and st["pieces"] == 2 and st["mean_coordination"] == pytest.approx(10 / 6)
+    assert st.loops == 1 and st.pieces == 2 and st.mean_coordination == pytest.approx(10 / 6)
 
 
 def test_winding_rank_of_a_periodic_lattice_and_of_a_tree():
@@ -103,7 +103,7 @@ def test_deflection_gives_each_dangling_sphere_a_second_contact_without_overlap(
     # the bonds a deflected sphere had are kept: its distance to its anchor is unchanged
     moved = np.flatnonzero(np.any(d.positions != a.positions, axis=1))
     assert len(moved) == counts["deflected"]
-    assert loop_statistics(1500, b)["loops"] >= counts["deflected"]
+    assert loop_statistics(1500, b).loops >= counts["deflected"]
 
 
 def test_restructuring_closes_a_loop_at_mergers_without_overlap():
@@ -112,7 +112,7 @@ def test_restructuring_closes_a_loop_at_mergers_without_overlap():
     assert _gaps(a)[1].min() > -1e-9
     x, b = network_bonds(a, 1.001)
     st = loop_statistics(1500, b)
-    assert st["mean_coordination"] > 2.5 and st["loops_per_10k"] > 2000       # trees: 2.00 and ~7
+    assert st.mean_coordination > 2.5 and st.loops_per_10k > 2000       # trees: 2.00 and ~7
     # the R_g of the last merger (running sums through the turns) is that of the final cluster, unwrapped
     # along the merger contacts (a tree)
     u = a.positions.copy()

@@ -79,14 +79,14 @@ def test_network_statistics_of_a_simple_cubic_lattice():
     bonds = find_bonds(grid, diameters, box, [True] * 3, 1.75)
     st = network_statistics(grid, diameters, box, [True] * 3, bonds, np.pi / 6)
     shell = 4 / 3 * np.pi * ((1 + SHELL) ** 3 - (1 - SHELL) ** 3)
-    assert st["bonds_per_particle"] == 13 and st["near_contact_bond_share"] == pytest.approx(6 / 26)
-    assert st["g_at_d"] == pytest.approx(6 / shell) and st["g_at_sqrt3_d"] == pytest.approx(8 / (shell * 3**1.5))
+    assert st.bonds_per_particle == 13 and st.near_contact_bond_share == pytest.approx(6 / 26)
+    assert st.g_at_d == pytest.approx(6 / shell) and st.g_at_sqrt3_d == pytest.approx(8 / (shell * 3**1.5))
 
 
 def test_the_build_report_states_the_network(quick_structure, capsys):
     st = structure_statistics(quick_structure)["network"]
-    assert 5 < st["bonds_per_particle"] < 12 and 0.05 < st["near_contact_bond_share"] < 0.5
-    assert st["g_at_d"] > 3 * st["g_at_sqrt3_d"] > 0     # the contact peak above the second shell
+    assert 5 < st.bonds_per_particle < 12 and 0.05 < st.near_contact_bond_share < 0.5
+    assert st.g_at_d > 3 * st.g_at_sqrt3_d > 0     # the contact peak above the second shell
 
 
 def test_bond_types_by_material(coated_quick):

@@ -32,7 +32,7 @@ Counting (:func:`loop_statistics`): the cycle rank of the bond graph, bonds - sp
 from __future__ import annotations
 
 import math
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numba import njit
@@ -153,15 +153,25 @@ def deflect_dangling(agg: Aggregate, cutoff_factor: float) -> tuple[Aggregate, d
     return replace(agg, positions=pos), counts
 
 
-def loop_statistics(n: int, bonds: np.ndarray) -> dict:
-    """Coordination and loops of a bond graph: mean coordination, the fraction of dangling spheres (one
-    bond), the cycle rank (bonds - spheres + pieces) and it per 10 000 spheres."""
+@dataclass
+class Loops:
+    """Coordination and loops of a bond graph: mean coordination, the fraction of dangling spheres (one bond), the
+    cycle rank ``loops`` (bonds - spheres + pieces), it per 10 000 spheres, and the connected ``pieces``."""
+
+    mean_coordination: float
+    dangling_fraction: float
+    loops: int
+    loops_per_10k: float
+    pieces: int
+
+
+def loop_statistics(n: int, bonds: np.ndarray) -> Loops:
+    """The :class:`Loops` of the graph of ``n`` spheres and ``bonds``."""
     z = np.bincount(bonds.ravel(), minlength=n)
     pieces = connected_components(coo_matrix((np.ones(len(bonds)), (bonds[:, 0], bonds[:, 1])), shape=(n, n)),
                                   directed=False)[0]
     loops = int(len(bonds) - n + pieces)
-    return {"mean_coordination": float(z.mean()), "dangling_fraction": float(np.mean(z == 1)),
-            "loops": loops, "loops_per_10k": 1e4 * loops / max(n, 1), "pieces": int(pieces)}
+    return Loops(float(z.mean()), float(np.mean(z == 1)), loops, 1e4 * loops / max(n, 1), int(pieces))
 
 
 def winding_rank(x: np.ndarray, bonds: np.ndarray, box: float) -> int:

@@ -7,6 +7,7 @@ with a summary.json is finished), all or none.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from pathlib import Path
@@ -91,7 +92,7 @@ def run_aggregation(spec: AggregationWorkflow, out: Path, say=print) -> Result:
         "placement": agg.placement, "stepping": agg.stepping, "moves": agg.moves, "jumps": agg.jumps,
         "collisions": agg.collisions, "mergers": len(agg.contacts),
         "clusters_left": agg.clusters_left, "aggregation_s": agg.wall_s, "moves_per_s": agg.moves / max(agg.wall_s, 1e-9),
-        "loop_model": done, "bond_cutoff": cutoff, **loops,
+        "loop_model": done, "bond_cutoff": cutoff, **dataclasses.asdict(loops),
         "crossover_mass": fits.rg[1].crossover_mass, "correlation_length_nm": fits.gr[1].xi_nm,
         "fractal_mass_radius": fits.mass_radius[0], "fractal_rg": fits.rg[0], "fractal_gr": fits.gr[0],
         "fractal_sq": fits.sq[0],
@@ -100,7 +101,7 @@ def run_aggregation(spec: AggregationWorkflow, out: Path, say=print) -> Result:
     d_text = "; ".join(f"{f.D:.2f} [{f.ci95[0]:.2f}, {f.ci95[1]:.2f}] ({f.method})" for f in fits.fits()
                        if math.isfinite(f.D)) or "no fit"
     summary["headline"] = (f"D_f = {d_text}; literature {lit}; {s.n_particles} spheres, {s.n_bonds} bonds "
-                           f"({loops['loops_per_10k']:.0f} loops per 10 000), {agg.wall_s:.1f} s")
+                           f"({loops.loops_per_10k:.0f} loops per 10 000), {agg.wall_s:.1f} s")
     rotation = ("Clusters translate only (no rotational diffusion, which lowers D_f: Jungblut et al., Phys. Rev. E "
                 "2019).")
     report = [f"# {spec.name}: {a.algorithm.upper()} aggregate", "",
@@ -109,8 +110,8 @@ def run_aggregation(spec: AggregationWorkflow, out: Path, say=print) -> Result:
               f"stepping: {agg.moves} moves, {agg.jumps} free-distance jumps, {agg.collisions} contacts, "
               f"{len(agg.contacts)} mergers in {agg.wall_s:.1f} s. {rotation}", "",
               f"Network (loop model `{a.loops}`; bonds within {cutoff:g} x (r_i + r_j)): {s.n_bonds} bonds, mean "
-              f"coordination {z.mean():.3f}, {loops['dangling_fraction']:.1%} dangling spheres, {loops['loops']} "
-              f"independent loops ({loops['loops_per_10k']:.0f} per 10 000 spheres)"
+              f"coordination {z.mean():.3f}, {loops.dangling_fraction:.1%} dangling spheres, {loops.loops} "
+              f"independent loops ({loops.loops_per_10k:.0f} per 10 000 spheres)"
               + (f"; {done['deflected']} of {done['dangling_before']} dangling spheres deflected" if "deflected" in done
                  else "") + ".", "",
               "| method | D_f | 95 % interval | fitted range | points | note |", "|---|---|---|---|---|---|",

@@ -148,9 +148,9 @@ def statistics(s: Structure) -> dict:
     loops = loop_statistics(n, s.bonds)
     return {"n_particles": n, "n_bonds": s.n_bonds, "solid_fraction": s.meta["solid_fraction"],
             "aggregate_solid_fraction": s.meta["aggregate_solid_fraction"],
-            "density_kg_m3": mass / volume * 1e6, "mean_coordination": loops["mean_coordination"],
-            "dangling_fraction": loops["dangling_fraction"], "loops": loops["loops"],
-            "loops_per_10k": loops["loops_per_10k"], "loop_model": s.meta.get("loop_model", {"model": "none"}),
+            "density_kg_m3": mass / volume * 1e6, "mean_coordination": loops.mean_coordination,
+            "dangling_fraction": loops.dangling_fraction, "loops": loops.loops,
+            "loops_per_10k": loops.loops_per_10k, "loop_model": s.meta.get("loop_model", {"model": "none"}),
             "sample": "cube" if s.periodic[2] else "slab", "dropped_unattached": s.meta["dropped_unattached"],
             "cut_bonds": s.meta["cut_bonds"], "aggregation_s": s.meta["aggregation_s"]}
 

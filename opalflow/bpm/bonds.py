@@ -13,6 +13,8 @@ Bond models (``bonds.model``, Roy and Hossain Fig. 10.8) are objects, one class 
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from opalflow.materials import BondCoefficients
@@ -70,8 +72,18 @@ NEAR_CONTACT = 1.005
 SHELL = 0.025
 
 
+@dataclass
+class NetworkStatistics:
+    """The bond network's numbers of :func:`network_statistics` (``near_contact_bond_share`` None: no bonds)."""
+
+    bonds_per_particle: float
+    near_contact_bond_share: float | None
+    g_at_d: float
+    g_at_sqrt3_d: float
+
+
 def network_statistics(positions: np.ndarray, diameters: np.ndarray, box: np.ndarray, periodic,
-                       bonds: np.ndarray, solid_fraction: float) -> dict:
+                       bonds: np.ndarray, solid_fraction: float) -> NetworkStatistics:
     """What the bond network's strength is sensitive to, for the build report (Dosta et al. section 2.1:
     ~10.5 bonds a particle at 1.75 d):
 
@@ -86,12 +98,12 @@ def network_statistics(positions: np.ndarray, diameters: np.ndarray, box: np.nda
     """
     n = len(positions)
     d = float(np.mean(diameters))
-    stats = {"bonds_per_particle": len(bonds) / max(n, 1)}
+    near = None
     if len(bonds):
         sep = separations(positions, bonds, box, periodic)
         r0 = np.sqrt(np.einsum("ij,ij->i", sep, sep))
         contact = 0.5 * (diameters[bonds[:, 0]] + diameters[bonds[:, 1]])
-        stats["near_contact_bond_share"] = float(np.mean(r0 < NEAR_CONTACT * contact))
+        near = float(np.mean(r0 < NEAR_CONTACT * contact))
     reach = 1.8 * d
     periodic = np.asarray(periodic, bool)
     lo, hi = positions.min(axis=0), positions.max(axis=0)
@@ -100,12 +112,13 @@ def network_statistics(positions: np.ndarray, diameters: np.ndarray, box: np.nda
     sep = separations(positions, pairs, box, periodic)
     r = np.sqrt(np.einsum("ij,ij->i", sep, sep))
     density = solid_fraction / (np.pi / 6 * np.mean(diameters**3))
-    for key, at in (("g_at_d", d), ("g_at_sqrt3_d", np.sqrt(3) * d)):
+    g = []
+    for at in (d, np.sqrt(3) * d):
         shell = (r >= at * (1 - SHELL)) & (r < at * (1 + SHELL))
         counted = int(np.count_nonzero(shell & inner[pairs[:, 0]]) + np.count_nonzero(shell & inner[pairs[:, 1]]))
         ideal = inner.sum() * density * 4 / 3 * np.pi * at**3 * ((1 + SHELL) ** 3 - (1 - SHELL) ** 3)
-        stats[key] = counted / ideal if ideal > 0 else float("nan")
-    return stats
+        g.append(counted / ideal if ideal > 0 else float("nan"))
+    return NetworkStatistics(len(bonds) / max(n, 1), near, *g)
 
 
 def bond_types_by_material(pairs: np.ndarray, coated: np.ndarray) -> np.ndarray:
@@ -113,8 +126,8 @@ def bond_types_by_material(pairs: np.ndarray, coated: np.ndarray) -> np.ndarray:
     return np.where(coated[pairs[:, 0]] | coated[pairs[:, 1]], 2, 1).astype(np.int32)
 
 
-def describe_network(stats: dict) -> str:
+def describe_network(stats: NetworkStatistics) -> str:
     """:func:`network_statistics` in one line."""
-    return (f"{stats['bonds_per_particle']:.2f} bonds a particle, "
-            f"{100 * stats.get('near_contact_bond_share', 0.0):.1f} % of them shorter than {NEAR_CONTACT:g} d, "
-            f"g(d) {stats['g_at_d']:.2f}, g(sqrt(3) d) {stats['g_at_sqrt3_d']:.2f}")
+    return (f"{stats.bonds_per_particle:.2f} bonds a particle, "
+            f"{100 * (stats.near_contact_bond_share or 0.0):.1f} % of them shorter than {NEAR_CONTACT:g} d, "
+            f"g(d) {stats.g_at_d:.2f}, g(sqrt(3) d) {stats.g_at_sqrt3_d:.2f}")

@@ -185,7 +185,7 @@ def loaded_sample(spec: BpmWorkflow, s: Structure) -> LoadedSample:
     place = loading.place(s, float(np.mean(s.diameters)))      # refuses a sample the loading cannot hold
     r0 = s.bond_lengths()
     data, bins, coeffs = bond_model(spec, s, r0)
-    return LoadedSample(structure=data, source=s, bins=bins, coefficients=coeffs, bond_lengths=r0, **place,
+    return LoadedSample(structure=data, source=s, bins=bins, coefficients=coeffs, bond_lengths=r0, **vars(place),
                         loading=loading.name, loading_sense=loading.sense)
 
 

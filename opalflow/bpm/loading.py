@@ -102,6 +102,22 @@ class Supports:
         return -self.sense * float(np.sum(force.reshape(len(self.loaded), 6)[self.loaded, 2])) / self.area_nm2
 
 
+@dataclass
+class Placement:
+    """Where a loading holds a sample (:meth:`Loading.place`): the strain's gauge ``height_nm`` and the stress's
+    ``area_nm2``, the substrate's top ``base_nm``, the sample's top ``plate_z0_nm``, the driven particles
+    (``top_layer``) and their mean centre height ``top_z0_nm``, and what else it placed (``marks``; bending:
+    span, supports, nose)."""
+
+    height_nm: float
+    area_nm2: float
+    base_nm: float
+    plate_z0_nm: float
+    top_z0_nm: float
+    top_layer: np.ndarray
+    marks: dict
+
+
 class Loading:
     """How the sample is held and moved.  Its measures make every method's stress and strain: the strain
     is the driven particles' displacement over ``height_nm`` and the stress their force over ``area_nm2``
@@ -127,7 +143,7 @@ class Loading:
     def check(self, spec) -> None:
         """Refuse a spec this loading cannot hold (one line), before anything is built."""
 
-    def place(self, s, d_mean: float) -> dict:
+    def place(self, s, d_mean: float) -> Placement:
         """The loaded geometry of structure ``s``: ``height_nm`` (from the substrate's top to the sample's),
         ``area_nm2`` (the box across periodic sides, the footprint across open ones), ``base_nm``,
         ``plate_z0_nm`` (the sample's top), ``top_z0_nm`` and ``top_layer`` (centres within 3/4 of a mean
@@ -142,8 +158,8 @@ class Loading:
         r = s.diameters / 2
         extent = [float(s.box_lengths[k]) if s.periodic[k] else float(np.max(s.positions[:, k] + r) -
                                                                         np.min(s.positions[:, k] - r)) for k in (0, 1)]
-        return {"height_nm": top - base, "area_nm2": extent[0] * extent[1], "base_nm": base, "plate_z0_nm": top,
-                "top_z0_nm": float(np.mean(s.positions[top_group, 2])), "top_layer": top_group, "marks": {}}
+        return Placement(top - base, extent[0] * extent[1], base, top, float(np.mean(s.positions[top_group, 2])),
+                         top_group, {})
 
     def held_text(self, driven: int) -> str:
         """How the sample is held and moved, for the reports (``driven``: the driven particles' count)."""
@@ -227,7 +243,7 @@ class ThreePointBending(Loading):
         if sides != "open":
             raise SpecError("compression.loading", self.name, "needs boundary.sides = \"open\" (a beam has ends)")
 
-    def place(self, s, d_mean):
+    def place(self, s, d_mean) -> Placement:
         if s.periodic[0]:
             raise SpecError("compression.loading", self.name, "needs boundary.sides = \"open\" (a beam has ends)")
         if s.groups.get("substrate", np.zeros(s.n_particles, bool)).any():
@@ -244,13 +260,13 @@ class ThreePointBending(Loading):
         depth = float(np.max(x[:, 2] + r) - np.min(x[:, 2] - r))
         width = float(s.box_lengths[1]) if s.periodic[1] else float(np.max(x[:, 1] + r) - np.min(x[:, 1] - r))
         top = float(np.max(x[:, 2] + r))
-        return {"height_nm": span**2 / (6 * depth), "area_nm2": 2 * width * depth**2 / (3 * span),
-                "base_nm": float(np.min(x[:, 2] - r)), "plate_z0_nm": top, "top_z0_nm": float(np.mean(x[nose, 2])),
-                "top_layer": nose,
-                "marks": {"span_nm": span, "depth_nm": depth, "width_nm": width, "pin": pin, "roller": roller,
-                          "pin_x": float(lo[0] + half), "roller_x": float(hi[0] - half),
-                          "bottom_z": float(lo[2] + half), "nose_lo": mid - half, "nose_hi": mid + half,
-                          "nose_z": float(hi[2] - half)}}
+        return Placement(
+            height_nm=span**2 / (6 * depth), area_nm2=2 * width * depth**2 / (3 * span),
+            base_nm=float(np.min(x[:, 2] - r)), plate_z0_nm=top, top_z0_nm=float(np.mean(x[nose, 2])), top_layer=nose,
+            marks={"span_nm": span, "depth_nm": depth, "width_nm": width, "pin": pin, "roller": roller,
+                   "pin_x": float(lo[0] + half), "roller_x": float(hi[0] - half),
+                   "bottom_z": float(lo[2] + half), "nose_lo": mid - half, "nose_hi": mid + half,
+                   "nose_z": float(hi[2] - half)})
 
     def held_text(self, driven):
         return (f"simply supported on its bottom end particles (pin and roller, free to turn), {driven} nose particles "

@@ -584,6 +584,17 @@ class Event:
 
 
 @dataclass
+class SavedState:
+    """What a stopped event loop goes on from: its events, the modulus of its first solve (MPa), and the
+    displacements ((N, 6)) just before the peak event ``peak_event`` (-1, None: none kept)."""
+
+    events: list[Event]
+    modulus_MPa: float
+    peak_event: int = -1
+    peak_x: np.ndarray | None = None
+
+
+@dataclass
 class FractureResult:
     modulus_MPa: float
     events: list[Event]
@@ -606,7 +617,7 @@ class FractureResult:
 def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray, supports: Supports, *,
                    strain_max: float = 0.04, stop_fraction: float = 0.5, events_max: int = 100_000,
                    tolerance: float = 0.0, resolver: str = "auto", rtol: float = 1e-6, local_rtol: float = 0.0,
-                   state: dict | None = None, checkpoint=None, checkpoint_s: float = 5.0, should_stop=lambda: False,
+                   state: SavedState | None = None, checkpoint=None, checkpoint_s: float = 5.0, should_stop=lambda: False,
                    contacts: Contacts | None = None, say=print) -> FractureResult:
     """The event loop of the module docstring under the loading's ``supports``
     (:meth:`opalflow.bpm.loading.Loading.supports`, as in :func:`opalflow.bpm.static.solve_compression`).
@@ -620,8 +631,7 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
 
     Stops when the next event would lie beyond ``strain_max``, when the stress after an event has fallen
     below ``stop_fraction`` of the peak, when no path carries load, or after ``events_max`` events.
-    ``state`` (``{"events": [...], "modulus_MPa": E, "peak_event": k, "peak_x": (N, 6) or None}``, given to
-    ``checkpoint(state)`` every ``checkpoint_s`` seconds, before :class:`Stopped` is raised when
+    ``state`` (a :class:`SavedState`, given to ``checkpoint(state)`` every ``checkpoint_s`` seconds, before :class:`Stopped` is raised when
     ``should_stop()`` turns true, and on Ctrl-C): continue a killed run from its events (the broken bonds are
     theirs) and the displacements just before its peak event (for the fracture pictures); the result is the
     same (with an iterative re-solve or the local step it restarts from a global re-solve: the same to the
@@ -631,7 +641,7 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
         raise InputError(f"compression.resolver = {resolver!r}: must be one of {', '.join(RESOLVERS)}")
     t0 = time.perf_counter()
     n, m = net.n_particles, len(net.L)
-    events = [Event(**e) for e in state["events"]] if state else []
+    events = list(state.events) if state else []
     alive = _intact(m, events)
     loaded = LoadedNetwork(net, supports, positions, alive, contacts, resolver, rtol)
     adjacency = Adjacency(net)
@@ -639,13 +649,12 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
     setup = time.perf_counter() - t0
 
     x, force, stress_unit, its, b_norm = loaded.solve(loaded.x_p.copy())
-    modulus = float(state["modulus_MPa"]) if state else stress_unit
+    modulus = state.modulus_MPa if state else stress_unit
     peak_stress, peak_alive, peak_x, peak_event = _restored_peak(state, events, m)
 
     def save():
         if checkpoint:
-            checkpoint({"events": [e.__dict__ for e in events], "modulus_MPa": modulus, "peak_event": peak_event,
-                        "peak_x": peak_x})
+            checkpoint(SavedState(list(events), modulus, peak_event, peak_x))
 
     stopped, touched, B, pace = "events_max", None, None, _Pace(checkpoint_s)
     try:
@@ -710,13 +719,13 @@ def _after_break(loaded: LoadedNetwork, settle, adjacency, broken: np.ndarray, x
     return x, force, stress_unit, its, b_norm, None, False
 
 
-def _restored_peak(state: dict | None, events: list[Event], m: int) -> tuple:
+def _restored_peak(state: SavedState | None, events: list[Event], m: int) -> tuple:
     """Where a resumed run's peak stood: its stress, the bonds intact before it, the displacements just before it
     as the state kept them (``peak_event``: the event they precede; an event cut short by Ctrl-C may have set
     them without being kept: then None) and that event's index (-1: none kept)."""
     peak = int(np.argmax([e.stress_MPa for e in events])) if events else 0
-    peak_x = (np.asarray(state["peak_x"], float) if state and state.get("peak_x") is not None
-              and state.get("peak_event") == peak else None)
+    peak_x = (np.asarray(state.peak_x, float) if state and state.peak_x is not None and state.peak_event == peak
+              else None)
     return (events[peak].stress_MPa if events else 0.0, _intact(m, events[:peak]) if events else None, peak_x,
             peak if peak_x is not None else -1)
 

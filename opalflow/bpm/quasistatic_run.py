@@ -23,7 +23,7 @@ from opalflow.bpm.deck import particle_material
 from opalflow.bpm.facts import RunFacts
 from opalflow.bpm.loading import LOADINGS
 from opalflow.materials import contact_properties
-from opalflow.bpm.quasistatic import CHECKS, Event, Stopped, Strengths, peak_facts, solve_fracture
+from opalflow.bpm.quasistatic import CHECKS, Event, SavedState, Stopped, Strengths, peak_facts, solve_fracture
 from opalflow.bpm.scene import scene_of
 from opalflow.bpm.spec import BREAKING_RULES, BpmWorkflow
 from opalflow.bpm.methods import METHODS
@@ -43,15 +43,14 @@ STATE = "quasistatic_state.json"
 PEAK = "quasistatic_peak.npy"     # the state's displacements just before the peak event (N, 6), beside STATE
 
 
-def save_state(out: Path, state: dict) -> None:
+def save_state(out: Path, state: SavedState) -> None:
     """The event loop's state: the events as JSON, the peak's displacements as .npy (written first: a
     state file never names a peak the .npy does not hold)."""
-    state = dict(state)
-    peak_x = state.pop("peak_x", None)
-    if peak_x is not None:
+    if state.peak_x is not None:
         with atomic_path(out / PEAK, PEAK + ".tmp.npy") as tmp:
-            np.save(tmp, peak_x)
-    write_json_atomic(out / STATE, state)
+            np.save(tmp, state.peak_x)
+    write_json_atomic(out / STATE, {"events": state.events, "modulus_MPa": state.modulus_MPa,
+                                    "peak_event": state.peak_event})
 
 
 def has_state(out: Path) -> bool:
@@ -59,19 +58,20 @@ def has_state(out: Path) -> bool:
     return (Path(out) / STATE).exists()
 
 
-def load_state(out: Path) -> dict:
+def load_state(out: Path) -> SavedState:
     """The state :func:`save_state` wrote (``peak_x`` None where no .npy is kept)."""
-    state = read_json(out / STATE, "the quasi-static run's saved state", "run it anew without --resume",
-                      keys=("events", "modulus_MPa"))
+    raw = read_json(out / STATE, "the quasi-static run's saved state", "run it anew without --resume",
+                    keys=("events", "modulus_MPa"))
     try:
-        for e in state["events"]:
-            Event(**e)
-            np.asarray(e["bonds"], np.int64)
-        float(state["modulus_MPa"])
+        events = [Event(**e) for e in raw.pop("events")]
+        for e in events:
+            np.asarray(e.bonds, np.int64)
+        state = SavedState(events, float(raw.pop("modulus_MPa")), int(raw.pop("peak_event", -1)))
     except (TypeError, ValueError) as exc:
         raise DamagedFile(out / STATE, "the quasi-static run's saved state", f"damaged ({exc})",
                           "run it anew without --resume") from None
-    state["peak_x"] = np.load(out / PEAK) if state.get("peak_event", -1) >= 0 and (out / PEAK).exists() else None
+    if state.peak_event >= 0 and (out / PEAK).exists():
+        state.peak_x = np.load(out / PEAK)
     return state
 
 
@@ -170,13 +170,13 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
     return written
 
 
-def resumed_state(out: Path, say) -> dict:
+def resumed_state(out: Path, say) -> SavedState:
     """The state a killed or stopped run saved (``--resume``); one line where it saved none."""
     if not (out / STATE).exists():
         raise SpecError("--resume", str(out), f"no {STATE} in the folder (the run saved none yet): run it anew")
     state = load_state(out)
-    say(f"quasi-static: resuming from {STATE} ({len(state['events'])} events done"
-        + (", the peak's displacements kept" if state["peak_x"] is not None else "") + ")")
+    say(f"quasi-static: resuming from {STATE} ({len(state.events)} events done"
+        + (", the peak's displacements kept" if state.peak_x is not None else "") + ")")
     return state
 
 
@@ -219,7 +219,7 @@ def _broken_in_order(res) -> tuple[np.ndarray, np.ndarray]:
             np.concatenate(checks) if checks else np.zeros(0, np.int64))
 
 
-def broken_by_check(res, sample, rule: str, *, peak_only: bool) -> dict:
+def broken_by_check(res, sample, rule: str, *, peak_only: bool) -> dict[str, dict[str, int]]:
     """Broken bonds counted by the check of ``rule`` that broke them (:data:`opalflow.bpm.quasistatic.CHECKS`:
     for LAMMPS's rule, the paper's and today's MUSEN's Dosta et al. eqs. 16-17 apart) and by length bin:
     ``{check: {bin label: count}}``, all events or those before the peak event (``peak_only``)."""
