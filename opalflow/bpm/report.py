@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import subprocess
 import tomllib
+from dataclasses import dataclass
 from functools import lru_cache
 
 from opalflow.analysis import compression as mech
@@ -45,9 +46,21 @@ LARGE_ERROR = 0.10
 SECTIONS = ("## Inputs", "## Results", "## Particle stresses", "## Files", "## Cost")
 
 
+@dataclass(frozen=True)
+class Resolution:
+    """data/reference/resolution.toml: the paper's particle diameter (nm) and the convergence study's E and strength
+    by particle diameter (the diameter in nm as text -> GPa or MPa)."""
+
+    paper_diameter_nm: float
+    static_youngs_modulus_GPa: dict[str, float]
+    dynamic_youngs_modulus_GPa: dict[str, float]
+    dynamic_strength_MPa: dict[str, float]
+
+
 @lru_cache(maxsize=1)
-def _resolution() -> dict:
-    return tomllib.loads((DATA / "reference" / "resolution.toml").read_text())
+def _resolution() -> Resolution:
+    raw = tomllib.loads((DATA / "reference" / "resolution.toml").read_text())
+    return Resolution(raw.pop("paper").pop("particle_diameter_nm"), **raw)
 
 
 def _series(table: dict, unit: str) -> str:
@@ -59,15 +72,15 @@ def why(key: str, error: float, diameter_nm: float) -> str:
     if abs(error) <= LARGE_ERROR:
         return ""
     res = _resolution()
-    paper_d = res["paper"]["particle_diameter_nm"]
+    paper_d = res.paper_diameter_nm
     if diameter_nm > 1.5 * paper_d and key in ("youngs_modulus_GPa", "youngs_modulus_specimen_GPa", "strength_MPa"):
         head = (f"resolution: d = {diameter_nm:.3g} nm is {diameter_nm / paper_d:.1f} x the paper's {paper_d:g} nm, "
                 "so the struts between the pores are one or two particles thick and carry far less")
         if key == "strength_MPa":
-            return (f"{head}; the convergence study's strength: {_series(res['dynamic_strength_MPa'], 'MPa')} "
+            return (f"{head}; the convergence study's strength: {_series(res.dynamic_strength_MPa, 'MPa')} "
                     "(data/reference/resolution.toml)")
-        return (f"{head}; E of the convergence study: {_series(res['dynamic_youngs_modulus_GPa'], 'GPa')}; static "
-                f"solve: {_series(res['static_youngs_modulus_GPa'], 'GPa')}, the last the paper's sample "
+        return (f"{head}; E of the convergence study: {_series(res.dynamic_youngs_modulus_GPa, 'GPa')}; static "
+                f"solve: {_series(res.static_youngs_modulus_GPa, 'GPa')}, the last the paper's sample "
                 "(data/reference/resolution.toml)")
     if key == "youngs_modulus_GPa":
         return ("the plate-strain modulus holds the Hertz settling of the plate on the rough top and the loading "

@@ -133,7 +133,7 @@ class CalibrationSpec:
     shear_ratio: float = 1.0         # k_s / k_n
 
 
-def first_estimate(c: CalibrationSpec, radius_factor: float) -> dict:
+def first_estimate(c: CalibrationSpec, radius_factor: float) -> dict[str, float]:
     """Bond properties (``[materials.<name>]`` keys) of the first estimate (eqs. 10.3-10.4).
 
     In PFC k_n is a ball's normal stiffness: a contact is two balls in series, K = k_n / 2 = 2 R E, and

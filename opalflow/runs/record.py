@@ -224,7 +224,7 @@ def spec_digest(spec: dict) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-def _references(spec) -> dict:
+def _references(spec) -> dict[str, tuple[float, str]]:
     refs = getattr(spec, "references", None)
     return refs() if callable(refs) else {}
 
