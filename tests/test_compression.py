@@ -225,7 +225,7 @@ def test_opal_run_carries_its_structure_statistics(tmp_path, quick_spec, quick_s
     info = RunRecord.read(tmp_path).facts()
     assert info == json.loads(json.dumps(record.facts(), default=float))    # the record the run holds is the file
     stats = structure_statistics(quick_structure)
-    assert info["structure"] == pytest.approx({k: stats[k] for k in OpalResult.structure_keys()})
+    assert info["structure"] == pytest.approx({k: getattr(stats, k) for k in OpalResult.structure_keys()})
     assert OpalResult.structure_keys() == ("porosity", "total_porosity", "density_kg_m3")
     assert 0.3 < info["structure"]["porosity"] < 0.9
 

@@ -122,7 +122,7 @@ def test_random_pores_reach_target_porosity(target):
                      [f"pores.porosity={target}", "packing.diameter_nm=40.0", "packing.tile_nm=400.0"])
     s, _ = build_opal(spec)
     stats = structure_statistics(s)
-    assert abs(stats["porosity"] - target) <= 0.01
+    assert abs(stats.porosity - target) <= 0.01
     c = s.meta["pore_centres_nm"]
     img = periodic_images(c, s.box_lengths[:2])
     d = np.linalg.norm(c[:, None, :] - img[None, :, :], axis=-1)

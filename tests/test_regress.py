@@ -10,7 +10,7 @@ from opalflow.cli import main
 def test_a_one_percent_stiffer_silica_bond_fails_exactly_the_keys_that_depend_on_it(tmp_path):
     ref = regress.read_reference("lattice_sc")
     E_b = 6.53 * 1.01
-    ref["set"] = {"materials.silica.bond_youngs_modulus_GPa": E_b}
+    ref.set = {"materials.silica.bond_youngs_modulus_GPa": E_b}
     res, _ = regress.run_one("lattice_sc", ref, tmp_path / "stiffer")
     failed = {c.key for c in regress.compare("lattice_sc", ref, res) if c.failed}
     # the structure does not depend on the bonds' stiffness; the time step (1/sqrt(k)), the moduli, the

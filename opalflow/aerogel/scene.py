@@ -17,6 +17,7 @@ wall, which loads the network where it reaches highest).
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.sparse import coo_matrix
@@ -140,30 +141,53 @@ def build_aerogel(spec: AerogelWorkflow, progress=None) -> Structure:
     return s
 
 
-def statistics(s: Structure) -> dict:
+@dataclass
+class AerogelStatistics:
+    """Numbers about the slab (or cube) for the build and run summaries: its spheres and bonds, its solid fraction
+    and the aggregate's, its density (the slab's mass over the aggregate's cube, kg/m^3), the network's loops, the
+    loop model's record, what the cut left out, and the aggregation's time."""
+
+    n_particles: int
+    n_bonds: int
+    solid_fraction: float
+    aggregate_solid_fraction: float
+    density_kg_m3: float
+    mean_coordination: float
+    dangling_fraction: float
+    loops: int
+    loops_per_10k: float
+    loop_model: dict
+    sample: str
+    dropped_unattached: int
+    cut_bonds: int
+    aggregation_s: float
+
+
+def statistics(s: Structure) -> AerogelStatistics:
     """Numbers about the slab for the build and run summaries."""
     n = s.n_particles
     volume = float(s.meta["box_nm"]) ** 3        # the cube the aggregate filled (the z box has room around it)
     mass = float(np.sum(s.densities * s.particle_volumes()))
     loops = loop_statistics(n, s.bonds)
-    return {"n_particles": n, "n_bonds": s.n_bonds, "solid_fraction": s.meta["solid_fraction"],
-            "aggregate_solid_fraction": s.meta["aggregate_solid_fraction"],
-            "density_kg_m3": mass / volume * 1e6, "mean_coordination": loops.mean_coordination,
-            "dangling_fraction": loops.dangling_fraction, "loops": loops.loops,
-            "loops_per_10k": loops.loops_per_10k, "loop_model": s.meta.get("loop_model", {"model": "none"}),
-            "sample": "cube" if s.periodic[2] else "slab", "dropped_unattached": s.meta["dropped_unattached"],
-            "cut_bonds": s.meta["cut_bonds"], "aggregation_s": s.meta["aggregation_s"]}
+    return AerogelStatistics(
+        n_particles=n, n_bonds=s.n_bonds, solid_fraction=s.meta["solid_fraction"],
+        aggregate_solid_fraction=s.meta["aggregate_solid_fraction"], density_kg_m3=mass / volume * 1e6,
+        mean_coordination=loops.mean_coordination, dangling_fraction=loops.dangling_fraction, loops=loops.loops,
+        loops_per_10k=loops.loops_per_10k, loop_model=s.meta.get("loop_model", {"model": "none"}),
+        sample="cube" if s.periodic[2] else "slab", dropped_unattached=s.meta["dropped_unattached"],
+        cut_bonds=s.meta["cut_bonds"], aggregation_s=s.meta["aggregation_s"])
 
 
-def _describe(st: dict) -> str:
-    if st["sample"] == "cube":
-        return (f"aerogel cube (periodic in x, y, z): {st['n_particles']} spheres, {st['n_bonds']} bonds (coordination "
-                f"{st['mean_coordination']:.2f}, {st['loops_per_10k']:.0f} loops per 10 000 spheres, loop model "
-                f"{st['loop_model']['model']}), solid fraction {st['solid_fraction']:.4f}")
-    return (f"aerogel slab: {st['n_particles']} spheres, {st['n_bonds']} bonds (coordination "
-            f"{st['mean_coordination']:.2f}, {st['loops_per_10k']:.0f} loops per 10 000 spheres, loop model "
-            f"{st['loop_model']['model']}), solid fraction {st['solid_fraction']:.4f} "
-            f"({st['dropped_unattached']} spheres left out: no bond path to the bottom after the cut)")
+def _describe(st: AerogelStatistics) -> str:
+    model = st.loop_model.get("model")
+    if st.sample == "cube":
+        return (f"aerogel cube (periodic in x, y, z): {st.n_particles} spheres, {st.n_bonds} bonds (coordination "
+                f"{st.mean_coordination:.2f}, {st.loops_per_10k:.0f} loops per 10 000 spheres, loop model "
+                f"{model}), solid fraction {st.solid_fraction:.4f}")
+    return (f"aerogel slab: {st.n_particles} spheres, {st.n_bonds} bonds (coordination "
+            f"{st.mean_coordination:.2f}, {st.loops_per_10k:.0f} loops per 10 000 spheres, loop model "
+            f"{model}), solid fraction {st.solid_fraction:.4f} "
+            f"({st.dropped_unattached} spheres left out: no bond path to the bottom after the cut)")
 
 
 SCENE = Scene(build=build_aerogel, statistics=statistics, run_keys=AerogelResult.structure_keys(), describe=_describe)

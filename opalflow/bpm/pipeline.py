@@ -22,6 +22,7 @@ from opalflow.lammps.datafile import write_data
 from opalflow.lammps.engine import run_script_sh
 from opalflow.materials import material
 from opalflow.runs.record import RunRecord, refuse_finished, write_build_summary
+from opalflow.runs.result import table_of
 from opalflow.store import write_text_atomic
 from opalflow.structure import Structure
 from opalflow.version import __version__
@@ -57,8 +58,9 @@ def prepare(spec: BpmWorkflow, out: Path, progress=None) -> tuple[CompressionDec
                       for n in dict.fromkeys(particle_material(t, spec.material) for t in s.type_names)},
         **deck.info()})
     if scene.statistics:        # what build's summary.json says of the structure, for the run's summary too
-        facts.statistics = scene.statistics_of(deck.source)
-        facts.structure = {k: facts.statistics[k] for k in scene.run_keys}
+        stats = scene.statistics_of(deck.source)
+        facts.statistics = table_of(stats)
+        facts.structure = {k: getattr(stats, k) for k in scene.run_keys}
     facts.build_timings_s = dict(deck.structure.meta.get("timings_s", {}))
     record = RunRecord.new(spec, deck=facts.to_dict(), folder=out)
     record.write(out)
@@ -73,12 +75,13 @@ def build(spec: BpmWorkflow, out: Path, say=print) -> None:
     deck, _ = prepare(spec, out, progress=say)
     scene = scene_of(spec)
     summary = {"workflow": spec.name, "opalflow_version": __version__}
-    if scene.statistics:
-        summary.update(scene.statistics_of(deck.source))
+    stats = scene.statistics_of(deck.source)
+    if stats is not None:
+        summary.update(table_of(stats))
     else:
         summary.update({"n_particles": deck.structure.n_particles, "n_bonds": deck.structure.n_bonds})
     if scene.describe:
-        say(scene.describe(summary))
+        say(scene.describe(stats))
     summary["deck"] = deck.info()
     summary["timings_s"] = {**deck.structure.meta.get("timings_s", {}),
                             "total": round(time.perf_counter() - start, 3)}

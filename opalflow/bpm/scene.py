@@ -11,6 +11,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
+from typing import Any
 
 from opalflow import registry
 from opalflow.store import atomic_path
@@ -29,24 +30,25 @@ class Scene:
 
     build : ``build(spec, progress) -> Structure`` with ``type_names`` (``substrate`` = fixed),
         ``bond_type_names`` by material and ``groups["substrate"]``.
-    statistics : ``statistics(structure) -> dict`` of numbers about the structure for the build
-        summary (``n_particles`` and ``n_bonds`` when not given).
-    run_keys : the keys of ``statistics`` that every run summary carries as well.
+    statistics : ``statistics(structure)`` -> a dataclass of numbers about the structure, the build summary's keys
+        (``n_particles`` and ``n_bonds`` when not given; :func:`opalflow.runs.result.table_of` makes the table).
+    run_keys : its fields that every run summary carries as well.
     describe : one line about the structure from its statistics, said by ``build``.
     cached : whether :meth:`structure` keeps what ``build`` made (not for a scene that only reads a file).
     """
 
     build: Callable[..., Structure]
-    statistics: Callable[[Structure], dict] | None = None
+    statistics: Callable[[Structure], Any] | None = None
     run_keys: tuple[str, ...] = ()
-    describe: Callable[[dict], str] | None = None
+    describe: Callable[[Any], str] | None = None
     cached: bool = True
 
-    def statistics_of(self, s: Structure) -> dict:
+    def statistics_of(self, s: Structure):
         """``statistics(s)``, kept in ``s.meta`` with the cached structure (a neighbour search and the slab
-        counts: 0.3 s of a one-second static run at d = 60 nm that a rerun from the cache no longer pays)."""
+        counts: 0.3 s of a one-second static run at d = 60 nm that a rerun from the cache no longer pays); None for
+        a scene without statistics."""
         if self.statistics is None:
-            return {}
+            return None
         if "statistics" not in s.meta:
             s.meta["statistics"] = self.statistics(s)
         return s.meta["statistics"]

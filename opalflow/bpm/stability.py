@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -33,28 +33,32 @@ from opalflow.bpm.spec import BpmWorkflow
 from opalflow.lammps.datafile import write_data
 from opalflow.lammps.engine import EngineError, script_commands, session
 from opalflow.lammps.syntax import num, render
+from opalflow.runs.result import optional, table_of
 from opalflow.store import write_json_atomic, write_text_atomic
 
 
 @dataclass
+class Criterion:
+    """One criterion of a short run: whether it passed and the figures it was judged by."""
+
+    passed: bool
+    figures: str
+
+
+@dataclass
 class StabilityResult:
-    """One short run: its time step, the criteria (name -> (passed, figures)) and the samples."""
+    """One short run: its time step, the criteria (name -> :class:`Criterion`) and the samples."""
 
     timestep_s: float
     timestep_factor: float
     steps: int
     passed: bool
-    criteria: dict[str, tuple[bool, str]]
+    criteria: dict[str, Criterion]
     seconds: float
     samples: dict[str, list[float]] = field(default_factory=dict)
 
     def failed(self) -> str:
-        return ", ".join(k for k, (ok, _) in self.criteria.items() if not ok)
-
-    def as_dict(self) -> dict:
-        d = asdict(self)
-        d["criteria"] = {k: {"passed": ok, "figures": fig} for k, (ok, fig) in self.criteria.items()}
-        return d
+        return ", ".join(k for k, c in self.criteria.items() if not c.passed)
 
 
 def check_script(deck, factor: float, every: int) -> str:
@@ -110,26 +114,26 @@ def run_check(deck: CompressionDeck, folder: Path, *, factor: float = 1.0, steps
     ke_tot = ke + erot - deck.initial_ke_zJ          # what the start gave is no energy the run created
     criteria = {}
     finite = bool(len(v)) and bool(np.all(np.isfinite(v)))
-    criteria["finite"] = (finite, "all values finite" if finite else
-                          "non-finite values" if len(v) else "no values (LAMMPS stopped before the first output)")
+    criteria["finite"] = Criterion(finite, "all values finite" if finite else "non-finite values" if len(v) else
+                                   "no values (LAMMPS stopped before the first output)")
     lost = "Lost atoms" in error or "lost" in error.lower()
-    criteria["no lost particles"] = (not lost, error if lost else "none lost")
+    criteria["no lost particles"] = Criterion(not lost, error if lost else "none lost")
     if error and not lost:
-        criteria["LAMMPS ran"] = (False, error)
+        criteria["LAMMPS ran"] = Criterion(False, error)
     if len(v) and finite:
         scale = max(float(np.max(np.abs(w_in))), 1e-30)
         excess = float(np.max(ke_tot - w_in))
-        criteria["energy account"] = (excess <= tolerance * scale,
-                                      f"max(KE - W_in) = {excess:.3g} zJ ({100 * excess / scale:+.2f} % of the "
-                                      f"largest work {scale:.3g} zJ; limit {100 * tolerance:g} %); largest KE "
-                                      f"{float(np.max(ke_tot)):.3g} zJ")
+        criteria["energy account"] = Criterion(excess <= tolerance * scale,
+                                               f"max(KE - W_in) = {excess:.3g} zJ ({100 * excess / scale:+.2f} % of "
+                                               f"the largest work {scale:.3g} zJ; limit {100 * tolerance:g} %); "
+                                               f"largest KE {float(np.max(ke_tot)):.3g} zJ")
         half = max(1, len(ke_tot) // 2)
         early = float(np.max(ke_tot[:half]))
         end = float(ke_tot[-1])
         bounded = end <= ke_growth * max(early, 1e-30) or end <= 0.01 * scale
-        criteria["kinetic energy bounded"] = (bounded, f"KE end {end:.3g} zJ, largest over the first half "
-                                                       f"{early:.3g} zJ (limit x{ke_growth:g})")
-    passed = all(ok for ok, _ in criteria.values())
+        criteria["kinetic energy bounded"] = Criterion(bounded, f"KE end {end:.3g} zJ, largest over the first "
+                                                                f"half {early:.3g} zJ (limit x{ke_growth:g})")
+    passed = all(c.passed for c in criteria.values())
     samples = {"step": step.tolist(), "ke_zJ": ke_tot.tolist(), "work_in_zJ": w_in.tolist()}
     return StabilityResult(dt_s, factor, int(step[-1]) if len(step) else 0, passed, criteria, seconds, samples)
 
@@ -186,18 +190,12 @@ class StabilityCheck:
     stiffest_mode: str
     steps: int
     strain: float | None
-    run: dict
+    run: StabilityResult
     headline: str = ""
     wall_s: float = 0.0
-    timestep_stable_max_s: float | None = None
-    estimate_over_bisected: float | None = None
-    bisection: list[BisectionStep] | None = None
-
-    def to_dict(self) -> dict:
-        """stability.json: the bisection's keys only where it ran."""
-        out = asdict(self)
-        return out if self.bisection is not None else {
-            k: v for k, v in out.items() if k not in ("timestep_stable_max_s", "estimate_over_bisected", "bisection")}
+    timestep_stable_max_s: float | None = optional()       # the bisection's: only where it ran
+    estimate_over_bisected: float | None = optional()
+    bisection: list[BisectionStep] | None = optional()
 
 
 def stability_check(spec: BpmWorkflow, out: Path, *, say=print, steps: int = 3000, timestep_factor: float = 1.0,
@@ -215,11 +213,11 @@ def stability_check(spec: BpmWorkflow, out: Path, *, say=print, steps: int = 300
         f"dt = {deck.dt_ns * timestep_factor * 1e-9:.3g} s (estimate x{timestep_factor:g}; the estimated limit is "
         f"{deck.timestep.limit_ns * 1e-9:.3g} s, stiffest: {deck.timestep.stiffest})")
     result = run_check(deck, out / "run", factor=timestep_factor, steps=steps, strain=strain)
-    for name, (ok, figures) in result.criteria.items():
-        say(f"  {'pass' if ok else 'FAIL'}  {name}: {figures}")
+    for name, c in result.criteria.items():
+        say(f"  {'pass' if c.passed else 'FAIL'}  {name}: {c.figures}")
     check = StabilityCheck(spec.name, result.passed, result.failed(), result.timestep_s, timestep_factor,
                            deck.dt_ns * 1e-9, deck.timestep.limit_ns * 1e-9, deck.timestep.stiffest, result.steps,
-                           strain, result.as_dict())
+                           strain, result)
     if bisect:
         say("bisection of the largest stable time step:")
         best, runs = bisect_timestep(deck, out / "bisection", steps=steps, strain=strain, say=say)
@@ -233,7 +231,7 @@ def stability_check(spec: BpmWorkflow, out: Path, *, say=print, steps: int = 300
     check.wall_s = time.perf_counter() - t0
     lines = [f"# Stability check: {spec.name}", "", check.headline + ".", "",
              "| criterion | result | figures |", "|---|---|---|"]
-    lines += [f"| {k} | {'pass' if ok else 'FAIL'} | {fig} |" for k, (ok, fig) in result.criteria.items()]
+    lines += [f"| {k} | {'pass' if c.passed else 'FAIL'} | {c.figures} |" for k, c in result.criteria.items()]
     if bisect:
         lines += ["", f"Largest stable time step found by bisection: {check.timestep_stable_max_s:.3g} s; "
                   f"the estimator's limit {check.timestep_limit_estimate_s:.3g} s "
@@ -243,6 +241,6 @@ def stability_check(spec: BpmWorkflow, out: Path, *, say=print, steps: int = 300
                   for r in check.bisection]
     lines += ["", "Criteria: opalflow/bpm/stability.py. Wall time "
               f"{check.wall_s:.1f} s."]
-    write_json_atomic(out / "stability.json", check.to_dict())
+    write_json_atomic(out / "stability.json", table_of(check))
     write_text_atomic(out / "stability.md", "\n".join(lines) + "\n")
     return check

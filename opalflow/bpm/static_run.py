@@ -94,7 +94,7 @@ def network_run(spec: BpmWorkflow, s, out: Path, t0: float, *, launcher: str, re
     scene = scene_of(spec)
     if scene.run_keys:
         stats = scene.statistics_of(sample.source)
-        facts.structure = {k: stats[k] for k in scene.run_keys}
+        facts.structure = {k: getattr(stats, k) for k in scene.run_keys}
     record = RunRecord.read(out) if resume else RunRecord.new(spec, deck=facts.to_dict(), folder=out)
     record.begin(out, launcher=launcher, restart=resume or "")
     return sample, net, RunFacts(spec, facts, spec.references()), record, written

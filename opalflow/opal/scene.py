@@ -8,15 +8,18 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
-from opalflow.bpm.bonds import bond_types_by_material, describe_network, find_bonds, network_statistics
+from opalflow.bpm.bonds import (NetworkStatistics, bond_types_by_material, describe_network, find_bonds,
+                                network_statistics)
 from opalflow.bpm.scene import Scene
 from opalflow.materials import material
 from opalflow.opal import pores as pore_geometry
 from opalflow.opal.result import OpalResult
 from opalflow.packing import dense_random_packing
+from opalflow.runs.result import optional
 from opalflow.opal.spec import OpalWorkflow, sample_box_nm
 from opalflow.opal.windows import coating_surface_distance, window_openings
 from opalflow.structure import Structure, quantize
@@ -166,7 +169,47 @@ def bulk_slab(s: Structure) -> tuple[float, float]:
     return float(z0), float(top)
 
 
-def structure_statistics(s: Structure) -> dict:
+@dataclass
+class Windows:
+    """The windows between neighbouring pores (:func:`opalflow.opal.windows.window_openings`): how many, how many
+    open, and their free radius (nm)."""
+
+    count: int
+    open: int
+    free_radius_nm_min: float
+    free_radius_nm_mean: float
+
+
+@dataclass
+class OpalStatistics:
+    """The numbers the paper reports about a structure (:func:`structure_statistics`); summary.json's keys."""
+
+    n_particles: int
+    n_bonds: int
+    box_nm: list[float]
+    sample_height_nm: float
+    substrate_thickness_nm: float
+    packing_fraction: float
+    porosity: float
+    total_porosity: float
+    bonds_per_particle: float
+    particles_per_um3: float
+    bonds_per_um3: float
+    bulk_slab_nm: list[float]
+    particles_per_um3_sample: float
+    bonds_per_um3_sample: float
+    max_overlap_fraction: float
+    n_by_material: dict[str, int]
+    n_bonds_by_type: dict[str, int]
+    n_pores: int
+    density_kg_m3: float
+    bond_length_nm: dict[str, float]
+    network: NetworkStatistics
+    windows: Windows | None = optional()
+    coating_max_distance_to_pore_surface_nm: float | None = optional()
+
+
+def structure_statistics(s: Structure) -> OpalStatistics:
     """The numbers the paper reports about a structure (section 2.1 and 4).
 
     ``particles_per_um3`` and ``bonds_per_um3`` (particles, and bonds by their
@@ -204,46 +247,32 @@ def structure_statistics(s: Structure) -> dict:
         bonds_in_bulk = int(np.count_nonzero((zmid >= bulk_lo) & (zmid < bulk_hi)))
     else:
         bonds_in_bulk = 0
-    stats = {
-        "n_particles": s.n_particles,
-        "n_bonds": s.n_bonds,
-        "box_nm": s.box_lengths.tolist(),
-        "sample_height_nm": m["sample_height_nm"],
-        "substrate_thickness_nm": m["substrate_top_nm"],
-        "packing_fraction": phi,
-        "porosity": 1 - n_sample / m["packing_particles_in_sample"],
-        "total_porosity": 1 - float(np.sum(vp[sample])) / sample_volume,
-        "bonds_per_particle": s.n_bonds / max(1, s.n_particles),
-        "particles_per_um3": int(np.count_nonzero(in_bulk)) / bulk_volume * NM3_PER_UM3,
-        "bonds_per_um3": bonds_in_bulk / bulk_volume * NM3_PER_UM3,
-        "bulk_slab_nm": [float(bulk_lo), float(bulk_hi)],
-        "particles_per_um3_sample": n_sample / sample_volume * NM3_PER_UM3,
-        "bonds_per_um3_sample": bonds_in_sample / sample_volume * NM3_PER_UM3,
-        "max_overlap_fraction": overlap,
-        "n_by_material": n_by_material,
-        "n_bonds_by_type": bonds_by_type,
-        "n_pores": int(len(m["pore_centres_nm"])),
-        "density_kg_m3": float(density_from_nano(density)),
-        "bond_length_nm": {"min": float(r0.min()) if len(r0) else 0.0,
-                           "max": float(r0.max()) if len(r0) else 0.0},
-    }
-    stats["network"] = network_statistics(s.positions, s.diameters, s.box_lengths, s.periodic, s.bonds, phi)
     pore_radius = m.get("pore_diameter_nm", 0.0) / 2
     windows = window_openings(s, pore_radius) if len(m["pore_centres_nm"]) else np.zeros(0)
-    if len(windows):
-        stats["windows"] = {"count": int(len(windows)), "open": int(np.count_nonzero(windows > 0)),
-                            "free_radius_nm_min": float(windows.min()),
-                            "free_radius_nm_mean": float(windows.mean())}
     coat = coating_surface_distance(s, pore_radius)
-    if len(coat):
-        stats["coating_max_distance_to_pore_surface_nm"] = float(coat.max())
-    return stats
+    return OpalStatistics(
+        n_particles=s.n_particles, n_bonds=s.n_bonds, box_nm=s.box_lengths.tolist(),
+        sample_height_nm=m["sample_height_nm"], substrate_thickness_nm=m["substrate_top_nm"], packing_fraction=phi,
+        porosity=1 - n_sample / m["packing_particles_in_sample"],
+        total_porosity=1 - float(np.sum(vp[sample])) / sample_volume,
+        bonds_per_particle=s.n_bonds / max(1, s.n_particles),
+        particles_per_um3=int(np.count_nonzero(in_bulk)) / bulk_volume * NM3_PER_UM3,
+        bonds_per_um3=bonds_in_bulk / bulk_volume * NM3_PER_UM3, bulk_slab_nm=[float(bulk_lo), float(bulk_hi)],
+        particles_per_um3_sample=n_sample / sample_volume * NM3_PER_UM3,
+        bonds_per_um3_sample=bonds_in_sample / sample_volume * NM3_PER_UM3, max_overlap_fraction=overlap,
+        n_by_material=n_by_material, n_bonds_by_type=bonds_by_type, n_pores=int(len(m["pore_centres_nm"])),
+        density_kg_m3=float(density_from_nano(density)),
+        bond_length_nm={"min": float(r0.min()) if len(r0) else 0.0, "max": float(r0.max()) if len(r0) else 0.0},
+        network=network_statistics(s.positions, s.diameters, s.box_lengths, s.periodic, s.bonds, phi),
+        windows=Windows(int(len(windows)), int(np.count_nonzero(windows > 0)), float(windows.min()),
+                        float(windows.mean())) if len(windows) else None,
+        coating_max_distance_to_pore_surface_nm=float(coat.max()) if len(coat) else None)
 
 
-def _describe(stats: dict) -> str:
-    return (f"{stats['n_particles']} particles, {stats['n_bonds']} bonds, porosity {stats['porosity']:.3f}, "
-            f"{stats['particles_per_um3']:.0f} particles/um^3, {stats['bonds_per_um3']:.0f} bonds/um^3; "
-            + describe_network(stats["network"]))
+def _describe(stats: OpalStatistics) -> str:
+    return (f"{stats.n_particles} particles, {stats.n_bonds} bonds, porosity {stats.porosity:.3f}, "
+            f"{stats.particles_per_um3:.0f} particles/um^3, {stats.bonds_per_um3:.0f} bonds/um^3; "
+            + describe_network(stats.network))
 
 
 def opal_structure(spec: OpalWorkflow, progress=None) -> Structure:

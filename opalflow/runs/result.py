@@ -67,6 +67,24 @@ def typed(hint, value):
     return value
 
 
+def optional(default=None):
+    """A field left out of its table (summary.json) where it is None (a number the run has no case for)."""
+    return field(default=default, metadata={"optional": True})
+
+
+def table_of(value):
+    """A dataclass as summary.json holds it: nested dataclasses as tables, optional fields (:func:`optional`,
+    ``key(optional=True)``) left out where None; lists and tables of them alike."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: table_of(getattr(value, f.name)) for f in dataclasses.fields(value)
+                if not (f.metadata.get("optional") and getattr(value, f.name) is None)}
+    if isinstance(value, dict):
+        return {k: table_of(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [table_of(v) for v in value]
+    return value
+
+
 def key(*cases: str, label: str = "", fmt: str = "{:.4g}", optional: bool = False, default=None,
         default_factory=dataclasses.MISSING):
     """A result key: the cases that give it, its report row (``label``, ``fmt``; none without a label),

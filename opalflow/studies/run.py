@@ -16,7 +16,7 @@ import dataclasses
 import math
 import time
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -29,7 +29,7 @@ from opalflow.materials import material
 from opalflow.registry import resolve
 from opalflow.resources import DATA, resource
 from opalflow.runs.record import RunRecord, finish
-from opalflow.runs.result import Result
+from opalflow.runs.result import Result, optional, table_of
 from opalflow.spec import SpecError
 from opalflow.store import new_figure, save_figure
 from opalflow.studies.spec import STUDY_TYPES, StudyWorkflow
@@ -96,24 +96,6 @@ def paper() -> Paper:
     return Paper(raw.pop("structure"), raw.pop("tolerance"), PaperCalibration(**raw.pop("calibration")),
                  PaperBulk(**raw.pop("bulk")), PaperCoating(coating["E_exp_GPa"], PaperCoated(**coating["coated20"])),
                  PaperPorosity(**raw.pop("porosity")))
-
-
-def optional(default=None):
-    """A result field left out of summary.json where it is None (a number the run has no case for)."""
-    return field(default=default, metadata={"optional": True})
-
-
-def summary_of(result):
-    """A study result dataclass as summary.json holds it: nested dataclasses and fits as tables, optional fields
-    (:func:`optional`) left out where None."""
-    if dataclasses.is_dataclass(result):
-        return {f.name: summary_of(getattr(result, f.name)) for f in dataclasses.fields(result)
-                if not (f.metadata.get("optional") and getattr(result, f.name) is None)}
-    if isinstance(result, dict):
-        return {k: summary_of(v) for k, v in result.items()}
-    if isinstance(result, (list, tuple)):
-        return [summary_of(v) for v in result]
-    return result
 
 
 # ----------------------------------------------------------------------------- calibration
@@ -833,7 +815,7 @@ def run(spec: StudyWorkflow, out: Path, say=print, executor=None) -> Result:
     if result is None:       # too few jobs finished for the study's analysis: the failures are the result
         summary, body = {"headline": f"no results: too few jobs finished ({len(failed)} failed)"}, []
     else:
-        summary = summary_of(result)
+        summary = table_of(result)
         body = resolve(STUDY_TYPES[spec.study.type].render)(spec, result, out)
     summary["failed_jobs"] = {k: v["error"] for k, v in failed.items()}
     if failed:

@@ -162,3 +162,21 @@ def potential_path(name: str) -> Path:
 def load_parameters(potential: str, element: str) -> TersoffParameters:
     """The ``element`` entry of a potential given by path or by name in data/potentials/."""
     return read_tersoff(potential_path(potential), element)
+
+
+@dataclass(frozen=True)
+class Properties:
+    """Table 1's properties of a parameter set: a0 (A), E_c (eV), B, C', C11, C12, C44^0 and C44 (GPa)."""
+
+    a0_A: float
+    Ec_eV: float
+    B_GPa: float
+    Cprime_GPa: float
+    C11_GPa: float
+    C12_GPa: float
+    C44_0_GPa: float
+    C44_GPa: float
+
+    def of(self, name: str) -> float:
+        """The property named ``name`` (a Table 1 key)."""
+        return getattr(self, name)

@@ -19,24 +19,6 @@ ALL = (PROPERTIES, STABILITY, FIT)
 
 
 @dataclass
-class Properties:
-    """Table 1's properties of a parameter set: a0 (A), E_c (eV), B, C', C11, C12, C44^0 and C44 (GPa)."""
-
-    a0_A: float
-    Ec_eV: float
-    B_GPa: float
-    Cprime_GPa: float
-    C11_GPa: float
-    C12_GPa: float
-    C44_0_GPa: float
-    C44_GPa: float
-
-    def of(self, name: str) -> float:
-        """The property named ``name`` (a Table 1 key)."""
-        return getattr(self, name)
-
-
-@dataclass
 class PropertyError:
     """One property against Table 1: its target (the fit's, absolute and relative error) and the authors' own
     evaluation of Table 2's set (the difference)."""

@@ -20,10 +20,10 @@ from opalflow.store import new_figure, save_figure
 from opalflow.tersoff import fit as fitting
 from opalflow.tersoff import stability as stab
 from opalflow.tersoff.model import DiamondModel, neighbor_radius
-from opalflow.tersoff.parameters import (COLUMNS, REFERENCE_POTENTIAL, TersoffParameters, load_parameters,
+from opalflow.tersoff.parameters import (COLUMNS, REFERENCE_POTENTIAL, Properties, TersoffParameters, load_parameters,
                                          read_tersoff, write_tersoff)
 from opalflow.tersoff.properties import MODULI_KEYS as MODULI, evaluate
-from opalflow.tersoff.result import Properties, PropertyError, ScanRow, StabilitySummary, TersoffResult
+from opalflow.tersoff.result import PropertyError, ScanRow, StabilitySummary, TersoffResult
 from opalflow.tersoff.spec import TersoffWorkflow
 from opalflow.version import __version__
 

@@ -15,24 +15,16 @@ from functools import lru_cache
 import numpy as np
 
 from opalflow.spec import SpecError
-from opalflow.tersoff.parameters import TersoffParameters
+from opalflow.tersoff.parameters import Properties, TersoffParameters
 
 
 @dataclass(frozen=True)
-class Crystal:
-    """The diamond single crystal at its zero-pressure lattice constant ``a0_A``: cohesive energy (eV), the
-    residual dE/da (eV/A per atom), bulk modulus, C' and the cubic elastic constants (GPa; C44 relaxed, C44^0
-    without the internal relaxation): :meth:`opalflow.tersoff.model.DiamondModel.evaluate` at a0."""
+class Crystal(Properties):
+    """The diamond single crystal at its zero-pressure lattice constant ``a0_A``: Table 1's properties (C44 relaxed,
+    C44^0 without the internal relaxation) and the residual dE/da (eV/A per atom):
+    :meth:`opalflow.tersoff.model.DiamondModel.evaluate` at a0."""
 
-    a0_A: float
-    Ec_eV: float
     dE_da_eV_per_A: float
-    B_GPa: float
-    Cprime_GPa: float
-    C11_GPa: float
-    C12_GPa: float
-    C44_0_GPa: float
-    C44_GPa: float
 
     @property
     def constants(self) -> tuple[float, float, float]:

@@ -85,8 +85,9 @@ class Measured(WaveSpeeds):
 
 
 @dataclass
-class WaveRun:
-    """One wave experiment: the front's speed (least squares over the stations used) and what it took."""
+class WaveFront:
+    """One wave experiment's front: its speed (least squares over the stations used), the column and the piston,
+    and what it took."""
 
     experiment: str
     elements: int
@@ -103,6 +104,13 @@ class WaveRun:
     stations_used: int
     wall_s: float
     s_per_macro_step: float
+
+
+@dataclass
+class WaveRun(WaveFront):
+    """One wave experiment as its job keeps it: the front and its curves (times, stations, arrival times, the
+    section velocity profile)."""
+
     times_ps: list
     stations_nm: list
     arrival_ps: list
@@ -153,25 +161,10 @@ class TensionExperiment:
 
 
 @dataclass
-class WaveExperiment:
-    """One wave of a waves run: its :class:`WaveRun` without the curves, and its errors against the reference and
-    against the speeds of the measured moduli."""
+class WaveExperiment(WaveFront):
+    """One wave of a waves run: its front (:class:`WaveRun` without the curves), and its errors against the
+    reference and against the speeds of the measured moduli."""
 
-    experiment: str
-    elements: int
-    cubes: list[int]
-    cube_nm: float
-    length_nm: float
-    lateral: str
-    piston_m_s: float
-    timestep_ps: float
-    macro_steps: int
-    evaluations: int
-    speed_m_s: float
-    speed_stderr_m_s: float
-    stations_used: int
-    wall_s: float
-    s_per_macro_step: float
     error_vs_reference: float
     error_vs_measured_moduli: float
 
