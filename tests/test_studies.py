@@ -17,6 +17,7 @@ from opalflow.studies import sweep
 from opalflow.runs import executors
 from opalflow.runs import jobs as jobs_mod
 from opalflow.runs.executors import run_jobs
+from opalflow.runs.result import table_of
 from opalflow.runs.spec import ExecutorSpec
 
 LOCAL1 = ExecutorSpec(workers=1)
@@ -127,7 +128,7 @@ def test_newton_calibration_on_a_known_model(tmp_path, monkeypatch):
         assert abs(cal.youngs_modulus_GPa / 1.7 - 1) <= 0.005
         assert abs(cal.strength_MPa / 41.3 - 1) <= 0.005
         assert any("| 1 |" in line for line in studies.calibration_render(spec, cal, tmp_path))
-        summary = studies.summary_of(cal)          # summary.json's keys, as before the result was a class
+        summary = table_of(cal)          # summary.json's keys, as before the result was a class
         assert set(summary) == {"youngs_modulus_GPa", "strength_MPa", "dem_runs", "bond_E_GPa", "bond_strength_MPa",
                                 "converged", "history", "jacobian", "targets", "headline"}
         assert set(summary["history"][0]) == {"iteration", "bond_E_GPa", "bond_strength_MPa", "youngs_modulus_GPa",
