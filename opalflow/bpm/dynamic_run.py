@@ -262,8 +262,8 @@ def read_snapshots(out: Path, sample: SampleFacts, curve: mech.Curve,
     bond_strains = {step: mech.bond_strains(mech.read_dump_local(path))
                     for step, path in mech.snapshot_files(out, "bonds").items()}
     edges = mech.strain_bins(list(bond_strains.values()))
-    histograms = {step: BondStrainHistogram(float(np.interp(step, mid_step, strain)), mech.histogram_fraction(e, edges),
-                                            edges)
+    histograms = {step: BondStrainHistogram(float(np.interp(step, mid_step, strain)),
+                                            mech.histogram_fraction(e, edges), edges)
                   for step, e in bond_strains.items()}
     return snapshots, histograms
 

@@ -617,7 +617,8 @@ class FractureResult:
 def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray, supports: Supports, *,
                    strain_max: float = 0.04, stop_fraction: float = 0.5, events_max: int = 100_000,
                    tolerance: float = 0.0, resolver: str = "auto", rtol: float = 1e-6, local_rtol: float = 0.0,
-                   state: SavedState | None = None, checkpoint=None, checkpoint_s: float = 5.0, should_stop=lambda: False,
+                   state: SavedState | None = None, checkpoint=None, checkpoint_s: float = 5.0,
+                   should_stop=lambda: False,
                    contacts: Contacts | None = None, say=print) -> FractureResult:
     """The event loop of the module docstring under the loading's ``supports``
     (:meth:`opalflow.bpm.loading.Loading.supports`, as in :func:`opalflow.bpm.static.solve_compression`).
@@ -631,11 +632,11 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
 
     Stops when the next event would lie beyond ``strain_max``, when the stress after an event has fallen
     below ``stop_fraction`` of the peak, when no path carries load, or after ``events_max`` events.
-    ``state`` (a :class:`SavedState`, given to ``checkpoint(state)`` every ``checkpoint_s`` seconds, before :class:`Stopped` is raised when
-    ``should_stop()`` turns true, and on Ctrl-C): continue a killed run from its events (the broken bonds are
-    theirs) and the displacements just before its peak event (for the fracture pictures); the result is the
-    same (with an iterative re-solve or the local step it restarts from a global re-solve: the same to the
-    re-solve's tolerance, not to the digit).
+    ``state`` (a :class:`SavedState`, given to ``checkpoint(state)`` every ``checkpoint_s`` seconds, before
+    :class:`Stopped` is raised when ``should_stop()`` turns true, and on Ctrl-C): continue a killed run from its
+    events (the broken bonds are theirs) and the displacements just before its peak event (for the fracture
+    pictures); the result is the same (with an iterative re-solve or the local step it restarts from a global
+    re-solve: the same to the re-solve's tolerance, not to the digit).
     """
     if resolver not in RESOLVERS:
         raise InputError(f"compression.resolver = {resolver!r}: must be one of {', '.join(RESOLVERS)}")

@@ -120,7 +120,8 @@ def status_lines(folder: str | Path, tail: int = 8) -> list[str]:
                             f"analyze {job}` writes it again")
                 continue
             wall = s.get("wall_s")
-            rows.append(f"  finished  {label}: {s['headline']}" + (f" ({wall:.0f} s)" if finite_number(wall) is not None else ""))
+            took = f" ({wall:.0f} s)" if finite_number(wall) is not None else ""
+            rows.append(f"  finished  {label}: {s['headline']}" + took)
         elif state in ("failed", "died", "damaged"):
             rows.append(f"  {state.upper():<9} {label}: {meta.get('error') or 'no reason recorded'} [{job}]")
             rows += [f"            | {line}" for line in meta.get("log_tail", "").splitlines()[-tail:]]

@@ -156,7 +156,8 @@ def _run_properties(spec: TersoffWorkflow, out: Path, say=print) -> TersoffResul
     rows = _scan_table(ev, exact)
     _plot_scan(rows, out / "strain_scan.png")
     result = TersoffResult(
-        mode="properties", **dataclasses.asdict(props), loss=loss(params), reference_loss=loss(read_tersoff(REFERENCE_POTENTIAL)),
+        mode="properties", **dataclasses.asdict(props), loss=loss(params),
+        reference_loss=loss(read_tersoff(REFERENCE_POTENTIAL)),
         strain=ev.strain, spread_GPa=ev.spread, model=exact,
         lammps_minus_model={k: props.of(k) - exact[k] for k in LABELS},
         reference=_errors(props, ref), strain_scan=rows, lammps_s=ev.seconds,

@@ -5,8 +5,9 @@ Each run folder gets ``results.h5`` (every dataset with ``units``, tables with `
 ``wall_s``; written last), ``report.md`` beside the references, the plots, ``.vtu`` meshes, and
 ``jobs/``: each experiment a :class:`opalflow.runs.jobs.Job` (its own spec, one mesh and seed, in a folder named by
 its label and spec hash, with its record and its result: :class:`TensionRun`, :class:`WaveRun`,
-:class:`Measured` of :mod:`opalflow.tersoff.polycrystal.result`), so ``--resume`` skips what is done with the same inputs, a changed experiment runs anew, and
-``status`` lists them.
+:class:`Measured` of :mod:`opalflow.tersoff.polycrystal.result`), so ``--resume`` skips what is done with the same
+inputs, a changed experiment runs anew, and ``status`` lists them; the run's own result is a :class:`TensionResult`
+or :class:`WavesResult`.
 """
 from __future__ import annotations
 
