@@ -8,20 +8,20 @@ and status reads one back (:meth:`ProgressNote.read`).
 from __future__ import annotations
 
 import dataclasses
-import math
 import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from opalflow.spec import is_number
 from opalflow.store import read_json, write_json_atomic
 
 PROGRESS_FILE = "progress.json"
 
 
-def finite_number(x) -> float | None:
-    """``x`` where it is a finite int or float (not a bool) as a float, else None."""
-    return float(x) if isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) else None
+def _number(x) -> float | None:
+    """``x`` as a float where it is a number (:func:`opalflow.spec.is_number`), else None."""
+    return float(x) if is_number(x) else None
 
 
 @dataclass
@@ -48,10 +48,10 @@ class ProgressNote:
         :class:`opalflow.store.DamagedFile` where the file cannot be read as a table."""
         raw = read_json(Path(folder) / PROGRESS_FILE, "the run's progress", "")
         message, unit = raw.get("message"), raw.get("unit")
-        return cls(time=finite_number(raw.get("time")), message=message if isinstance(message, str) else None,
-                   step=finite_number(raw.get("step")), total=finite_number(raw.get("total")),
-                   rate_steps_s=finite_number(raw.get("rate_steps_s")), left_s=finite_number(raw.get("left_s")),
-                   strain=finite_number(raw.get("strain")), unit=unit if isinstance(unit, str) else "step")
+        return cls(time=_number(raw.get("time")), message=message if isinstance(message, str) else None,
+                   step=_number(raw.get("step")), total=_number(raw.get("total")),
+                   rate_steps_s=_number(raw.get("rate_steps_s")), left_s=_number(raw.get("left_s")),
+                   strain=_number(raw.get("strain")), unit=unit if isinstance(unit, str) else "step")
 
 
 class Progress:

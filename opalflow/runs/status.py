@@ -11,10 +11,10 @@ from collections import Counter
 from pathlib import Path
 
 from opalflow import registry
-from opalflow.progress import PROGRESS_FILE, ProgressNote, finite_number
+from opalflow.progress import PROGRESS_FILE, ProgressNote
 from opalflow.runs.record import RunRecord
 from opalflow.runs.result import is_finished, read_summary
-from opalflow.spec import InputError, SpecError
+from opalflow.spec import InputError, SpecError, is_number
 from opalflow.store import RECORD, SUMMARY, DamagedFile, lock_owner, process_alive
 
 #: the record's states (opalflow.runs.record.STATES, built shown as pending) and what status sees besides:
@@ -120,7 +120,7 @@ def status_lines(folder: str | Path, tail: int = 8) -> list[str]:
                             f"analyze {job}` writes it again")
                 continue
             wall = s.get("wall_s")
-            took = f" ({wall:.0f} s)" if finite_number(wall) is not None else ""
+            took = f" ({wall:.0f} s)" if is_number(wall) else ""
             rows.append(f"  finished  {label}: {s['headline']}" + took)
         elif state in ("failed", "died", "damaged"):
             rows.append(f"  {state.upper():<9} {label}: {meta.get('error') or 'no reason recorded'} [{job}]")
