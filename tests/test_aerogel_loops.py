@@ -6,6 +6,8 @@ import math
 import numpy as np
 import pytest
 
+import opalflow
+
 from opalflow.aerogel.aggregation import aggregate, box_edge, gaussian_diameters
 from opalflow.aerogel.fractal import pair_correlation, radius_of_gyration, structure_factor
 from opalflow.aerogel.loops import deflect_dangling, loop_statistics, network_bonds, winding_rank
@@ -240,3 +242,32 @@ def test_density_study_fits_each_loop_model(tmp_path):
         assert sum(m["energy_split"].values()) == pytest.approx(1.0, rel=1e-9)
     assert s["models"]["restructuring"]["loops_per_10k"] > 10 * max(s["models"]["none"]["loops_per_10k"], 10)
     assert (out / "density.png").stat().st_size > 0
+
+
+def test_strength_study_gives_n_and_m_from_the_same_slabs(tmp_path):
+    """aerogel_strength on small slabs (one loop model, 2 fractions x 2 seeds): each slab's quasi-static run gives
+    a strength, E equal to a static solve of the same slab (the same linear network), the energy to the peak as the area under
+    its saw-tooth (the first event's peak: sigma eps / 2), and the summary's n and m with their intervals."""
+    out = tmp_path / "strength"
+    assert main(["run", "aerogel_strength", "--out", str(out), "--set", "study.solid_fractions=[0.06, 0.12]",
+                 "--set", "study.seeds=[1, 2]", "--set", 'study.loop_models=["restructuring"]',
+                 "--set", 'study.set=["aggregate.particles=600", "bonds.smooth=false", "compression.strain_max=0.5"]',
+                 "--set", "executor.workers=2"]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert s["failed_jobs"] == {}
+    runs = s["models"]["restructuring"]["runs"]
+    assert len(runs) == 4 and all(r["loaded"]["method"] == "quasistatic" for r in runs)
+    static = opalflow.run("aerogel_compression", tmp_path / "static", quiet=True, set={
+        "aggregate.particles": 600, "aggregate.loops": "restructuring", "aggregate.solid_fraction": 0.06,
+        "aggregate.seed": 1, "compression.method": "static", "compression.drop_loose": True})
+    first = next(r for r in runs if (r["target_solid_fraction"], r["seed"]) == (0.06, 1))
+    assert first["E_kPa"] == pytest.approx(static["youngs_modulus_GPa"] * 1e6, rel=1e-6)   # the same first solve
+    for r in runs:
+        q = r["loaded"]
+        if q["broken_at_peak"] == 0:
+            assert q["energy_to_peak_kJ_m3"] == pytest.approx(0.5 * q["strength_kPa"] * q["strain_at_peak"], rel=1e-9)
+    for key in ("modulus_exponent", "strength_exponent"):
+        lo, hi = s[f"{key}_ci95"]
+        assert math.isfinite(s[key]) and lo < s[key] < hi
+    assert [x["target_solid_fraction"] for x in s["models"]["restructuring"]["strength"]] == [0.06, 0.12]
+    assert (out / "curves.png").stat().st_size > 0 and "sigma = a rho^n" in (out / "report.md").read_text()

@@ -194,6 +194,7 @@ def analyze(out: Path, started: float | None = None, lammps_s: float | None = No
         strength_MPa=float(stress[peak]) if breakable else None,
         peak_stress_MPa=None if breakable else float(stress[peak]),
         strain_at_peak=float(strain[peak]), strain_at_peak_specimen=float(strain_top[peak]),
+        energy_to_peak_kJ_m3=float(np.trapezoid(stress[:peak + 1], strain[:peak + 1])) * 1e3 if breakable else None,
         timestep_s=sample.timestep_s, steps=int(curve.step[-1]),
         # the last averaged row lies within one output interval of the last step of a whole run
         complete=bool(curve.step[-1] > sample.steps - sample.output_every_steps),

@@ -882,12 +882,19 @@ class PeakFacts:
     events: int
     broken_bonds: int
     broken_bonds_at_peak: int
+    energy_to_peak_kJ_m3: float | None = None
 
 
 def peak_facts(res: FractureResult) -> PeakFacts:
-    """Strength, strain at peak, E of the first branch and the event counts."""
+    """Strength, strain at peak, E of the first branch, the event counts and the energy to the peak: the area
+    under the saw-tooth up to the peak (between events the network is linear, stress on a line through the
+    origin, so the trapezoids are exact)."""
     if not res.events:
         return PeakFacts(res.modulus_MPa / 1e3, math.nan, math.nan, 0, 0, 0)
     p = res.peak
+    strain = [0.0] + [x for e in res.events[:p] for x in (e.strain, e.strain)] + [res.events[p].strain]
+    stress = ([0.0] + [x for e in res.events[:p] for x in (e.stress_MPa, e.stress_after_MPa)]
+              + [res.events[p].stress_MPa])
     return PeakFacts(res.modulus_MPa / 1e3, res.events[p].stress_MPa, res.events[p].strain, len(res.events),
-                     int((~res.alive).sum()), sum(len(e.bonds) for e in res.events[:p]))
+                     int((~res.alive).sum()), sum(len(e.bonds) for e in res.events[:p]),
+                     float(np.trapezoid(stress, strain)) * 1e3)

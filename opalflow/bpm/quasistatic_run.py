@@ -135,7 +135,7 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
         spec.kind, run.sample.structure or {}, workflow=spec.name, method="quasistatic", loading=loading.name,
         youngs_modulus_GPa=E, youngs_modulus_specimen_GPa=E,
         strength_MPa=got.strength_MPa, strain_at_peak=got.strain_at_peak,
-        broken_bonds=got.broken_bonds, broken_bonds_by_material=by_material,
+        energy_to_peak_kJ_m3=got.energy_to_peak_kJ_m3, broken_bonds=got.broken_bonds, broken_bonds_by_material=by_material,
         broken_bonds_at_peak=got.broken_bonds_at_peak,
         broken_bonds_by_check=broken_by_check(res, sample, spec.bonds.breaking, peak_only=False),
         broken_bonds_by_check_at_peak=broken_by_check(res, sample, spec.bonds.breaking, peak_only=True),

@@ -74,6 +74,8 @@ class CompressionResult(Result):
     youngs_modulus_specimen_GPa: float = key(*LOADED, label="Young's modulus, top-layer strain (GPa)")
     strength_MPa: float | None = key(*BREAKING, label="strength (MPa)")
     strain_at_peak: float | None = key(*BREAKING, label="strain at peak", fmt="{:.4f}")
+    #: the work of the load per unit volume up to the peak, the area under the stress-strain curve (kJ/m^3)
+    energy_to_peak_kJ_m3: float | None = key(*BREAKING, label="energy to the peak (kJ/m^3)", optional=True)
     strain_at_peak_specimen: float = key(DYNAMIC)                 # the top layer's (no plate settling)
     peak_stress_MPa: float | None = key(DYNAMIC, optional=True)   # the peak of a loading that breaks nothing
     broken_bonds: int = key(*BREAKING, label="broken bonds at the end", fmt="{}")

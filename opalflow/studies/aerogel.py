@@ -34,13 +34,17 @@ def literature() -> dict:
 
 
 def _curve(out: Path, job: Job) -> tuple[np.ndarray, np.ndarray] | None:
-    """Strain and stress of a finished dynamic job (its results.h5)."""
+    """Strain and stress of a finished dynamic or quasi-static job (its results.h5; the quasi-static one's
+    saw-tooth: each event's stress before and after it, from the origin)."""
     import h5py
 
     path = job.folder(out) / RESULTS
     if not path.exists():
         return None
     with h5py.File(path, "r") as h:
+        if "quasistatic" in h:
+            e, before, after = (h[f"quasistatic/{k}"][()] for k in ("strain", "stress_MPa", "stress_after_MPa"))
+            return np.r_[0.0, np.repeat(e, 2)], np.r_[0.0, np.column_stack([before, after]).ravel()]
         return h["curve/strain"][()], h["curve/stress_MPa"][()]
 
 
@@ -167,8 +171,25 @@ def _plot_models(curves: dict, path: Path) -> None:
 
 
 @dataclass
+class StrengthRun:
+    """The strength job of one slab (``study.method`` dynamic or quasistatic): its E, its strength, the strain and
+    the energy (the area under the curve) to the peak, the bonds broken before the peak and the bonds broken in the
+    run by each check of the breaking rule (quasi-static)."""
+
+    method: str
+    E_kPa: float
+    strength_kPa: float | None
+    strain_at_peak: float | None
+    energy_to_peak_kJ_m3: float | None
+    broken_at_peak: int | None
+    broken_by_check: dict[str, int]
+    wall_s: float
+
+
+@dataclass
 class DensityRun:
-    """One solid fraction x seed of one loop model: the static E, and the dynamic E and strength where run."""
+    """One solid fraction x seed of one loop model: the static E (and its energy by mode), and the strength run
+    where the study's method gives one."""
 
     loop_model: str
     target_solid_fraction: float
@@ -179,15 +200,43 @@ class DensityRun:
     mean_coordination: float | None
     loops_per_10k: float | None
     energy_split: dict
-    E_dynamic_kPa: float | None
-    strength_kPa: float | None
+    loaded: StrengthRun | None
     wall_s: float
+
+    @property
+    def strength_kPa(self) -> float | None:
+        return self.loaded.strength_kPa if self.loaded else None
+
+
+@dataclass
+class DensityStrength:
+    """The strength of one loop model at one solid fraction over its seeds: geometric means, the seeds' scatter
+    (max / min) and where that scatter comes from.  Below the peak a slab is linear where no bond broke before
+    it, so sigma = E eps_peak and var(ln sigma) = var(ln E) + var(ln eps) + 2 cov: ``share_E`` and ``share_strain``
+    are the two variances over var(ln sigma), ``corr_E_strain`` their correlation (the stiff slabs break early
+    where it is negative)."""
+
+    target_solid_fraction: float
+    runs: int
+    density_kg_m3: float
+    strength_kPa: float
+    strength_max_min: float
+    E_kPa: float
+    strength_per_E: float
+    strain_at_peak: float
+    energy_to_peak_kJ_m3: float
+    broken_at_peak: float
+    share_E: float
+    share_strain: float
+    corr_E_strain: float
+    broken_by_check: dict[str, int]
 
 
 @dataclass
 class DensitySeries:
-    """A loop model's runs, its fits (E ~ rho^m; sigma ~ rho^n where three dynamic runs have a strength), the
-    largest E scatter between seeds, the network's coordination and loops, the bonds' energy by mode."""
+    """A loop model's runs, its fits (E ~ rho^m; sigma ~ rho^n where three runs have a strength), the largest E
+    scatter between seeds, the network's coordination and loops, the bonds' energy by mode, the strength per
+    solid fraction (with a strength method)."""
 
     runs: list[DensityRun]
     fits: dict[str, Fit]
@@ -195,23 +244,31 @@ class DensitySeries:
     mean_coordination: float
     loops_per_10k: float
     energy_split: dict
+    strength: list[DensityStrength]
 
 
 @dataclass
 class Density:
+    """The density study: every run, the first loop model's fits (and its exponents with their 95 % intervals as
+    the summary's ``modulus_exponent``, ``strength_exponent``), each loop model's series, the literature."""
+
     runs: list[DensityRun]
     fits: dict[str, Fit]
     models: dict[str, DensitySeries]
     literature: dict
+    modulus_exponent: float
+    modulus_exponent_ci95: tuple[float, float]
+    strength_exponent: float | None = None
+    strength_exponent_ci95: tuple[float, float] | None = None
     headline: str = ""
 
 
 def _density_fits(runs: list[DensityRun]) -> dict[str, Fit]:
-    """E ~ rho^m (and sigma ~ rho^n where three dynamic runs have a strength) of one series."""
+    """E ~ rho^m (and sigma ~ rho^n where three runs have a strength) of one series."""
     fits = {"E": fit_power_law([r.density_kg_m3 for r in runs], [r.E_kPa for r in runs])}
-    dyn = [r for r in runs if r.strength_kPa]
-    if len(dyn) >= 3:
-        fits["strength"] = fit_power_law([r.density_kg_m3 for r in dyn], [r.strength_kPa for r in dyn])
+    broke = [r for r in runs if r.strength_kPa]
+    if len(broke) >= 3:
+        fits["strength"] = fit_power_law([r.density_kg_m3 for r in broke], [r.strength_kPa for r in broke])
     return fits
 
 
@@ -225,9 +282,31 @@ def _scatter(runs: list[DensityRun]) -> float:
     return worst
 
 
+def _strength_at(f: float, runs: list[DensityRun]) -> DensityStrength | None:
+    """:class:`DensityStrength` of the runs at target solid fraction ``f`` that have a strength."""
+    rs = [r for r in runs if r.target_solid_fraction == f and r.strength_kPa and r.loaded.E_kPa > 0]
+    if not rs:
+        return None
+    sig, E, eps = (np.log([x for x in v]) for v in ([r.strength_kPa for r in rs], [r.loaded.E_kPa for r in rs],
+                                                    [r.loaded.strain_at_peak for r in rs]))
+    var = float(np.var(sig)) if len(rs) > 1 else 0.0
+    checks = {c: sum(r.loaded.broken_by_check.get(c, 0) for r in rs) for c in rs[0].loaded.broken_by_check}
+    energy = [r.loaded.energy_to_peak_kJ_m3 for r in rs if r.loaded.energy_to_peak_kJ_m3 is not None]
+    broken = [r.loaded.broken_at_peak for r in rs if r.loaded.broken_at_peak is not None]
+    return DensityStrength(
+        f, len(rs), float(np.exp(np.mean(np.log([r.density_kg_m3 for r in rs])))), float(np.exp(sig.mean())),
+        float(np.exp(sig.max() - sig.min())), float(np.exp(E.mean())), float(np.exp((sig - E).mean())),
+        float(np.exp(eps.mean())), float(np.exp(np.mean(np.log(energy)))) if energy else float("nan"),
+        float(np.mean(broken)) if broken else float("nan"),
+        float(np.var(E)) / var if var else float("nan"), float(np.var(eps)) / var if var else float("nan"),
+        float(np.corrcoef(E, eps)[0, 1]) if len(rs) > 2 and np.std(E) and np.std(eps) else float("nan"), checks)
+
+
 def aerogel_density_jobs(spec: StudyWorkflow) -> list[Job]:
-    """Each loop model x solid fraction x seed: a static solve and (study.method = "dynamic") a LAMMPS run
-    (``at``: model, solid fraction, seed, the pair's name)."""
+    """Each loop model x solid fraction x seed (``at``: model, solid fraction, seed, the slab's name): a static solve
+    (``NAME_static``: E, energy by mode), a quasi-static run (``NAME``: E by the same first solve, and the strength;
+    no static job: the slab is aggregated once) or a dynamic run (``NAME``: strength) with a static solve beside it
+    (E without a fit)."""
     st = spec.study
     many = len(st.loop_models) > 1
     jobs = []
@@ -236,11 +315,13 @@ def aerogel_density_jobs(spec: StudyWorkflow) -> list[Job]:
         for f in st.solid_fractions:
             for s in st.seeds:
                 common = {"aggregate.solid_fraction": float(label_number(f)), "aggregate.seed": s,
-                          **({"aggregate.loops": model} if many else {})}
+                          "aggregate.loops": model}      # (one model too: the series is what its label says)
                 name = f"{prefix}phi{label_number(f)}_s{s}"
                 at = (model, f, s, name)
-                jobs.append(Job(f"{name}_static", job_spec(spec, {**common, "compression.method": "static"}), at=at))
-                if not METHODS[st.method].linear:     # study.method = "static": E only, no strength
+                if not METHODS[st.method].linear or not METHODS[st.method].strength:
+                    jobs.append(Job(f"{name}_static", job_spec(spec, {**common, "compression.method": "static"}),
+                                    at=at))
+                if METHODS[st.method].strength:
                     jobs.append(Job(name, job_spec(spec, common), at=at))
     return jobs
 
@@ -249,28 +330,39 @@ def _density_series(runs: list[DensityRun]) -> DensitySeries:
     fits = _density_fits(runs)
     split = {k: float(np.mean([r.energy_split[k] for r in runs if r.energy_split]))
              for k in ("stretching", "shear", "bending", "twisting") if any(r.energy_split for r in runs)}
+    strength = [x for f in sorted({r.target_solid_fraction for r in runs}) if (x := _strength_at(f, runs))]
     return DensitySeries(runs, fits, _scatter(runs), float(np.mean([r.mean_coordination or 0 for r in runs])),
-                         float(np.mean([r.loops_per_10k or 0 for r in runs])), split)
+                         float(np.mean([r.loops_per_10k or 0 for r in runs])), split, strength)
+
+
+def _strength_run(result) -> StrengthRun:
+    """A strength job's result as :class:`StrengthRun`."""
+    checks = {check: sum(bins.values()) for check, bins in (getattr(result, "broken_bonds_by_check", None) or {}).items()}
+    return StrengthRun(result.method, result.youngs_modulus_GPa * 1e6,
+                       result.strength_MPa * 1e3 if result.strength_MPa else None, result.strain_at_peak,
+                       result.energy_to_peak_kJ_m3, getattr(result, "broken_bonds_at_peak", None), checks, result.wall_s)
 
 
 def aerogel_density_analyse(spec: StudyWorkflow, jobs: list[Job], res: dict) -> Density | None:
     """E ~ rho^m and sigma ~ rho^n with 95 % intervals for each loop model with two densities or more."""
     series: dict[str, list[DensityRun]] = {m: [] for m in spec.study.loop_models}
     for model, f, s, name in dict.fromkeys(j.at for j in jobs):
-        static, dy = res.get(f"{name}_static"), res.get(name)
+        loaded = res.get(name)                                  # the strength run
+        static = res.get(f"{name}_static") or loaded            # E: the static solve, else the quasi-static one
         if static is not None:
             series[model].append(DensityRun(
                 model, f, s, static.solid_fraction, static.density_kg_m3, static.youngs_modulus_GPa * 1e6,
-                static.mean_coordination, static.loops_per_10k, static.energy_split or {},
-                dy.youngs_modulus_GPa * 1e6 if dy else None, dy.strength_MPa * 1e3 if dy else None,
-                static.wall_s + (dy.wall_s if dy else 0.0)))
+                static.mean_coordination, static.loops_per_10k, getattr(static, "energy_split", None) or {},
+                _strength_run(loaded) if loaded else None,
+                static.wall_s + (loaded.wall_s if loaded and loaded is not static else 0.0)))
     models = {m: _density_series(runs) for m, runs in series.items() if len({r.density_kg_m3 for r in runs}) >= 2}
     if not models:
         return None
     ref = literature()["density_scaling"]
     first = models[next(iter(models))]
-    study = Density([r for m in models.values() for r in m.runs], first.fits, models, ref)
-    n = first.fits.get("strength")
+    m, n = first.fits["E"], first.fits.get("strength")
+    study = Density([r for m in models.values() for r in m.runs], first.fits, models, ref, m.exponent,
+                    m.exponent_ci, n.exponent if n else None, n.exponent_ci if n else None)
     n_txt = f", n = {n.exponent:.2f} [{n.exponent_ci[0]:.2f}, {n.exponent_ci[1]:.2f}]" if n else ""
     study.headline = ("E ~ rho^m with " + "; ".join(f"{_m_text(m.fits['E'])} ({name})" for name, m in models.items())
                       + n_txt + f"; Ma et al. m = {ref['m_dlca_beams']}, experiments {ref['m_experiment_low']}-"
@@ -284,11 +376,12 @@ def _m_text(f: Fit) -> str:
 
 def aerogel_density_render(spec: StudyWorkflow, study: Density, out: Path) -> list[str]:
     st, ref = spec.study, study.literature
+    method = next((r.loaded.method for r in study.runs if r.loaded), None)
     _plot_density(study.models, out / "density.png")
     lines = [f"Solid fractions {', '.join(map(str, st.solid_fractions))} x seeds {', '.join(map(str, st.seeds))} x "
              f"loop models {', '.join(st.loop_models)}: E from the static solver (the slab glued between its bottom "
-             "layer and the wall, as the dynamic run), strength from the dynamic run; density = the slab's after "
-             "the cut.", "",
+             "layer and the wall, as the loaded run)" + (f", strength from the {method} run" if method else "")
+             + "; density = the slab's after the cut.", "",
              "| loop model | law | exponent | 95 % interval | prefactor | R^2 | E max/min between seeds | "
              "coordination | loops per 10 000 | energy: bending / twisting / shear / stretching | reference |",
              "|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -302,13 +395,58 @@ def aerogel_density_render(spec: StudyWorkflow, study: Density, out: Path) -> li
                 + (" / ".join(f"{100 * e[k]:.0f} %" for k in ("bending", "twisting", "shear", "stretching")) if e
                    else "-")
                 + (f" | m = {ref['m_dlca_beams']} ({ref['m_dlca_beams_source']}); {ref['m_experiment_low']}-"
-                   f"{ref['m_experiment_high']} ({ref['m_experiment_source']}) |" if law == "E" else " | - |"))
+                   f"{ref['m_experiment_high']} ({ref['m_experiment_source']}) |" if law == "E" else
+                   f" | {_n_reference(ref)} |"))
+    if method:
+        lines += ["", f"Strength per solid fraction ({method}; geometric means over the seeds; share of "
+                  "var(ln sigma) from ln E and ln(strain at peak), their correlation: DensityStrength in "
+                  "opalflow/studies/aerogel.py):", "",
+                  "| loop model | target solid fraction | runs | density (kg/m^3) | strength (kPa) | strength "
+                  "max/min | E (kPa) | strength / E | strain at peak | energy to peak (kJ/m^3) | bonds broken before "
+                  "the peak | share of ln E / ln strain | corr | bonds broken by |", "|" + "---|" * 14]
+        lines += [f"| {model} | {x.target_solid_fraction:g} | {x.runs} | {x.density_kg_m3:.1f} | "
+                  f"{x.strength_kPa:.4g} | {x.strength_max_min:.1f} | {x.E_kPa:.4g} | {x.strength_per_E:.4f} | "
+                  f"{x.strain_at_peak:.3f} | "
+                  f"{x.energy_to_peak_kJ_m3:.3g} | {x.broken_at_peak:.1f} | {x.share_E:.2f} / {x.share_strain:.2f} | "
+                  f"{x.corr_E_strain:.2f} | {', '.join(f'{k} {v}' for k, v in x.broken_by_check.items()) or '-'} |"
+                  for model, m in study.models.items() for x in m.strength]
+        _plot_curves(spec, study, out, out / "curves.png")
     lines += ["", "| loop model | target solid fraction | seed | solid fraction | density (kg/m^3) | E static (kPa) | "
-              "E dynamic (kPa) | strength (kPa) | wall (s) |", "|---|---|---|---|---|---|---|---|---|"]
+              "E loaded (kPa) | strength (kPa) | strain at peak | wall (s) |", "|" + "---|" * 10]
     lines += [f"| {r.loop_model} | {r.target_solid_fraction:g} | {r.seed} | {r.solid_fraction:.4f} | "
-              f"{r.density_kg_m3:.1f} | {r.E_kPa:.4g} | {fmt_value(r.E_dynamic_kPa, '.4g')} | "
-              f"{fmt_value(r.strength_kPa, '.4g')} | {r.wall_s:.0f} |" for r in study.runs]
-    return lines + ["", "![E and strength against density](density.png)"]
+              f"{r.density_kg_m3:.1f} | {r.E_kPa:.4g} | {fmt_value(r.loaded and r.loaded.E_kPa, '.4g')} | "
+              f"{fmt_value(r.strength_kPa, '.4g')} | {fmt_value(r.loaded and r.loaded.strain_at_peak, '.4f')} | "
+              f"{r.wall_s:.0f} |" for r in study.runs]
+    return lines + ["", "![E and strength against density](density.png)"] + (
+        ["", "![stress-strain curves, one per solid fraction](curves.png)"] if method else [])
+
+
+def _n_reference(ref: dict) -> str:
+    """The literature's strength exponents (data/reference/aerogel_literature.toml), where it has them."""
+    if "n_experiment" not in ref:
+        return "-"
+    return (f"n = {ref['n_experiment']} ({ref['n_experiment_source']}); brittle open cells n = "
+            f"{ref['n_foam_brittle']} ({ref['n_foam_source']})")
+
+
+def _plot_curves(spec: StudyWorkflow, study: Density, out: Path, path: Path) -> None:
+    """The first loop model's stress-strain curves, one per solid fraction: the seed of median strength."""
+    jobs = {j.at: j for j in aerogel_density_jobs(spec) if not j.label.endswith("_static")}
+    model = next(iter(study.models))
+    fig, ax = new_figure(figsize=(6.4, 4.4))
+    for k, f in enumerate(sorted({r.target_solid_fraction for r in study.models[model].runs})):
+        rs = sorted((r for r in study.models[model].runs if r.target_solid_fraction == f and r.strength_kPa),
+                    key=lambda r: r.strength_kPa)
+        job = next((j for at, j in jobs.items() if rs and at[:3] == (model, f, rs[len(rs) // 2].seed)), None)
+        curve = _curve(out, job) if job else None
+        if curve is not None:
+            ax.plot(curve[0], curve[1] * 1e3, "-", color=f"C{k}", lw=1,
+                    label=f"solid fraction {f:g}, seed {rs[len(rs) // 2].seed}")
+    ax.set_xlabel("strain")
+    ax.set_ylabel("stress (kPa)")
+    ax.set_title(f"{model}: the seed of median strength at each solid fraction", fontsize=9)
+    ax.legend(fontsize=7)
+    save_figure(fig, path)
 
 
 def _plot_density(models: dict[str, DensitySeries], path: Path) -> None:
@@ -322,11 +460,12 @@ def _plot_density(models: dict[str, DensitySeries], path: Path) -> None:
         ax.loglog(rho, [r.E_kPa for r in runs], "o", color=f"C{k}", ms=4, label=f"E (static), {model}")
         ax.loglog(grid, f.prefactor * grid ** f.exponent, "-", color=f"C{k}", label=f"{model}: {_m_text(f)}")
         if "strength" in fits:
-            dyn = [r for r in runs if r.strength_kPa]
+            broke = [r for r in runs if r.strength_kPa]
             f = fits["strength"]
-            ax.loglog([r.density_kg_m3 for r in dyn], [r.strength_kPa for r in dyn], "s", color=f"C{k}", mfc="none",
-                      label=f"strength (dynamic), {model}")
-            ax.loglog(grid, f.prefactor * grid ** f.exponent, "--", color=f"C{k}", label=f"sigma ~ rho^{f.exponent:.2f}")
+            ax.loglog([r.density_kg_m3 for r in broke], [r.strength_kPa for r in broke], "s", color=f"C{k}",
+                      mfc="none", label=f"strength ({broke[0].loaded.method}), {model}")
+            ax.loglog(grid, f.prefactor * grid ** f.exponent, "--", color=f"C{k}",
+                      label=f"n = {f.exponent:.2f} [{f.exponent_ci[0]:.2f}, {f.exponent_ci[1]:.2f}]")
     ax.set_xlabel("density (kg/m^3)")
     ax.set_ylabel("kPa")
     ax.legend(fontsize=7)

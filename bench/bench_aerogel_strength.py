@@ -1,0 +1,192 @@
+"""Aerogel strength (issue 55): the quasi-static method checked against LAMMPS's dynamics on the same slabs, the
+strength study's cost, the curve to densification.
+
+    python bench/bench_aerogel_strength.py validate   # 2 000-sphere slabs, 3 densities x 3 seeds x trees / loops
+    python bench/bench_aerogel_strength.py study      # workflows/aerogel_strength.toml: n and m, its wall time
+    python bench/bench_aerogel_strength.py densify    # one slab to 40 % strain by LAMMPS's dynamics, with contacts
+
+``validate`` runs each slab three ways: LAMMPS (``bpm/rotational``, wall at 0.1 m/s, bonds breaking at full load:
+``bonds.smooth = false``), the quasi-static method (event-driven breaking of the linear network, the same rule) and
+the static solver (E); one slab again at half the wall speed (is the dynamic run quasi-static?) and with LAMMPS's
+``smooth yes`` (the fade-out 1 - B^4: how much it lowers the strength).  Rows go to
+bench/results/aerogel_strength_validation.json; ``study`` writes bench/results/aerogel_strength.json; ``densify``
+bench/results/aerogel_densification.json.  Two runs at a time (one LAMMPS process each) on this 2-core machine.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+RESULTS = HERE / "results"
+ROOT = HERE.parent
+FRACTIONS = (0.03, 0.06, 0.12)
+SEEDS = (1, 2, 3)
+SERIES = ("none", "restructuring")
+BRITTLE = ["bonds.smooth=false"]          # a bond breaks at full load (the quasi-static method's rule)
+#: the quasi-static runs go this far (they stop once the stress has fallen to half its peak)
+QS_STRAIN_MAX = 0.5
+
+
+def machine() -> dict:
+    return {"machine": platform.node(), "cpus": os.cpu_count(), "python": platform.python_version(),
+            "date": time.strftime("%Y-%m-%d %H:%M")}
+
+
+def run(out: Path, sets: list[str], workflow: str = "aerogel_compression") -> dict:
+    """One ``python -m opalflow run`` into ``out`` (kept when finished: a second call reads it back)."""
+    if not (out / "summary.json").exists() or json.loads((out / "summary.json").read_text()).get("state") != "finished":
+        cmd = [sys.executable, "-m", "opalflow", "run", workflow, "--out", str(out)]
+        for s in sets:
+            cmd += ["--set", s]
+        out.parent.mkdir(parents=True, exist_ok=True)
+        with open(out.with_name(out.name + ".log"), "w") as log:         # (progress lines: not on this screen)
+            subprocess.run(cmd, check=True, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
+    return json.loads((out / "summary.json").read_text())
+
+
+def at_peak(out: Path, summary: dict) -> dict:
+    """Strength, strain at the peak, bonds broken up to the peak (from the curve) and the first tangent."""
+    with h5py.File(out / "results.h5", "r") as h:
+        if summary["method"] == "quasistatic":
+            e, s = h["quasistatic/strain"][()], h["quasistatic/stress_MPa"][()]
+            broken = np.cumsum(h["quasistatic/bonds_per_event"][()])
+            k = int(np.argmax(s))
+            at = int(broken[k - 1]) if k > 0 else 0          # events before the peak's (the peak: before its event)
+            tangent = None
+        elif summary["method"] == "dynamic":
+            e, s = h["curve/strain"][()], h["curve/stress_MPa"][()]
+            k = int(np.argmax(s))
+            at = int(h["curve/broken_bonds"][()][k])
+            m = (e >= 0.005) & (e <= 0.02)
+            tangent = float(np.polyfit(e[m], s[m], 1)[0] * 1e3) if m.sum() > 2 else None
+        else:
+            return {"E_kPa": summary["youngs_modulus_GPa"] * 1e6}
+    return {"strength_kPa": float(s[k]) * 1e3, "strain_at_peak": float(e[k]), "broken_at_peak": at,
+            "E_kPa": summary["youngs_modulus_GPa"] * 1e6, "tangent_kPa": tangent, "wall_s": summary["wall_s"],
+            "broken_bonds": summary.get("broken_bonds")}
+
+
+def slab(root: Path, series: str, phi: float, seed: int) -> tuple[Path, list[str]]:
+    sets = [f"aggregate.loops={series}", f"aggregate.solid_fraction={phi}", f"aggregate.seed={seed}"]
+    return root / f"{series}_phi{phi}_s{seed}", sets
+
+
+def validate(a) -> dict:
+    root = Path(a.runs) / "validate"
+    cases = [(series, phi, seed) for series in SERIES for phi in FRACTIONS for seed in SEEDS]
+
+    def one(case):
+        series, phi, seed = case
+        base, sets = slab(root, series, phi, seed)
+        row = {"series": series, "solid_fraction": phi, "seed": seed}
+        # the quasi-static run first (seconds): the dynamic one then goes to 1.25 x its strain at the peak, not
+        # further (a LAMMPS run costs in proportion to its strain; a tree at 0.03 breaks its first bond at ~0.2)
+        for method in ("quasistatic", "static", "dynamic"):
+            extra = [f"compression.method={method}", f"compression.strain_max={QS_STRAIN_MAX}"]
+            if method == "dynamic":
+                reach = min(QS_STRAIN_MAX, round(1.25 * row["quasistatic"]["strain_at_peak"] + 0.01, 3))
+                extra = [f"compression.strain_max={reach}", "compression.snapshot_strains=[]"]
+            out = base.with_name(f"{base.name}_{method}")
+            summary = run(out, [*sets, *BRITTLE, *extra])
+            row[method] = at_peak(out, summary)
+            row["particles"], row["bonds"] = summary["n_particles"], summary["n_bonds"]
+            row["density_kg_m3"] = summary["density_kg_m3"]
+        row["dynamic_strain_max"] = reach
+        row["dynamic"]["peak_inside_run"] = row["dynamic"]["strain_at_peak"] < 0.98 * reach
+        d, q = row["dynamic"], row["quasistatic"]
+        row["strength_error"] = q["strength_kPa"] / d["strength_kPa"] - 1
+        row["strain_at_peak_error"] = q["strain_at_peak"] / d["strain_at_peak"] - 1
+        print(json.dumps({k: row[k] for k in ("series", "solid_fraction", "seed", "strength_error")}), flush=True)
+        return row
+
+    def extra(name, sets, rows):
+        series, phi, seed = SERIES[1], FRACTIONS[1], SEEDS[0]
+        reach = next(r["dynamic_strain_max"] for r in rows if (r["series"], r["solid_fraction"], r["seed"])
+                     == (series, phi, seed))
+        base, slab_sets = slab(root, series, phi, seed)
+        out = base.with_name(f"{base.name}_{name}")
+        summary = run(out, [*slab_sets, *sets, f"compression.strain_max={reach}", "compression.snapshot_strains=[]"])
+        return {"series": series, "solid_fraction": phi, "seed": seed, "case": name, **at_peak(out, summary)}
+
+    t = time.perf_counter()
+    with ThreadPoolExecutor(a.workers) as pool:
+        rows = list(pool.map(one, cases))
+        checks = list(pool.map(lambda c: extra(*c, rows), [("half_speed", [*BRITTLE, "compression.plate_speed_m_s=0.05"]),
+                                                     ("smooth", ["bonds.smooth=true"])]))
+    errors = [abs(r["strength_error"]) for r in rows]
+    out = {**machine(), "wall_s": time.perf_counter() - t, "rows": rows, "checks": checks,
+           "strength_error_max": max(errors), "strength_error_mean": float(np.mean(errors)),
+           "within_10_percent": sum(e <= 0.10 for e in errors), "cases": len(rows)}
+    (RESULTS / "aerogel_strength_validation.json").write_text(json.dumps(out, indent=1) + "\n")
+    return out
+
+
+def densify(a) -> dict:
+    """One restructured slab (2 000 spheres, solid fraction 0.12, seed 1) compressed by LAMMPS to 50 % strain with
+    its Hertz-Mindlin contacts, bonds breaking at full load: the curve through the peak, the plateau and the
+    contacts' stiffening; docs/figures/aerogel_densification.png."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(a.runs) / "densify"
+    sets = ["aggregate.loops=restructuring", "aggregate.solid_fraction=0.12", "aggregate.seed=1", *BRITTLE,
+            "compression.strain_max=0.5", "compression.snapshot_strains=[0.1, 0.3, 0.5]",
+            "compression.output_every_strain=0.002", "compression.restart_every_strain=0.05"]
+    t = time.perf_counter()
+    summary = run(out, sets)
+    with h5py.File(out / "results.h5", "r") as h:
+        e, s, broken = h["curve/strain"][()], h["curve/stress_MPa"][()] * 1e3, h["curve/broken_bonds"][()]
+    k = int(np.argmax(s))
+    post = e > e[k]
+    plateau = (e >= 0.2) & (e <= 0.4)
+    tail = e >= 0.45
+    row = {**machine(), "sets": sets, "wall_s": summary["wall_s"], "bench_s": time.perf_counter() - t,
+           "particles": summary["n_particles"], "bonds": summary["n_bonds"], "E_kPa": summary["youngs_modulus_GPa"] * 1e6,
+           "peak_kPa": float(s[k]), "strain_at_peak": float(e[k]),
+           "plateau_kPa_0.2_0.4": float(np.mean(s[plateau])) if plateau.any() else None,
+           "stress_kPa_0.45_0.5": float(np.mean(s[tail])) if tail.any() else None,
+           "min_after_peak_kPa": float(s[post].min()) if post.any() else None,
+           "broken_bonds_at_peak": int(broken[k]), "broken_bonds_end": int(broken[-1]), "strain_end": float(e[-1])}
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    ax.plot(e, s, "-", color="C0", lw=1, label="stress (LAMMPS, bpm/rotational + Hertz-Mindlin contacts)")
+    ax.plot([e[k]], [s[k]], "o", color="C3", label=f"peak {s[k]:.3g} kPa at strain {e[k]:.3f}")
+    ax.set_xlabel("strain")
+    ax.set_ylabel("stress (kPa)")
+    ax2 = ax.twinx()
+    ax2.plot(e, broken, ":", color="C2", lw=1)
+    ax2.set_ylabel("bonds broken", color="C2")
+    ax.set_title(f"restructured DLCA slab, solid fraction 0.12, {summary['n_particles']} spheres, wall 0.1 m/s",
+                 fontsize=9)
+    ax.legend(fontsize=7, loc="upper left")
+    fig.tight_layout()
+    fig.savefig(ROOT / "docs" / "figures" / "aerogel_densification.png", dpi=110)
+    (RESULTS / "aerogel_densification.json").write_text(json.dumps(row, indent=1) + "\n")
+    return row
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("part", choices=["validate", "densify"])
+    p.add_argument("--runs", default="runs/bench_aerogel_strength", help="folder of the runs (kept: rerun reads them)")
+    p.add_argument("--workers", type=int, default=2)
+    a = p.parse_args(argv)
+    out = {"validate": validate, "densify": densify}[a.part](a)
+    print(json.dumps({k: v for k, v in out.items() if not isinstance(v, list)}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
