@@ -11,6 +11,7 @@ A killed run continues with ``--resume`` from ``quasistatic_state.json`` and ``q
 """
 from __future__ import annotations
 
+import math
 import resource
 import time
 from pathlib import Path
@@ -27,6 +28,7 @@ from opalflow.bpm.quasistatic import CHECKS, Event, SavedState, Stopped, Strengt
 from opalflow.bpm.scene import scene_of
 from opalflow.bpm.spec import BREAKING_RULES, BpmWorkflow
 from opalflow.bpm.methods import METHODS
+from opalflow.bpm.nonlinear import Touching, solve_nonlinear_fracture
 from opalflow.bpm.report import network_inputs, plots_line, sample_lines, structure_cost
 from opalflow.bpm.result import CompressionResult, EventFacts
 from opalflow.bpm.static_run import network_run, particle_stress
@@ -92,6 +94,16 @@ def contacts_of(spec: BpmWorkflow, data) -> Contacts | None:
                             data.types - 1, k.quasistatic, k.reference_strain)
 
 
+def touching_of(spec: BpmWorkflow, data) -> Touching | None:
+    """The nonlinear method's contacts (``contacts.enabled``): Hertz between the spheres of ``data`` with the
+    first particle type's material (one material: the aerogel's, the lattice's)."""
+    if not spec.contacts.enabled:
+        return None
+    p = contact_properties(particle_material(data.type_names[0], spec.material))
+    return Touching(data.positions, data.diameters / 2, data.box_lengths, data.periodic,
+                    p.youngs_modulus_MPa / (2 * (1 - p.poisson_ratio**2)))
+
+
 def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=print) -> CompressionResult:
     """Build the scene, run the event loop, write the results (see the module docstring)."""
     t0 = time.perf_counter()
@@ -111,13 +123,18 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
     tell(f"quasi-static ({loading.title}): {s.n_particles} particles, {s.n_bonds} bonds, to strain {c.strain_max:g}"
         + (f"; contacts: {describe_contacts(contacts, spec.contacts.quasistatic, spec.contacts.reference_strain)}"
            if contacts else ""))
+    strengths, supports = strengths_of(data, sample.coefficients, spec.bonds.breaking), loading.supports(sample)
     try:
-        res = solve_fracture(net, strengths_of(data, sample.coefficients, spec.bonds.breaking), data.positions,
-                             loading.supports(sample), strain_max=c.strain_max, stop_fraction=c.stop_fraction,
-                             events_max=c.events_max, tolerance=c.event_tolerance, resolver=c.resolver,
-                             rtol=c.resolve_rtol, local_rtol=c.local_rtol, state=state,
-                             checkpoint=lambda st: save_state(out, st), should_stop=stop_requested,
-                             contacts=contacts, say=tell)
+        res = solve_fracture(net, strengths, data.positions, supports, strain_max=c.strain_max,
+                             stop_fraction=c.stop_fraction, events_max=1 if c.geometry == "nonlinear" else c.events_max,
+                             tolerance=c.event_tolerance, resolver=c.resolver, rtol=c.resolve_rtol,
+                             local_rtol=c.local_rtol, state=state, checkpoint=lambda st: save_state(out, st),
+                             should_stop=stop_requested, contacts=contacts, say=tell)
+        if c.geometry == "nonlinear":           # the linear first event sets the load step
+            res = solve_nonlinear_fracture(net, strengths, supports, strain_max=c.strain_max,
+                                           first_strain=res.events[0].strain if res.events else math.inf,
+                                           stop_fraction=c.stop_fraction, events_max=c.events_max,
+                                           tolerance=c.event_tolerance, touching=touching_of(spec, data), say=tell)
     except Stopped as exc:                       # a scheduler's signal: the state is saved, a requeue resumes
         record.end(out, "interrupted", last_step=exc.events)
         raise Preempted(out, exc.events) from None

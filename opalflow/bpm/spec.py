@@ -74,7 +74,9 @@ class ContactsSpec:
     """Hertz-Mindlin contacts between unbonded particles (pair_style granular); friction and restitution
     replace every material's (data/materials.toml) when given."""
 
-    enabled: bool = True             # contacts between unbonded particles in the dynamic method (pair_style granular)
+    #: contacts between unbonded particles in the dynamic method (pair_style granular) and in the quasi-static one
+    #: with compression.geometry = "nonlinear" (Hertz's normal force, frictionless: opalflow/bpm/nonlinear.py)
+    enabled: bool = True
     model: str = "hertz"             # hertz: hertz/material + mindlin; linear: hooke + linear_history
     friction: float | None = None    # Coulomb friction coefficient of every contact (None: each material's)
     restitution: float | None = None  # coefficient of restitution of every contact (None: each material's)
@@ -118,6 +120,9 @@ class CompressionSpec:
     events_max: int = 100_000        # quasistatic: at most this many events
     resolve_rtol: float = 1e-6       # quasistatic, amg and block-amg: each re-solve to this residual (of |b|)
     local_rtol: float = 0.0          # quasistatic: events settle by a local solve while the residual stays below this
+    #: quasistatic: "linear" (small rotations: one solve an event) or "nonlinear" (LAMMPS's bond law at finite
+    #: rotation, Newton at each load step: opalflow/bpm/nonlinear.py; bending networks at large strain)
+    geometry: str = "linear"
     plots: str = "auto"              # the report's plots: all, none, or auto (all but for the static method)
 
 
@@ -243,6 +248,18 @@ class BpmWorkflow(WorkflowSpec):
         LOADINGS[c.loading].check(self)
         check(c.resolver in RESOLVERS, "compression.resolver", c.resolver,
               f"must be one of {', '.join(RESOLVERS)} (quasistatic method)")
+        check(c.geometry in ("linear", "nonlinear"), "compression.geometry", c.geometry,
+              'must be "linear" or "nonlinear" (quasistatic method)')
+        check(c.geometry == "linear" or c.method == "quasistatic", "compression.geometry", c.geometry,
+              'is the quasi-static method\'s (the dynamic one is LAMMPS, at finite rotation already)')
+        check(c.geometry == "linear" or not self.contacts.enabled or self.contacts.model == "hertz", "contacts.model",
+              self.contacts.model, 'must be "hertz" with compression.geometry = "nonlinear" (its contacts are '
+              "Hertz's; or contacts.enabled = false)")
+        check(c.geometry == "linear" or b.breaking == "lammps", "bonds.breaking", b.breaking,
+              'must be "lammps" with compression.geometry = "nonlinear" (LAMMPS\'s bpm/rotational law and rule)')
+        check(c.geometry == "linear" or self.contacts.quasistatic == "off", "contacts.quasistatic",
+              self.contacts.quasistatic, 'must be "off" with compression.geometry = "nonlinear" (its contacts are '
+              "contacts.enabled's, found as the spheres move)")
         check(0 <= c.event_tolerance <= 0.5, "compression.event_tolerance", c.event_tolerance,
               "must be in [0, 0.5] (bonds within this fraction of the next limit break in one event)")
         check(0 <= c.stop_fraction < 1, "compression.stop_fraction", c.stop_fraction, "must be in [0, 1)")

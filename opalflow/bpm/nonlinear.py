@@ -1,0 +1,461 @@
+"""Geometrically nonlinear quasi-static fracture of a bonded-particle network: LAMMPS's own ``bpm/rotational``
+forces at finite displacement and rotation, equilibrium by Newton-Krylov at each load step, bonds broken one
+event at a time (``compression.geometry = "nonlinear"`` of the quasi-static method).
+
+The bond law is BondBPMRotational::elastic_forces (src/BPM/bond_bpm_rotational.cpp, LAMMPS 22 Jul 2025; after
+Wang, Acta Geotechnica 4:117, 2009, and Mora and Wang 2009) term by term, for all bonds at once: with i the lower
+atom id, r = x_i - x_j, r0 the bond vector at rest (lab frame), q_i, q_j the orientations and rb = q_j^-1 r q_j the
+bond vector in j's frame,
+
+- ``Fr = Kr (|r| - |r0|)`` along rb, ``Fs = Ks |r| gamma s`` (gamma = angle(r0, rb), s = rb x (rb x r0) / |.|),
+  ``Ts = Ks |r|^2 gamma t / 2`` (t = r0 x rb / |.|);
+- the relative rotation q21 = mq^-1 (q_j^-1 q_i) mq, mq the rotation of z onto rb (Wang's X'Y'Z' angles): twist
+  psi, bend theta and its plane phi give ``Tb = Kb theta (-sin phi, cos phi, 0)``, ``Tt = Kt psi z``,
+  ``Fsp = -Ks |r| theta / 2 (cos phi, sin phi, 0)``, ``Tsp = Ks |r|^2 theta / 4 (sin phi, -cos phi, 0)``, rotated
+  by mq and added to Fs and Ts;
+- force1on2 = q_j (Fr rb / |r| + Fs), torque on j = q_j (Ts + Tt + Tb), on i = q_j (Ts - Tt - Tb); f_i -= force1on2,
+  f_j += force1on2; the breaking index B = Fr / Fcr + |Fs| / Fcs + |Tb| / Tcb + |Tt| / Tct (``smooth no``).
+
+Kr, Ks are per unit length (``normalize yes``: the network's a_r, a_s), Kb, Kt its bend and twist
+(:mod:`opalflow.bpm.stiffness` is the same law to first order; ``tests/test_nonlinear.py`` checks the two agree
+for small motions and that the forces balance).
+
+The solve: unknowns the displacements u and rotation vectors phi (q = exp(phi), the orientations at rest the
+identity, as the data file gives them) of the free particles; the residual the force and torque on each;
+:func:`scipy.optimize.newton_krylov` (LGMRES, Armijo line search) preconditioned by the factor of the linear
+network's stiffness (the intact bonds at rest: refactorised after each event), from the last equilibrium moved
+affinely by the step.  The strain grows by ``step`` (the first load step: the linear method's first event
+strain / ``steps_to_first``), each step's equilibrium checked for B >= 1; the first crossing is located by
+bisection to ``locate_rtol`` of the strain, the bond of the largest B breaks (with the linear method's
+``tolerance``: every bond within it), particles that lose their path to the supports are held still, and the
+network is solved again at that strain (the stress after the event); so on until the stress falls below
+``stop_fraction`` of the peak or the strain reaches ``strain_max``.  Contacts between spheres are not in it (the
+dynamic method's Hertz-Mindlin pair style is; docs/aerogels.md says where that matters).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+
+import numpy as np
+
+from scipy.sparse import diags as sp_diags
+
+from opalflow.bpm.loading import Supports
+from opalflow.bpm.quasistatic import Event, FractureResult, Strengths
+from opalflow.bpm.static import block_matrix, loose_particles
+from opalflow.bpm.stiffness import BondNetwork
+from opalflow.linalg.direct import Factor
+from opalflow.spec import InputError
+
+SQRT_HALF = math.sqrt(0.5)
+
+
+def quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Rows of quaternions (w, x, y, z): a b."""
+    aw, ax, ay, az = a.T
+    bw, bx, by, bz = b.T
+    return np.stack([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw], axis=1)
+
+
+def quat_conjugate(q: np.ndarray) -> np.ndarray:
+    return q * np.array([1.0, -1.0, -1.0, -1.0])
+
+
+def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rows of vectors v rotated by the unit quaternions q (q v q^-1; LAMMPS's MathExtra::quatrotvec)."""
+    w, u = q[:, :1], q[:, 1:]
+    t = 2.0 * np.cross(u, v)
+    return v + w * t + np.cross(u, t)
+
+
+def quat_from_rotation(phi: np.ndarray) -> np.ndarray:
+    """Unit quaternions of rotation vectors phi (N, 3) (angle |phi| about phi / |phi|)."""
+    angle = np.linalg.norm(phi, axis=1)
+    half = 0.5 * angle
+    # sin(a/2)/a -> 1/2 as a -> 0 (its series to a^4 where a is small)
+    k = np.where(angle > 1e-4, np.sin(half) / np.where(angle > 1e-4, angle, 1.0), 0.5 - angle**2 / 48.0)
+    return np.column_stack([np.cos(half), k[:, None] * phi])
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    """Rows of v over their length (zero rows stay zero: LAMMPS's norm3 of a zero vector is a 0/0 there,
+    reached only by a bond exactly at rest, where the term it scales is zero)."""
+    n = np.linalg.norm(v, axis=1, keepdims=True)
+    return np.divide(v, n, out=np.zeros_like(v), where=n > 0)
+
+
+@dataclasses.dataclass
+class BondLoads:
+    """Each bond's loads (LAMMPS's elastic_forces): the force on j (``force1on2``, lab frame), the torques on
+    j and on i, and the four magnitudes of the breaking index: the signed normal force Fr, |Fs|, |Tb|, |Tt|."""
+
+    force: np.ndarray
+    torque_j: np.ndarray
+    torque_i: np.ndarray
+    Fr: np.ndarray
+    Fs: np.ndarray
+    Tb: np.ndarray
+    Tt: np.ndarray
+
+
+def bond_loads(net: BondNetwork, u: np.ndarray, q: np.ndarray) -> BondLoads:
+    """The loads of the bonds of ``net`` at displacements ``u`` (N, 3) from rest and orientations ``q`` (the module
+    docstring, term by term).  The bond vector r = r0 + u_i - u_j, r0 = L n at rest (the nearest image across a
+    periodic side, as the network has it)."""
+    i, j = net.i, net.j
+    qj = q[j]
+    qj_inv = quat_conjugate(qj)
+    r0 = net.L[:, None] * net.n
+    r = r0 + u[i] - u[j]
+    r_mag = np.linalg.norm(r, axis=1)
+    r0_mag = net.L
+    rb = quat_rotate(qj_inv, r)
+    Fr = net.a_r * (r_mag - r0_mag)
+    F_rot = (Fr / r_mag)[:, None] * rb
+    rb_x_r0 = np.cross(rb, r0)
+    # acos of the cosines as LAMMPS writes them, taken as atan2 (the same angles without acos's loss of
+    # precision near 0: sqrt(machine epsilon) in the angle, which a difference quotient of the forces would see)
+    gamma = np.arctan2(np.linalg.norm(rb_x_r0, axis=1), np.einsum("ij,ij->i", r0, rb))
+    s = _unit(np.cross(rb, rb_x_r0))
+    Fs = (net.a_s * r_mag * gamma)[:, None] * s
+    t = _unit(np.cross(r0, rb))
+    Ts = (0.5 * net.a_s * r_mag * r_mag * gamma)[:, None] * t
+    # mq: the rotation of z onto rb (Wang and Mora's X'Y'Z' representation)
+    mq = np.zeros((len(r), 4))
+    mq[:, 0] = SQRT_HALF * np.sqrt(np.maximum(r_mag + rb[:, 2], 0.0) / r_mag)
+    rxy = np.sqrt(rb[:, 0] ** 2 + rb[:, 1] ** 2)
+    off = rxy != 0.0
+    k = np.zeros(len(r))
+    k[off] = -SQRT_HALF / rxy[off] * np.sqrt(np.maximum(r_mag[off] - rb[off, 2], 0.0) / r_mag[off])
+    mq[:, 1], mq[:, 2] = k * rb[:, 1], -k * rb[:, 0]
+    q21 = quat_multiply(quat_multiply(quat_conjugate(mq), quat_multiply(qj_inv, q[i])), mq)
+    w, a, b, z = q21.T
+    out_plane, in_plane = w * w + z * z, a * a + b * b
+    psi = 2.0 * np.arctan2(np.abs(z), w) * np.sign(z)        # 2 acos(w / |(w, z)|), negative where z is
+    theta = 2.0 * np.arctan2(np.sqrt(in_plane), np.sqrt(out_plane))     # acos(w^2 - a^2 - b^2 + z^2)
+    both = np.sqrt(out_plane * in_plane)
+    cos_phi = np.where(in_plane == 0.0, 0.0, np.where(
+        out_plane == 0.0, np.divide(b, np.sqrt(in_plane), out=np.zeros_like(b), where=in_plane > 0),
+        np.divide(a * z + w * b, both, out=np.zeros_like(b), where=both > 0)))
+    sin_phi = np.where(in_plane == 0.0, 0.0, np.where(
+        out_plane == 0.0, np.divide(-a, np.sqrt(in_plane), out=np.zeros_like(a), where=in_plane > 0),
+        np.divide(b * z - w * a, both, out=np.zeros_like(a), where=both > 0)))
+    zero = np.zeros(len(r))
+    Tbp = np.column_stack([-net.bend * theta * sin_phi, net.bend * theta * cos_phi, zero])
+    Ttp = np.column_stack([zero, zero, net.twist * psi])
+    Fsp = np.column_stack([-0.5 * net.a_s * r_mag * theta * cos_phi, -0.5 * net.a_s * r_mag * theta * sin_phi, zero])
+    Tsp = np.column_stack([0.25 * net.a_s * r_mag**2 * theta * sin_phi, -0.25 * net.a_s * r_mag**2 * theta * cos_phi,
+                           zero])
+    Fs = Fs + quat_rotate(mq, Fsp)
+    Ts = Ts + quat_rotate(mq, Tsp)
+    Tb, Tt = quat_rotate(mq, Tbp), quat_rotate(mq, Ttp)
+    return BondLoads(quat_rotate(qj, F_rot + Fs), quat_rotate(qj, Ts + Tt + Tb), quat_rotate(qj, Ts - Tt - Tb),
+                     Fr, np.linalg.norm(Fs, axis=1), np.linalg.norm(Tb, axis=1), np.linalg.norm(Tt, axis=1))
+
+
+def internal_force(net: BondNetwork, loads: BondLoads) -> np.ndarray:
+    """(N, 6): minus the bonds' force and torque on each particle (the load that holds it there: K x for small
+    motions, as the linear network's)."""
+    g = np.zeros((net.n_particles, 6))
+    for k in range(3):
+        g[:, k] = np.bincount(net.i, loads.force[:, k], net.n_particles) - np.bincount(
+            net.j, loads.force[:, k], net.n_particles)
+        g[:, 3 + k] = -np.bincount(net.i, loads.torque_i[:, k], net.n_particles) - np.bincount(
+            net.j, loads.torque_j[:, k], net.n_particles)
+    return g
+
+
+def breaking_index(loads: BondLoads, c: Strengths) -> np.ndarray:
+    """LAMMPS's B of each bond (clipped at 0) and which of its two sums is the larger (0: normal + bending,
+    1: shear + twist, as :data:`opalflow.bpm.quasistatic.CHECKS` names them for "lammps")."""
+    normal = loads.Fr / c.fr_c + loads.Tb / c.tb_c
+    shear = loads.Fs / c.fs_c + loads.Tt / c.tt_c
+    return np.maximum(normal + shear, 0.0), (shear > normal).astype(int)
+
+
+@dataclasses.dataclass
+class Touching:
+    """Spheres that come to touch press on each other where no intact bond joins them: Hertz's normal force
+    F = 4/3 E* sqrt(R*) delta^1.5 (LAMMPS's ``hertz/material``, E* = E / (2 (1 - nu^2)) for one material; Dosta et
+    al. eq. 5), frictionless (the dynamic method's Mindlin tangential spring and Coulomb friction are not in it).
+    ``positions`` at rest, ``radii``, the box and its periodic sides."""
+
+    positions: np.ndarray
+    radii: np.ndarray
+    box: np.ndarray
+    periodic: np.ndarray
+    e_star: float
+    #: candidate pairs: centres within this factor of their contact distance at the start of a load step
+    reach: float = 1.05
+
+    def candidates(self, u: np.ndarray, bonded: set) -> np.ndarray:
+        """(P, 2) pairs near contact at displacements u that no intact bond joins."""
+        from opalflow.bpm.bonds import find_bonds
+
+        x = self.positions + u
+        x[:, self.periodic] = np.mod(x[:, self.periodic], self.box[self.periodic])
+        pairs = find_bonds(x, 2 * self.radii, self.box, self.periodic, self.reach)
+        keep = np.array([(int(a), int(b)) not in bonded for a, b in pairs], bool) if len(pairs) else np.zeros(0, bool)
+        return pairs[keep].astype(np.int64).reshape(-1, 2)
+
+    def forces(self, pairs: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """(N, 3): minus the contact forces on each particle (the internal force's translation part)."""
+        from opalflow.neighbors import separations
+
+        g = np.zeros((len(u), 3))
+        if not len(pairs):
+            return g
+        a, b = pairs[:, 0], pairs[:, 1]
+        d = separations(self.positions + u, pairs, self.box, self.periodic)        # x_b - x_a
+        dist = np.linalg.norm(d, axis=1)
+        ra, rb = self.radii[a], self.radii[b]
+        overlap = np.maximum(ra + rb - dist, 0.0)
+        F = 4.0 / 3.0 * self.e_star * np.sqrt(ra * rb / (ra + rb)) * overlap**1.5
+        f = (F / np.where(dist > 0, dist, 1.0))[:, None] * d        # along a -> b: pushes b away from a
+        for k in range(3):
+            g[:, k] = np.bincount(a, f[:, k], len(u)) - np.bincount(b, f[:, k], len(u))
+        return g
+
+
+class _Network:
+    """The damaged network under its supports: the intact bonds, the particles held (supports, loose ones), the
+    preconditioner of the linear stiffness of what is intact."""
+
+    def __init__(self, net: BondNetwork, supports: Supports, alive, touching: Touching | None = None):
+        self.full, self.supports, self.touching = net, supports, touching
+        self.pairs = np.zeros((0, 2), np.int64)
+        self.set_alive(alive)
+
+    def set_alive(self, alive: np.ndarray) -> None:
+        self.alive = alive.copy()
+        self.net = self.full.part(np.flatnonzero(alive))
+        self.loose = loose_particles(self.net, self.supports.anchored)
+        self.held = self.supports.without(self.loose)
+        self.free = ~self.held.held.ravel()
+        K = block_matrix(self.net, self.free)[0]
+        self.factor = Factor(K, self.free)
+        self.factorizations = getattr(self, "factorizations", 0) + 1
+        self.groups = self.colours()
+
+    def find_contacts(self, z: np.ndarray) -> None:
+        """The candidate contacts at ``z`` (:meth:`Touching.candidates`; the colour groups follow)."""
+        if self.touching is None:
+            return
+        bonded = set(zip(self.net.i.tolist(), self.net.j.tolist()))
+        pairs = self.touching.candidates(z.reshape(-1, 6)[:, :3], bonded)
+        if len(pairs) != len(self.pairs) or not np.array_equal(pairs, self.pairs):
+            self.pairs = pairs
+            self.groups = self.colours()
+        drive = self.held.drive.ravel()
+        # the linear network's displacements at unit strain: the first predictor
+        self.unit = drive - np.where(self.free, self.factor.solve(np.where(self.free, self.net.matvec(drive), 0.0)),
+                                     0.0)
+
+    def loads(self, z: np.ndarray) -> BondLoads:
+        X = z.reshape(-1, 6)
+        return bond_loads(self.net, X[:, :3], quat_from_rotation(X[:, 3:]))
+
+    def internal(self, z: np.ndarray) -> np.ndarray:
+        """(N, 6): the bonds' and the contacts' internal force at z."""
+        g = internal_force(self.net, self.loads(z))
+        if len(self.pairs):
+            g[:, :3] += self.touching.forces(self.pairs, z.reshape(-1, 6)[:, :3])
+        return g
+
+    def residual(self, z: np.ndarray) -> np.ndarray:
+        return np.where(self.free, self.internal(z).ravel(), 0.0)
+
+    def prescribed(self, z: np.ndarray, strain: float) -> np.ndarray:
+        return np.where(self.free, z, self.held.drive.ravel() * strain)
+
+    def colours(self) -> list[np.ndarray]:
+        """Groups of particles no two of which share a bond or a bonded neighbour (a greedy colouring of the
+        bond graph's square): one residual per group and dof gives 6 x groups columns of the Jacobian."""
+        import scipy.sparse as sp
+
+        n = self.net.n_particles
+        i, j = np.r_[self.net.i, self.pairs[:, 0]], np.r_[self.net.j, self.pairs[:, 1]]
+        A = sp.coo_matrix((np.ones(2 * len(i)), (np.r_[i, j], np.r_[j, i])), shape=(n, n)).tocsr()
+        A = (A + sp.identity(n, format="csr")).tocsr()
+        A2 = (A @ A).tocsr()
+        colour = np.full(n, -1)
+        for p in np.argsort(-np.diff(A2.indptr), kind="stable"):
+            used = set(colour[A2.indices[A2.indptr[p]:A2.indptr[p + 1]]])
+            c = 0
+            while c in used:
+                c += 1
+            colour[p] = c
+        self.neighbours = A
+        return [np.flatnonzero(colour == c) for c in range(colour.max() + 1)]
+
+    def jacobian(self, z: np.ndarray, F0: np.ndarray, h: float):
+        """The tangent dF/dz of the residual by forward differences over the colour groups (free dofs only; a
+        prescribed dof's row and column the identity)."""
+        import scipy.sparse as sp
+
+        n = self.net.n_particles
+        rows, cols, vals = [], [], []
+        A = self.neighbours
+        for group in self.groups:
+            # each particle's perturbed neighbour in this group (at most one: the colouring)
+            owner = np.full(n, -1)
+            sub = A[:, group].tocoo()
+            owner[sub.row] = group[sub.col]
+            touched = np.flatnonzero(owner >= 0)
+            for d in range(6):
+                dz = np.zeros(n * 6)
+                dz[group * 6 + d] = h
+                dz = np.where(self.free, dz, 0.0)
+                dF = ((self.residual(z + dz) - F0) / h).reshape(n, 6)[touched]
+                r = (touched[:, None] * 6 + np.arange(6)).ravel()
+                c = np.repeat(owner[touched] * 6 + d, 6)
+                rows.append(r)
+                cols.append(c)
+                vals.append(dF.ravel())
+        J = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(6 * n, 6 * n))
+        keep = sp.diags(self.free.astype(float))
+        return (keep @ J @ keep + sp.diags((~self.free).astype(float))).tocsc()
+
+    def solve(self, z0: np.ndarray, strain: float, f_tol: float, maxiter: int) -> tuple[np.ndarray, int] | None:
+        """Equilibrium at ``strain`` from ``z0`` (its prescribed dofs set): Newton with the tangent of
+        :meth:`jacobian` and a backtracking line search on |F|; where that stalls (no equilibrium near: a sphere
+        slides off another, a branch snaps through), pseudo-transient continuation (Kelley and Keyes, SIAM J.
+        Numer. Anal. 35:508, 1998): (J + D / tau) dz = -F, D the tangent's diagonal, every step taken, tau grown
+        as |F| falls (switched evolution relaxation), which follows a damped motion to a stable equilibrium.
+        (z, iterations), None where neither converged."""
+        from scipy.sparse.linalg import splu
+
+        z = self.prescribed(z0, strain)
+        F = self.residual(z)
+        norm, it = np.linalg.norm(F), 0
+        ptc, shift = False, 1.0
+        while it < 10 * maxiter:
+            if np.max(np.abs(F)) <= f_tol:
+                return z, it
+            if not ptc and it >= maxiter:
+                return None
+            it += 1
+            J = self.jacobian(z, F, 1e-7 * max(1.0, float(np.max(np.abs(z)))))
+            if ptc:
+                J = J + sp_diags(shift * np.abs(J.diagonal()) + 1e-30)
+            try:
+                dz = np.where(self.free, -splu(J.tocsc()).solve(F), 0.0)
+            except RuntimeError:                 # a singular tangent (a mechanism)
+                return None
+            if ptc:
+                z = z + dz
+                F_new = self.residual(z)
+                n_new = np.linalg.norm(F_new)
+                if not np.isfinite(n_new):
+                    return None
+                shift *= min(max(n_new / norm, 0.1), 10.0)      # SER: the pseudo time step grows as |F| falls
+                F, norm = F_new, n_new
+                continue
+            t = 1.0
+            while t > 1e-2:
+                z_try = z + t * dz
+                F_try = self.residual(z_try)
+                n_try = np.linalg.norm(F_try)
+                if np.isfinite(n_try) and n_try < norm:
+                    break
+                t *= 0.5
+            if t <= 1e-2 or t < 0.25 and it > 5:               # stalled: continue by pseudo-time
+                ptc = True
+                continue
+            z, F, norm = z_try, F_try, n_try
+        return None
+
+    def stress(self, z: np.ndarray) -> float:
+        return self.held.stress(self.internal(z))
+
+
+def solve_nonlinear_fracture(net: BondNetwork, strengths: Strengths, supports: Supports, *,
+                             strain_max: float, first_strain: float, stop_fraction: float = 0.5,
+                             events_max: int = 100_000, tolerance: float = 0.0, steps_to_first: int = 8,
+                             locate_rtol: float = 1e-3, f_rtol: float = 1e-6, maxiter: int = 50,
+                             touching: Touching | None = None, say=print) -> FractureResult:
+    """Events of the nonlinear network (the module docstring) as :class:`opalflow.bpm.quasistatic.FractureResult`
+    (``modulus_MPa`` the first step's secant; ``resolver`` "newton-krylov").  ``first_strain``: the linear
+    method's first event (sets the step); ``f_rtol``: Newton's residual over the first step's largest force."""
+    if strengths.rule != "lammps":
+        raise InputError("bonds.breaking", strengths.rule, 'must be "lammps" with compression.geometry = '
+                         '"nonlinear" (LAMMPS\'s bpm/rotational rule, the one its bond law carries)')
+    t0 = time.perf_counter()
+    nw = _Network(net, supports, np.ones(len(net.L), bool), touching)
+    setup = time.perf_counter() - t0
+    step = first_strain / steps_to_first if math.isfinite(first_strain) and first_strain > 0 else strain_max / 50
+    z, strain, secant = np.zeros(supports.drive.size), 0.0, None
+    scale = None
+    events: list[Event] = []
+    peak, peak_alive, peak_x, modulus, stopped = 0.0, None, None, float("nan"), f"strain_max {strain_max:g} reached"
+
+    def equilibrium(z_from, e_from, e_to):
+        """Equilibrium at e_to from the one at e_from, predicted by the secant of the last two (the linear
+        network's unit solution where there is none)."""
+        slope = nw.unit if secant is None else secant
+        return nw.solve(z_from + slope * (e_to - e_from), e_to, f_tol, maxiter)
+
+    f_tol = math.inf
+    while strain < strain_max and len(events) < events_max:
+        target = min(strain + step, strain_max)
+        nw.find_contacts(z)
+        if scale is None:       # the first step's reactions (the forces' scale) set Newton's tolerance
+            trial = nw.internal(nw.prescribed(z + nw.unit * (target - strain), target))
+            scale = float(np.max(np.abs(np.where(nw.free, 0.0, trial.ravel()))))
+            f_tol = f_rtol * scale
+        got = equilibrium(z, strain, target)
+        if got is None:
+            if step < 1e-6 * strain_max:
+                stopped = f"Newton did not converge at strain {target:.5g}"
+                break
+            step *= 0.5
+            continue
+        z_new, _ = got
+        B, _ = breaking_index(nw.loads(z_new), strengths.part(np.flatnonzero(nw.alive)))
+        if math.isnan(modulus):
+            modulus = nw.stress(z_new) / target
+        if B.max(initial=0.0) < 1.0:
+            secant = (z_new - z) / (target - strain)
+            z, strain = z_new, target
+            continue
+        # the first crossing between strain and target, by bisection
+        lo, hi, z_lo, z_hi = strain, target, z, z_new
+        while hi - lo > locate_rtol * hi:
+            mid = 0.5 * (lo + hi)
+            got = equilibrium(z_lo, lo, mid)
+            if got is None:
+                break
+            B_mid, _ = breaking_index(nw.loads(got[0]), strengths.part(np.flatnonzero(nw.alive)))
+            if B_mid.max(initial=0.0) >= 1.0:
+                hi, z_hi = mid, got[0]
+            else:
+                lo, z_lo = mid, got[0]
+        z, strain = z_hi, hi
+        stress = nw.stress(z)
+        B, which = breaking_index(nw.loads(z), strengths.part(np.flatnonzero(nw.alive)))
+        k = B >= (1.0 - tolerance) * B.max()
+        ids = np.flatnonzero(nw.alive)[k]
+        if stress > peak:
+            peak, peak_alive, peak_x = stress, nw.alive.copy(), z.reshape(-1, 6).copy()
+        alive = nw.alive.copy()
+        alive[ids] = False
+        nw.set_alive(alive)
+        got = nw.solve(z, strain, f_tol, maxiter)
+        if got is None:         # no equilibrium near the last one: the network snaps through (dynamic)
+            events.append(Event(strain, stress, 0.0, [int(b) for b in ids], 0, False, [int(c) for c in which[k]]))
+            stopped = f"no equilibrium after the event at strain {strain:.5g} (snap-through)"
+            break
+        z, secant = got[0], None
+        after = nw.stress(z)
+        events.append(Event(strain, stress, after, [int(b) for b in ids], got[1], False, [int(c) for c in which[k]]))
+        say(f"quasi-static (nonlinear): event {len(events)}, {int((~nw.alive).sum())} bonds broken, strain "
+            f"{strain:.5f}, stress {stress:.4g} -> {after:.4g} MPa (peak {peak:.4g})")
+        if after < stop_fraction * peak:
+            stopped = f"stress fell below {stop_fraction:g} of the peak"
+            break
+    return FractureResult(modulus, events, nw.alive, stopped, time.perf_counter() - t0, setup, "newton-krylov",
+                          nw.factorizations, peak_alive=peak_alive, peak_x=peak_x, end_x=z.reshape(-1, 6),
+                          loose=int(nw.loose.sum()))
