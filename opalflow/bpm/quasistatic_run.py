@@ -28,7 +28,7 @@ from opalflow.bpm.quasistatic import CHECKS, Event, SavedState, Stopped, Strengt
 from opalflow.bpm.scene import scene_of
 from opalflow.bpm.spec import BREAKING_RULES, BpmWorkflow
 from opalflow.bpm.methods import METHODS
-from opalflow.bpm.nonlinear import Touching, solve_nonlinear_fracture
+from opalflow.bpm.nonlinear import solve_nonlinear_fracture
 from opalflow.bpm.report import network_inputs, plots_line, sample_lines, structure_cost
 from opalflow.bpm.result import CompressionResult, EventFacts
 from opalflow.bpm.static_run import network_run, particle_stress
@@ -94,16 +94,6 @@ def contacts_of(spec: BpmWorkflow, data) -> Contacts | None:
                             data.types - 1, k.quasistatic, k.reference_strain)
 
 
-def touching_of(spec: BpmWorkflow, data) -> Touching | None:
-    """The nonlinear method's contacts (``contacts.enabled``): Hertz between the spheres of ``data`` with the
-    first particle type's material (one material: the aerogel's, the lattice's)."""
-    if not spec.contacts.enabled:
-        return None
-    p = contact_properties(particle_material(data.type_names[0], spec.material))
-    return Touching(data.positions, data.diameters / 2, data.box_lengths, data.periodic,
-                    p.youngs_modulus_MPa / (2 * (1 - p.poisson_ratio**2)))
-
-
 def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=print) -> CompressionResult:
     """Build the scene, run the event loop, write the results (see the module docstring)."""
     t0 = time.perf_counter()
@@ -134,7 +124,7 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
             res = solve_nonlinear_fracture(net, strengths, supports, strain_max=c.strain_max,
                                            first_strain=res.events[0].strain if res.events else math.inf,
                                            stop_fraction=c.stop_fraction, events_max=c.events_max,
-                                           tolerance=c.event_tolerance, touching=touching_of(spec, data), say=tell)
+                                           tolerance=c.event_tolerance, say=tell)
     except Stopped as exc:                       # a scheduler's signal: the state is saved, a requeue resumes
         record.end(out, "interrupted", last_step=exc.events)
         raise Preempted(out, exc.events) from None

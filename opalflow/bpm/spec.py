@@ -74,9 +74,7 @@ class ContactsSpec:
     """Hertz-Mindlin contacts between unbonded particles (pair_style granular); friction and restitution
     replace every material's (data/materials.toml) when given."""
 
-    #: contacts between unbonded particles in the dynamic method (pair_style granular) and in the quasi-static one
-    #: with compression.geometry = "nonlinear" (Hertz's normal force, frictionless: opalflow/bpm/nonlinear.py)
-    enabled: bool = True
+    enabled: bool = True             # contacts between unbonded particles in the dynamic method (pair_style granular)
     model: str = "hertz"             # hertz: hertz/material + mindlin; linear: hooke + linear_history
     friction: float | None = None    # Coulomb friction coefficient of every contact (None: each material's)
     restitution: float | None = None  # coefficient of restitution of every contact (None: each material's)
@@ -252,14 +250,14 @@ class BpmWorkflow(WorkflowSpec):
               'must be "linear" or "nonlinear" (quasistatic method)')
         check(c.geometry == "linear" or c.method == "quasistatic", "compression.geometry", c.geometry,
               'is the quasi-static method\'s (the dynamic one is LAMMPS, at finite rotation already)')
-        check(c.geometry == "linear" or not self.contacts.enabled or self.contacts.model == "hertz", "contacts.model",
-              self.contacts.model, 'must be "hertz" with compression.geometry = "nonlinear" (its contacts are '
-              "Hertz's; or contacts.enabled = false)")
+        check(c.geometry == "linear" or not self.contacts.enabled, "contacts.enabled", self.contacts.enabled,
+              'must be false with compression.geometry = "nonlinear" (its contacts are not built: '
+              "opalflow/bpm/nonlinear.py says why; the dynamic method has them)")
         check(c.geometry == "linear" or b.breaking == "lammps", "bonds.breaking", b.breaking,
               'must be "lammps" with compression.geometry = "nonlinear" (LAMMPS\'s bpm/rotational law and rule)')
         check(c.geometry == "linear" or self.contacts.quasistatic == "off", "contacts.quasistatic",
-              self.contacts.quasistatic, 'must be "off" with compression.geometry = "nonlinear" (its contacts are '
-              "contacts.enabled's, found as the spheres move)")
+              self.contacts.quasistatic, 'must be "off" with compression.geometry = "nonlinear" (the linear '
+              "method's contact springs)")
         check(0 <= c.event_tolerance <= 0.5, "compression.event_tolerance", c.event_tolerance,
               "must be in [0, 0.5] (bonds within this fraction of the next limit break in one event)")
         check(0 <= c.stop_fraction < 1, "compression.stop_fraction", c.stop_fraction, "must be in [0, 1)")
