@@ -2,8 +2,10 @@
 strength study's cost, the curve to densification.
 
     python bench/bench_aerogel_strength.py validate   # 2 000-sphere slabs, 3 densities x 3 seeds x trees / loops
+    python bench/bench_aerogel_strength.py nonlinear  # the nonlinear method, and LAMMPS without contacts, on them
+    python bench/bench_aerogel_strength.py report     # the validation table (.json, .md) from the runs that finished
     python bench/bench_aerogel_strength.py study      # workflows/aerogel_strength.toml: n and m, its wall time
-    python bench/bench_aerogel_strength.py densify    # one slab to 40 % strain by LAMMPS's dynamics, with contacts
+    python bench/bench_aerogel_strength.py densify    # one slab to 50 % strain by LAMMPS's dynamics, with contacts
 
 ``validate`` runs each slab three ways: LAMMPS (``bpm/rotational``, wall at 0.1 m/s, bonds breaking at full load:
 ``bonds.smooth = false``), the quasi-static method (event-driven breaking of the linear network, the same rule) and
@@ -209,6 +211,19 @@ def nonlinear(a) -> dict:
     return {"runs": len(got), "wall_s": time.perf_counter() - t}
 
 
+def study(a) -> dict:
+    """workflows/aerogel_strength.toml run into RUNS/strength (kept: a rerun reads it), its summary and report
+    copied to bench/results/aerogel_strength.json and .md with the machine and the wall time of the run that
+    computed its jobs."""
+    out = Path(a.runs) / "strength"
+    summary = run(out, [], workflow="aerogel_strength")
+    row = {**machine(), "load": a.load, **summary}
+    (RESULTS / "aerogel_strength.json").write_text(json.dumps(row, indent=1) + "\n")
+    (RESULTS / "aerogel_strength.md").write_text((out / "report.md").read_text())
+    return {k: summary[k] for k in ("modulus_exponent", "modulus_exponent_ci95", "strength_exponent",
+                                    "strength_exponent_ci95", "wall_s")}
+
+
 def finished(out: Path) -> dict | None:
     p = out / "summary.json"
     summary = json.loads(p.read_text()) if p.exists() else None
@@ -281,13 +296,15 @@ def report(a) -> dict:
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("part", choices=["validate", "nonlinear", "densify", "report"])
+    p.add_argument("part", choices=["validate", "nonlinear", "study", "densify", "report"])
     p.add_argument("--runs", default="runs/bench_aerogel_strength", help="folder of the runs (kept: rerun reads them)")
     p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--load", default="", help="what else ran on the machine meanwhile (recorded with the study)")
     p.add_argument("--series", nargs="+", default=["restructuring"], choices=SERIES,
                    help="loop models (a tree at 0.03 breaks near 25 %% strain: 10-20 min of LAMMPS a slab)")
     a = p.parse_args(argv)
-    out = {"validate": validate, "nonlinear": nonlinear, "densify": densify, "report": report}[a.part](a)
+    out = {"validate": validate, "nonlinear": nonlinear, "study": study, "densify": densify,
+           "report": report}[a.part](a)
     print(json.dumps({k: v for k, v in out.items() if not isinstance(v, list)}, indent=1))
     return 0
 

@@ -12,6 +12,7 @@ and silica-aerogel experiments (data/reference/aerogel_literature.toml).
 """
 from __future__ import annotations
 
+import math
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -218,6 +219,8 @@ class DensityStrength:
 
     target_solid_fraction: float
     runs: int
+    #: runs at this solid fraction in which no bond broke up to compression.strain_max (no strength)
+    unbroken: int
     density_kg_m3: float
     strength_kPa: float
     strength_max_min: float
@@ -293,8 +296,9 @@ def _strength_at(f: float, runs: list[DensityRun]) -> DensityStrength | None:
     checks = {c: sum(r.loaded.broken_by_check.get(c, 0) for r in rs) for c in rs[0].loaded.broken_by_check}
     energy = [r.loaded.energy_to_peak_kJ_m3 for r in rs if r.loaded.energy_to_peak_kJ_m3 is not None]
     broken = [r.loaded.broken_at_peak for r in rs if r.loaded.broken_at_peak is not None]
+    unbroken = sum(1 for r in runs if r.target_solid_fraction == f and r.loaded and not r.strength_kPa)
     return DensityStrength(
-        f, len(rs), float(np.exp(np.mean(np.log([r.density_kg_m3 for r in rs])))), float(np.exp(sig.mean())),
+        f, len(rs), unbroken, float(np.exp(np.mean(np.log([r.density_kg_m3 for r in rs])))), float(np.exp(sig.mean())),
         float(np.exp(sig.max() - sig.min())), float(np.exp(E.mean())), float(np.exp((sig - E).mean())),
         float(np.exp(eps.mean())), float(np.exp(np.mean(np.log(energy)))) if energy else float("nan"),
         float(np.mean(broken)) if broken else float("nan"),
@@ -338,9 +342,10 @@ def _density_series(runs: list[DensityRun]) -> DensitySeries:
 def _strength_run(result) -> StrengthRun:
     """A strength job's result as :class:`StrengthRun`."""
     checks = {check: sum(bins.values()) for check, bins in (getattr(result, "broken_bonds_by_check", None) or {}).items()}
-    return StrengthRun(result.method, result.youngs_modulus_GPa * 1e6,
-                       result.strength_MPa * 1e3 if result.strength_MPa else None, result.strain_at_peak,
-                       result.energy_to_peak_kJ_m3, getattr(result, "broken_bonds_at_peak", None), checks, result.wall_s)
+    broke = result.strength_MPa is not None and math.isfinite(result.strength_MPa)     # (nan: no bond broke)
+    return StrengthRun(result.method, result.youngs_modulus_GPa * 1e6, result.strength_MPa * 1e3 if broke else None,
+                       result.strain_at_peak if broke else None, result.energy_to_peak_kJ_m3 if broke else None,
+                       getattr(result, "broken_bonds_at_peak", None) if broke else None, checks, result.wall_s)
 
 
 def aerogel_density_analyse(spec: StudyWorkflow, jobs: list[Job], res: dict) -> Density | None:
@@ -401,10 +406,10 @@ def aerogel_density_render(spec: StudyWorkflow, study: Density, out: Path) -> li
         lines += ["", f"Strength per solid fraction ({method}; geometric means over the seeds; share of "
                   "var(ln sigma) from ln E and ln(strain at peak), their correlation: DensityStrength in "
                   "opalflow/studies/aerogel.py):", "",
-                  "| loop model | target solid fraction | runs | density (kg/m^3) | strength (kPa) | strength "
+                  "| loop model | target solid fraction | runs broken / unbroken | density (kg/m^3) | strength (kPa) | strength "
                   "max/min | E (kPa) | strength / E | strain at peak | energy to peak (kJ/m^3) | bonds broken before "
                   "the peak | share of ln E / ln strain | corr | bonds broken by |", "|" + "---|" * 14]
-        lines += [f"| {model} | {x.target_solid_fraction:g} | {x.runs} | {x.density_kg_m3:.1f} | "
+        lines += [f"| {model} | {x.target_solid_fraction:g} | {x.runs} / {x.unbroken} | {x.density_kg_m3:.1f} | "
                   f"{x.strength_kPa:.4g} | {x.strength_max_min:.1f} | {x.E_kPa:.4g} | {x.strength_per_E:.4f} | "
                   f"{x.strain_at_peak:.3f} | "
                   f"{x.energy_to_peak_kJ_m3:.3g} | {x.broken_at_peak:.1f} | {x.share_E:.2f} / {x.share_strain:.2f} | "
