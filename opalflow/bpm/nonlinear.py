@@ -395,8 +395,9 @@ def solve_nonlinear_fracture(net: BondNetwork, strengths: Strengths, supports: S
         alive[ids] = False
         nw.set_alive(alive)
         got = nw.solve(z, strain, f_tol, maxiter)
-        if got is None:         # no equilibrium near the last one: the network snaps through (dynamic)
-            events.append(Event(strain, stress, 0.0, [int(b) for b in ids], 0, False, [int(c) for c in which[k]]))
+        if got is None:         # no equilibrium near the last one: the network snaps through (dynamic): no stress after
+            events.append(Event(strain, stress, math.nan, [int(b) for b in ids], 0, False,
+                                [int(c) for c in which[k]]))
             stopped = f"no equilibrium after the event at strain {strain:.5g} (snap-through)"
             break
         z, secant = got[0], None

@@ -195,7 +195,7 @@ def _event_facts(spec: BpmWorkflow, res, events: int, contacts) -> EventFacts:
         events=events, stopped=res.stopped, resolver=res.resolver, tolerance=c.event_tolerance,
         setup_s=round(res.setup_seconds, 3), events_s=round(res.seconds - res.setup_seconds, 3),
         factorizations=res.factorizations,
-        cg_iterations=int(sum(e.iterations for e in res.events)) if res.resolver != "direct" else 0,
+        cg_iterations=int(sum(e.iterations for e in res.events)) if res.resolver not in ("direct", "newton") else 0,
         local_rtol=c.local_rtol, settled_locally=int(sum(e.settled for e in res.events)), loose_particles=res.loose,
         contacts=spec.contacts.quasistatic, contact_pairs=len(contacts.bond) if contacts else 0,
         contacts_pressing_at_peak=res.events[max(res.peak - 1, 0)].contacts if res.events else 0,
