@@ -341,7 +341,8 @@ def _density_series(runs: list[DensityRun]) -> DensitySeries:
 
 def _strength_run(result) -> StrengthRun:
     """A strength job's result as :class:`StrengthRun`."""
-    checks = {check: sum(bins.values()) for check, bins in (getattr(result, "broken_bonds_by_check", None) or {}).items()}
+    by_check = getattr(result, "broken_bonds_by_check", None) or {}
+    checks = {check: sum(bins.values()) for check, bins in by_check.items()}
     broke = result.strength_MPa is not None and math.isfinite(result.strength_MPa)     # (nan: no bond broke)
     return StrengthRun(result.method, result.youngs_modulus_GPa * 1e6, result.strength_MPa * 1e3 if broke else None,
                        result.strain_at_peak if broke else None, result.energy_to_peak_kJ_m3 if broke else None,
@@ -406,9 +407,9 @@ def aerogel_density_render(spec: StudyWorkflow, study: Density, out: Path) -> li
         lines += ["", f"Strength per solid fraction ({method}; geometric means over the seeds; share of "
                   "var(ln sigma) from ln E and ln(strain at peak), their correlation: DensityStrength in "
                   "opalflow/studies/aerogel.py):", "",
-                  "| loop model | target solid fraction | runs broken / unbroken | density (kg/m^3) | strength (kPa) | strength "
-                  "max/min | E (kPa) | strength / E | strain at peak | energy to peak (kJ/m^3) | bonds broken before "
-                  "the peak | share of ln E / ln strain | corr | bonds broken by |", "|" + "---|" * 14]
+                  "| loop model | target solid fraction | runs broken / unbroken | density (kg/m^3) | strength (kPa) | "
+                  "strength max/min | E (kPa) | strength / E | strain at peak | energy to peak (kJ/m^3) | bonds broken "
+                  "before the peak | share of ln E / ln strain | corr | bonds broken by |", "|" + "---|" * 14]
         lines += [f"| {model} | {x.target_solid_fraction:g} | {x.runs} / {x.unbroken} | {x.density_kg_m3:.1f} | "
                   f"{x.strength_kPa:.4g} | {x.strength_max_min:.1f} | {x.E_kPa:.4g} | {x.strength_per_E:.4f} | "
                   f"{x.strain_at_peak:.3f} | "
