@@ -138,10 +138,7 @@ def densify(a) -> dict:
     """One restructured slab (2 000 spheres, solid fraction 0.12, seed 1) compressed by LAMMPS to 35 % strain with
     its Hertz-Mindlin contacts, bonds breaking at full load: the curve through the peak, the plateau and the
     contacts' stiffening; docs/figures/aerogel_densification.png."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from opalflow.store import new_figure, save_figure
 
     out = Path(a.runs) / "densify"
     sets = ["aggregate.loops=restructuring", "aggregate.solid_fraction=0.12", "aggregate.seed=1", *BRITTLE,
@@ -162,7 +159,7 @@ def densify(a) -> dict:
            "stress_kPa_0.3_0.35": float(np.mean(s[tail])) if tail.any() else None,
            "min_after_peak_kPa": float(s[post].min()) if post.any() else None,
            "broken_bonds_at_peak": int(broken[k]), "broken_bonds_end": int(broken[-1]), "strain_end": float(e[-1])}
-    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    fig, ax = new_figure(figsize=(6.4, 4.2))
     ax.plot(e, s, "-", color="C0", lw=1, label="stress (LAMMPS, bpm/rotational + Hertz-Mindlin contacts)")
     ax.plot([e[k]], [s[k]], "o", color="C3", label=f"peak {s[k]:.3g} kPa at strain {e[k]:.3f}")
     ax.set_xlabel("strain")
@@ -173,8 +170,7 @@ def densify(a) -> dict:
     ax.set_title(f"restructured DLCA slab, solid fraction 0.12, {summary['n_particles']} spheres, wall 0.1 m/s",
                  fontsize=9)
     ax.legend(fontsize=7, loc="upper left")
-    fig.tight_layout()
-    fig.savefig(ROOT / "docs" / "figures" / "aerogel_densification.png", dpi=110)
+    save_figure(fig, ROOT / "docs" / "figures" / "aerogel_densification.png")
     (RESULTS / "aerogel_densification.json").write_text(json.dumps(row, indent=1) + "\n")
     return row
 

@@ -187,13 +187,14 @@ class _Network:
     """The damaged network under its supports: the intact bonds, the particles held (supports, loose ones), the
     preconditioner of the linear stiffness of what is intact."""
 
-    def __init__(self, net: BondNetwork, supports: Supports, alive):
-        self.full, self.supports = net, supports
+    def __init__(self, net: BondNetwork, supports: Supports, alive, strengths: Strengths):
+        self.full, self.supports, self.all_strengths = net, supports, strengths
         self.set_alive(alive)
 
     def set_alive(self, alive: np.ndarray) -> None:
         self.alive = alive.copy()
         self.net = self.full.part(np.flatnonzero(alive))
+        self.strengths = self.all_strengths.part(np.flatnonzero(alive))     # the intact bonds', in their order
         self.loose = loose_particles(self.net, self.supports.anchored)
         self.held = self.supports.without(self.loose)
         self.free = ~self.held.held.ravel()
@@ -333,7 +334,7 @@ def solve_nonlinear_fracture(net: BondNetwork, strengths: Strengths, supports: S
         raise InputError("bonds.breaking", strengths.rule, 'must be "lammps" with compression.geometry = '
                          '"nonlinear" (LAMMPS\'s bpm/rotational rule, the one its bond law carries)')
     t0 = time.perf_counter()
-    nw = _Network(net, supports, np.ones(len(net.L), bool))
+    nw = _Network(net, supports, np.ones(len(net.L), bool), strengths)
     setup = time.perf_counter() - t0
     step = first_strain / steps_to_first if math.isfinite(first_strain) and first_strain > 0 else strain_max / 50
     z, strain, secant = np.zeros(supports.drive.size), 0.0, None
@@ -362,7 +363,7 @@ def solve_nonlinear_fracture(net: BondNetwork, strengths: Strengths, supports: S
             step *= 0.5
             continue
         z_new, _ = got
-        B, _ = breaking_index(nw.loads(z_new), strengths.part(np.flatnonzero(nw.alive)))
+        B, _ = breaking_index(nw.loads(z_new), nw.strengths)
         if math.isnan(modulus):
             modulus = nw.stress(z_new) / target
         if B.max(initial=0.0) < 1.0:
@@ -379,14 +380,14 @@ def solve_nonlinear_fracture(net: BondNetwork, strengths: Strengths, supports: S
             got = equilibrium(z_lo, lo, mid)
             if got is None:
                 break
-            B_mid, _ = breaking_index(nw.loads(got[0]), strengths.part(np.flatnonzero(nw.alive)))
+            B_mid, _ = breaking_index(nw.loads(got[0]), nw.strengths)
             if B_mid.max(initial=0.0) >= 1.0:
                 hi, z_hi = mid, got[0]
             else:
                 lo, z_lo = mid, got[0]
         z, strain = z_hi, hi
         stress = nw.stress(z)
-        B, which = breaking_index(nw.loads(z), strengths.part(np.flatnonzero(nw.alive)))
+        B, which = breaking_index(nw.loads(z), nw.strengths)
         k = B >= (1.0 - tolerance) * B.max()
         ids = np.flatnonzero(nw.alive)[k]
         if stress > peak:

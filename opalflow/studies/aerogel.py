@@ -290,7 +290,7 @@ def _strength_at(f: float, runs: list[DensityRun]) -> DensityStrength | None:
     rs = [r for r in runs if r.target_solid_fraction == f and r.strength_kPa and r.loaded.E_kPa > 0]
     if not rs:
         return None
-    sig, E, eps = (np.log([x for x in v]) for v in ([r.strength_kPa for r in rs], [r.loaded.E_kPa for r in rs],
+    sig, E, eps = (np.log(v) for v in ([r.strength_kPa for r in rs], [r.loaded.E_kPa for r in rs],
                                                     [r.loaded.strain_at_peak for r in rs]))
     var = float(np.var(sig)) if len(rs) > 1 else 0.0
     checks = {c: sum(r.loaded.broken_by_check.get(c, 0) for r in rs) for c in rs[0].loaded.broken_by_check}
