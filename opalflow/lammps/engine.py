@@ -403,44 +403,55 @@ def run_in_process(folder: Path, script: str, *, every: int, strain_per_step: fl
     t = time.perf_counter()
     folder = Path(folder).resolve()          # the session works inside it: progress.json needs the full path
     with session(folder, suffix=suffix) as lmp:
-        for cmd in script_commands(script):
-            words = cmd.split()
-            if words[0] == "run" and "upto" in words:
-                target = int(words[1])
-                step = int(lmp.get_thermo("step"))
-                # chunks of about CHUNK_S seconds from the rate so far (the first 100 steps; at most 1/50 of the
-                # run): LAMMPS holds Ctrl-C and signals until a chunk ends
-                longest = max(every, target // 50)
-                chunk = min(every, 100)
-                progress = Progress(target, step, label, folder=folder)
-                first = True
-                while step < target:
-                    nxt = min(target, step + chunk)
-                    t_chunk = time.perf_counter()
-                    try:
-                        lmp.command(f"run {nxt} upto pre {'yes' if first else 'no'} post no")
-                    except KeyboardInterrupt:
-                        raise Interrupted(folder, int(lmp.get_thermo("step"))) from None
-                    rate = (nxt - step) / max(time.perf_counter() - t_chunk, 1e-6)
-                    chunk = int(min(max(1.0, rate * CHUNK_S), longest))
-                    first = False
+        try:
+            for cmd in script_commands(script):
+                words = cmd.split()
+                if words[0] == "run" and "upto" in words:
+                    target = int(words[1])
                     step = int(lmp.get_thermo("step"))
-                    progress.update(step, step * strain_per_step)
-                    if _STOP and step < target:
-                        _STOP.clear()
-                        # a restart at a whole output interval: the resumed run's first curve row is then
-                        # one interval later, no row lost or written twice
-                        aligned = min(target, -(-step // every) * every)
-                        if aligned > step:
-                            lmp.command(f"run {aligned} upto pre no post no")
-                            step = aligned
-                        if step < target:
-                            lmp.command(f"write_restart restart.{step}.bin")
-                            raise Preempted(folder, step)
-                progress.update(step, step * strain_per_step, force=True)
-            else:
-                lmp.command(cmd)
+                    # chunks of about CHUNK_S seconds from the rate so far (the first 100 steps; at most 1/50 of the
+                    # run): LAMMPS holds Ctrl-C and signals until a chunk ends
+                    longest = max(every, target // 50)
+                    chunk = min(every, 100)
+                    progress = Progress(target, step, label, folder=folder)
+                    first = True
+                    while step < target:
+                        nxt = min(target, step + chunk)
+                        t_chunk = time.perf_counter()
+                        lmp.command(f"run {nxt} upto pre {'yes' if first else 'no'} post no")
+                        rate = (nxt - step) / max(time.perf_counter() - t_chunk, 1e-6)
+                        chunk = int(min(max(1.0, rate * CHUNK_S), longest))
+                        first = False
+                        step = int(lmp.get_thermo("step"))
+                        progress.update(step, step * strain_per_step)
+                        if _STOP and step < target:
+                            _STOP.clear()
+                            # a restart at a whole output interval: the resumed run's first curve row is then
+                            # one interval later, no row lost or written twice
+                            aligned = min(target, -(-step // every) * every)
+                            if aligned > step:
+                                lmp.command(f"run {aligned} upto pre no post no")
+                                step = aligned
+                            if step < target:
+                                lmp.command(f"write_restart restart.{step}.bin")
+                                raise Preempted(folder, step)
+                    progress.update(step, step * strain_per_step, force=True)
+                else:
+                    lmp.command(cmd)
+        except Interrupted:
+            raise
+        except KeyboardInterrupt:
+            # Ctrl-C lands where Python runs next: inside a chunk, between chunks (progress) or in a command
+            raise Interrupted(folder, _step_reached(lmp)) from None
     return time.perf_counter() - t
+
+
+def _step_reached(lmp) -> int | None:
+    """The step LAMMPS has reached, None before a box exists (no thermo yet)."""
+    try:
+        return int(lmp.get_thermo("step"))
+    except Exception:  # noqa: BLE001 - LAMMPS refuses thermo before the box is defined
+        return None
 
 
 def run_script_sh(lmp_args: str = "-in in.lmp") -> str:
