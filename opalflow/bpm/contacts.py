@@ -20,6 +20,9 @@ G* = 1 / ((2 - nu_i) / G_i + (2 - nu_j) / G_j), R* = R_i R_j / (R_i + R_j), from
 contact properties (data/materials.toml: the paper's particles have its bonds' E, 6.53 GPa for silica).
 A contact element is a :class:`opalflow.bpm.stiffness.BondNetwork` bond with a_r = k_n, a_s = k_t (or 0) and
 no bending or twisting stiffness, so every re-solve takes it as it takes a bond.
+
+The nonlinear quasi-static method (``compression.geometry = "nonlinear"``) has LAMMPS's own contacts instead, at
+finite displacement, with friction and found as the spheres move: :class:`GranularContacts`.
 """
 from __future__ import annotations
 
@@ -29,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from opalflow.bpm.bonds import find_bonds
-from opalflow.bpm.stiffness import BondNetwork
+from opalflow.bpm.stiffness import BondNetwork, cross
 from opalflow.materials import ContactProperties
 from opalflow.neighbors import separations
 
@@ -115,3 +118,161 @@ def describe(contacts: Contacts, friction: str, reference_strain: float) -> str:
             f"of them bonded: their contact acts once the bond breaks), linear Hertz-Mindlin springs at "
             f"{100 * reference_strain:g} % overlap (k_n {np.mean(k) if len(k) else math.nan:.4g} pN/nm), "
             f"{friction}, in compression only")
+
+
+#: the nonlinear contacts' friction follows Coulomb's cap exactly up to this fraction of it (GranularContacts)
+STICK = 0.9
+
+
+@dataclass
+class GranularContacts:
+    """Hertz-Mindlin contacts with Coulomb friction at finite displacement, for the nonlinear quasi-static method
+    (:mod:`opalflow.bpm.nonlinear`): LAMMPS's ``pair_style granular`` with ``hertz/material`` and ``tangential
+    mindlin`` (src/GRANULAR/gran_sub_mod_normal.cpp, gran_sub_mod_tangential.cpp, LAMMPS 22 Jul 2025) without its
+    damping (a static state has no relative velocity), between spheres that overlap and that no intact bond joins
+    (the deck's ``special_bonds lj 0``; a broken bond's pair then touches as any other):
+
+    - normal: F_n = 4/3 E* sqrt(R* delta) delta along n = (x_i - x_j) / r, delta = R_i + R_j - r > 0 (Dosta et al.
+      eq. 5);
+    - tangential: k_t = 8 G* sqrt(R* delta) (eq. 8) on the history xi, the slip of i's contact point on j's since
+      the pair touched, F_t = -k_t xi, at most mu F_n (Coulomb; where reached, xi = -F_t / k_t, LAMMPS's rescale),
+      xi turned into each new tangent plane with its length kept, dropped when the pair parts; the cap is rounded
+      above :data:`STICK` of it (|F_t| = mu F_n (s + (1 - s) tanh((x - s) / (1 - s))), x = k_t |xi| / (mu F_n),
+      the same force below s, continuous in slope) so that Newton's tangent is continuous; a pair that comes to
+      touch in a load step counts its slip from the step's start (LAMMPS: from the touch; the cap bounds the
+      difference, mu F_n, which is zero at the touch);
+    - torques (-(R - delta / 2) n) x F_t on i and on j (LAMMPS's dist_to_contact), no rolling or twisting
+      resistance (the deck's contacts have none).
+
+    E*, G* as :func:`hertz_mindlin_springs`, mu the geometric mean of the two particles' (LAMMPS's mixing).
+    A load step is one increment of the history from the last accepted equilibrium (:meth:`commit`): the slip
+    increment (du_i - du_j) - (R_i dphi_i + R_j dphi_j) x n, its tangential part; so the forces are a function of
+    the displacements and rotations z alone within a step, and Newton's tangent sees the friction's return map.
+    The pairs a step considers (:meth:`find`) are those within ``reach`` of contact at its start; a pair that comes
+    to overlap outside them is found after the solve, and the step solved again with it."""
+
+    x0: np.ndarray
+    radius: np.ndarray
+    E: np.ndarray
+    nu: np.ndarray
+    mu: np.ndarray
+    box: np.ndarray
+    periodic: np.ndarray
+    reach: float = 1.05
+
+    def __post_init__(self) -> None:
+        n = len(self.x0)
+        self.z_c = np.zeros(6 * n)
+        self.keys_c = np.zeros(0, np.int64)        # the committed contacts (pair keys i n + j, sorted) ...
+        self.xi_c = np.zeros((0, 3))               # ... and their slip histories
+        self.bonded = np.zeros(0, np.int64)        # keys of the pairs an intact bond joins (sorted)
+        self.loose = np.zeros(n, bool)             # particles held still (lost from the supports): no contact
+        self.pairs = np.zeros((0, 2), np.int64)    # the candidates of the step under way
+        self.xi0 = np.zeros((0, 3))
+
+    @classmethod
+    def of(cls, positions, diameters, box, periodic, properties: list[ContactProperties], kinds) -> GranularContacts:
+        """From a structure: ``properties[kinds[p]]`` is particle p's material's contact."""
+        pick = (lambda f: np.array([getattr(properties[k], f) for k in kinds], float))
+        return cls(np.asarray(positions, float), 0.5 * np.asarray(diameters, float), E=pick("youngs_modulus_MPa"),
+                   nu=pick("poisson_ratio"), mu=pick("friction"), box=np.asarray(box, float),
+                   periodic=np.asarray(periodic, bool))
+
+    def set_bonded(self, i: np.ndarray, j: np.ndarray) -> None:
+        """The pairs an intact bond joins (no contact acts between them)."""
+        self.bonded = np.unique(np.minimum(i, j).astype(np.int64) * len(self.x0) + np.maximum(i, j))
+
+    def _near(self, z: np.ndarray, factor: float) -> np.ndarray:
+        """Pairs (i < j) no intact bond joins, neither particle loose, with centres within ``factor`` x (R_i + R_j)
+        at z."""
+        from opalflow.neighbors import pairs_within
+
+        x = self._positions(z)
+        for k in np.flatnonzero(self.periodic):
+            x[:, k] = np.mod(x[:, k], self.box[k])
+        pairs = pairs_within(x, factor * 2.0 * float(self.radius.max()), self.box, self.periodic)
+        if len(pairs):
+            r = np.linalg.norm(separations(x, pairs, self.box, self.periodic), axis=1)
+            pairs = pairs[r < factor * (self.radius[pairs[:, 0]] + self.radius[pairs[:, 1]])]
+        keys = pairs[:, 0] * len(self.x0) + pairs[:, 1]
+        return pairs[~np.isin(keys, self.bonded) & ~self.loose[pairs[:, 0]] & ~self.loose[pairs[:, 1]]]
+
+    def _positions(self, z: np.ndarray) -> np.ndarray:
+        return self.x0 + z.reshape(-1, 6)[:, :3]
+
+    def find(self, z: np.ndarray) -> None:
+        """The candidates of a step from z: the pairs within ``reach`` of contact, each with its history."""
+        self.pairs = self._near(z, self.reach)
+        keys = self.pairs[:, 0] * len(self.x0) + self.pairs[:, 1]
+        at = np.minimum(np.searchsorted(self.keys_c, keys), max(len(self.keys_c) - 1, 0))
+        hit = (self.keys_c[at] == keys) if len(self.keys_c) else np.zeros(len(keys), bool)
+        self.xi0 = np.zeros((len(keys), 3))
+        self.xi0[hit] = self.xi_c[at[hit]]
+
+    def missed(self, z: np.ndarray) -> bool:
+        """Whether a pair overlaps at z that is not among the step's candidates."""
+        n = len(self.x0)
+        over = self._near(z, 1.0)
+        inside = np.isin(over[:, 0] * n + over[:, 1], self.pairs[:, 0] * n + self.pairs[:, 1])
+        return not np.all(inside)
+
+    def _state(self, z: np.ndarray, sel=None):
+        """Each candidate's (those of ``sel``) overlap, normal, forces and slip history at z (the class
+        docstring)."""
+        pairs, xi0 = (self.pairs, self.xi0) if sel is None else (self.pairs[sel], self.xi0[sel])
+        i, j = pairs[:, 0], pairs[:, 1]
+        X, X0 = z.reshape(-1, 6), self.z_c.reshape(-1, 6)
+        sep = separations(self._positions(z), pairs, self.box, self.periodic)      # x_j - x_i
+        r = np.linalg.norm(sep, axis=1)
+        n = -sep / r[:, None]
+        Ri, Rj = self.radius[i], self.radius[j]
+        delta = Ri + Rj - r
+        on = delta > 0
+        d = np.where(on, delta, 0.0)
+        e_star = 1.0 / ((1 - self.nu[i] ** 2) / self.E[i] + (1 - self.nu[j] ** 2) / self.E[j])
+        g_star = 1.0 / (2 * (2 - self.nu[i]) * (1 + self.nu[i]) / self.E[i]
+                        + 2 * (2 - self.nu[j]) * (1 + self.nu[j]) / self.E[j])
+        a = np.sqrt(Ri * Rj / (Ri + Rj) * d)
+        Fn = 4.0 / 3.0 * e_star * a * d
+        # the history into the tangent plane, its length kept; plus the slip of this step
+        xi = xi0 - np.einsum("ij,ij->i", xi0, n)[:, None] * n
+        old, new = np.linalg.norm(xi0, axis=1), np.linalg.norm(xi, axis=1)
+        xi *= np.divide(old, new, out=np.ones_like(old), where=new > 0)[:, None]
+        du = (X[i, :3] - X0[i, :3]) - (X[j, :3] - X0[j, :3])
+        dphi = Ri[:, None] * (X[i, 3:] - X0[i, 3:]) + Rj[:, None] * (X[j, 3:] - X0[j, 3:])
+        slip = du - cross(dphi, n)
+        xi = xi + slip - np.einsum("ij,ij->i", slip, n)[:, None] * n
+        kt = 8.0 * g_star * a
+        Ft = -kt[:, None] * xi
+        limit = np.sqrt(self.mu[i] * self.mu[j]) * Fn
+        size = np.linalg.norm(Ft, axis=1)
+        ratio = np.divide(size, limit, out=np.zeros_like(size), where=limit > 0)
+        over = ratio > STICK
+        cap = STICK + (1 - STICK) * np.tanh((ratio[over] - STICK) / (1 - STICK))
+        Ft[over] *= (cap / ratio[over])[:, None]
+        xi[over] = -Ft[over] / np.where(kt[over] > 0, kt[over], 1.0)[:, None]
+        Ft[~on], xi[~on] = 0.0, 0.0
+        return on, n, Fn, Ft, xi, Ri - 0.5 * d, Rj - 0.5 * d
+
+    def internal(self, z: np.ndarray, sel=None) -> np.ndarray:
+        """(N, 6): minus the contacts' (the candidates ``sel``'s) force and torque on each particle at z (as the
+        bonds' internal force)."""
+        on, n, Fn, Ft, _, arm_i, arm_j = self._state(z, sel)
+        pairs = self.pairs if sel is None else self.pairs[sel]
+        i, j = pairs[:, 0], pairs[:, 1]
+        f = np.where(on[:, None], Fn[:, None] * n + Ft, 0.0)         # on i; -f on j
+        nxF = cross(n, Ft)
+        g = np.zeros((len(self.x0), 6))
+        for k in range(3):
+            g[:, k] = np.bincount(j, f[:, k], len(g)) - np.bincount(i, f[:, k], len(g))
+            g[:, 3 + k] = np.bincount(i, arm_i * nxF[:, k], len(g)) + np.bincount(j, arm_j * nxF[:, k], len(g))
+        return g
+
+    def commit(self, z: np.ndarray) -> int:
+        """Accept z: the touching candidates' histories become the next step's start; the number touching."""
+        on, *_, xi, _, _ = self._state(z)
+        keys = self.pairs[:, 0] * len(self.x0) + self.pairs[:, 1]
+        order = np.argsort(keys[on])
+        self.keys_c, self.xi_c = keys[on][order], xi[on][order]
+        self.z_c = z.copy()
+        return int(on.sum())

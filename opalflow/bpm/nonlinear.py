@@ -32,12 +32,13 @@ bond of the largest B breaks (with ``tolerance``: every bond within it of the la
 path to the supports are held still, and the network is solved again at that strain (the stress after the event);
 so on until the stress falls below ``stop_fraction`` of the peak or the strain reaches ``strain_max``.
 
-Contacts between spheres are not in it (``contacts.enabled = false`` is asked): frictionless Hertz contacts found
-as the spheres moved were tried and left out, since a sphere that slides off another has no equilibrium near
-and the continuation did not get past it in 15 min on a 2 000-sphere tree; LAMMPS's contacts carry Mindlin's
-tangential spring with friction, which a static method must follow as history.  Where they matter (bench/results/
-aerogel_strength_validation.json: at solid fraction 0.06 and up, and past ~15 % strain) the dynamic method is
-the reference.
+Contacts (``contacts.enabled``, the dynamic deck's own): LAMMPS's Hertz-Mindlin contacts with Coulomb friction
+between spheres no intact bond joins (:class:`opalflow.bpm.contacts.GranularContacts`), their slip histories
+carried from one accepted equilibrium to the next, found as the spheres move; a load step whose Newton iterations
+stall is halved (after ``ptc_in_step`` continuation steps) and grows back by 1.5 after easy ones, and the solve
+after an event may take ``ptc_after_event`` (the network settling after a snap-through: contacts catch it where
+LAMMPS's dynamics would).  Where no equilibrium is found after an event the run stops there (a snap-through that
+nothing catches: no stress after it).
 """
 from __future__ import annotations
 
@@ -49,10 +50,11 @@ import numpy as np
 
 from scipy.sparse import diags as sp_diags
 
+from opalflow.bpm.contacts import GranularContacts
 from opalflow.bpm.loading import Supports
 from opalflow.bpm.quasistatic import Event, FractureResult, Strengths
 from opalflow.bpm.static import block_matrix, loose_particles
-from opalflow.bpm.stiffness import BondNetwork
+from opalflow.bpm.stiffness import BondNetwork, cross
 from opalflow.linalg.direct import Factor
 from opalflow.spec import InputError
 
@@ -74,8 +76,8 @@ def quat_conjugate(q: np.ndarray) -> np.ndarray:
 def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Rows of vectors v rotated by the unit quaternions q (q v q^-1; LAMMPS's MathExtra::quatrotvec)."""
     w, u = q[:, :1], q[:, 1:]
-    t = 2.0 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
+    t = 2.0 * cross(u, v)
+    return v + w * t + cross(u, t)
 
 
 def quat_from_rotation(phi: np.ndarray) -> np.ndarray:
@@ -122,13 +124,13 @@ def bond_loads(net: BondNetwork, u: np.ndarray, q: np.ndarray) -> BondLoads:
     rb = quat_rotate(qj_inv, r)
     Fr = net.a_r * (r_mag - r0_mag)
     F_rot = (Fr / r_mag)[:, None] * rb
-    rb_x_r0 = np.cross(rb, r0)
+    rb_x_r0 = cross(rb, r0)
     # acos of the cosines as LAMMPS writes them, taken as atan2 (the same angles without acos's loss of
     # precision near 0: sqrt(machine epsilon) in the angle, which a difference quotient of the forces would see)
     gamma = np.arctan2(np.linalg.norm(rb_x_r0, axis=1), np.einsum("ij,ij->i", r0, rb))
-    s = _unit(np.cross(rb, rb_x_r0))
+    s = _unit(cross(rb, rb_x_r0))
     Fs = (net.a_s * r_mag * gamma)[:, None] * s
-    t = _unit(np.cross(r0, rb))
+    t = _unit(cross(r0, rb))
     Ts = (0.5 * net.a_s * r_mag * r_mag * gamma)[:, None] * t
     # mq: the rotation of z onto rb (Wang and Mora's X'Y'Z' representation)
     mq = np.zeros((len(r), 4))
@@ -187,8 +189,9 @@ class _Network:
     """The damaged network under its supports: the intact bonds, the particles held (supports, loose ones), the
     preconditioner of the linear stiffness of what is intact."""
 
-    def __init__(self, net: BondNetwork, supports: Supports, alive, strengths: Strengths):
-        self.full, self.supports, self.all_strengths = net, supports, strengths
+    def __init__(self, net: BondNetwork, supports: Supports, alive, strengths: Strengths,
+                 contacts: GranularContacts | None = None):
+        self.full, self.supports, self.all_strengths, self.contacts = net, supports, strengths, contacts
         self.set_alive(alive)
 
     def set_alive(self, alive: np.ndarray) -> None:
@@ -198,6 +201,9 @@ class _Network:
         self.loose = loose_particles(self.net, self.supports.anchored)
         self.held = self.supports.without(self.loose)
         self.free = ~self.held.held.ravel()
+        if self.contacts is not None:
+            self.contacts.set_bonded(self.net.i, self.net.j)
+            self.contacts.loose = self.loose
         K = block_matrix(self.net, self.free)[0]
         self.factor = Factor(K, self.free)
         self.factorizations = getattr(self, "factorizations", 0) + 1
@@ -212,8 +218,9 @@ class _Network:
         return bond_loads(self.net, X[:, :3], quat_from_rotation(X[:, 3:]))
 
     def internal(self, z: np.ndarray) -> np.ndarray:
-        """(N, 6): the bonds' internal force at z."""
-        return internal_force(self.net, self.loads(z))
+        """(N, 6): the bonds' (and the contacts') internal force at z."""
+        g = internal_force(self.net, self.loads(z))
+        return g if self.contacts is None else g + self.contacts.internal(z)
 
     def residual(self, z: np.ndarray) -> np.ndarray:
         return np.where(self.free, self.internal(z).ravel(), 0.0)
@@ -223,11 +230,14 @@ class _Network:
 
     def colours(self) -> list[np.ndarray]:
         """Groups of particles no two of which share a bond or a bonded neighbour (a greedy colouring of the
-        bond graph's square): one residual per group and dof gives 6 x groups columns of the Jacobian."""
+        square of the graph of bonds and the step's contact candidates): one residual per group and dof gives
+        6 x groups columns of the Jacobian."""
         import scipy.sparse as sp
 
         n = self.net.n_particles
         i, j = self.net.i, self.net.j
+        if self.contacts is not None:
+            i, j = np.r_[i, self.contacts.pairs[:, 0]], np.r_[j, self.contacts.pairs[:, 1]]
         A = sp.coo_matrix((np.ones(2 * len(i)), (np.r_[i, j], np.r_[j, i])), shape=(n, n)).tocsr()
         A = (A + sp.identity(n, format="csr")).tocsr()
         A2 = (A @ A).tocsr()
@@ -238,28 +248,46 @@ class _Network:
             while c in used:
                 c += 1
             colour[p] = c
-        self.neighbours = A
-        return [np.flatnonzero(colour == c) for c in range(colour.max() + 1)]
-
-    def jacobian(self, z: np.ndarray, F0: np.ndarray, h: float):
-        """The tangent dF/dz of the residual by forward differences over the colour groups (free dofs only; a
-        prescribed dof's row and column the identity)."""
-        import scipy.sparse as sp
-
-        n = self.net.n_particles
-        rows, cols, vals = [], [], []
-        A = self.neighbours
-        for group in self.groups:
+        groups = [np.flatnonzero(colour == c) for c in range(colour.max() + 1)]
+        self.group_parts = []
+        for group in groups:
             # each particle's perturbed neighbour in this group (at most one: the colouring)
             owner = np.full(n, -1)
             sub = A[:, group].tocoo()
             owner[sub.row] = group[sub.col]
-            touched = np.flatnonzero(owner >= 0)
+            mine = np.zeros(n, bool)
+            mine[group] = True
+            part = self.net.part(np.flatnonzero(mine[self.net.i] | mine[self.net.j]))
+            pairs = None
+            if self.contacts is not None:
+                pairs = np.flatnonzero(mine[self.contacts.pairs[:, 0]] | mine[self.contacts.pairs[:, 1]])
+            self.group_parts.append((group, np.flatnonzero(owner >= 0), owner, part, pairs))
+        return groups
+
+    def jacobian(self, z: np.ndarray, h: float):
+        """The tangent dF/dz of the residual by forward differences over the colour groups (free dofs only; a
+        prescribed dof's row and column the identity); each group's columns from the bonds and contacts that touch
+        it alone (the others' forces do not change)."""
+        import scipy.sparse as sp
+
+        n = self.net.n_particles
+        rows, cols, vals = [], [], []
+        X = z.reshape(-1, 6)
+        for group, touched, owner, part, pairs in self.group_parts:
+            q = quat_from_rotation(X[:, 3:])
+
+            def local(zz, qq):
+                g = internal_force(part, bond_loads(part, zz.reshape(-1, 6)[:, :3], qq))
+                return g if pairs is None else g + self.contacts.internal(zz, pairs)
+
+            g0 = local(z, q)[touched]
             for d in range(6):
                 dz = np.zeros(n * 6)
                 dz[group * 6 + d] = h
                 dz = np.where(self.free, dz, 0.0)
-                dF = ((self.residual(z + dz) - F0) / h).reshape(n, 6)[touched]
+                zz = z + dz
+                qq = q if d < 3 else quat_from_rotation(zz.reshape(-1, 6)[:, 3:])
+                dF = (local(zz, qq)[touched] - g0) / h
                 r = (touched[:, None] * 6 + np.arange(6)).ravel()
                 c = np.repeat(owner[touched] * 6 + d, 6)
                 rows.append(r)
@@ -269,41 +297,67 @@ class _Network:
         keep = sp.diags(self.free.astype(float))
         return (keep @ J @ keep + sp.diags((~self.free).astype(float))).tocsc()
 
-    def solve(self, z0: np.ndarray, strain: float, f_tol: float, maxiter: int) -> tuple[np.ndarray, int] | None:
+    def solve(self, z0: np.ndarray, strain: float, f_tol: float, maxiter: int,
+              ptc_max: int) -> tuple[np.ndarray, int] | None:
         """Equilibrium at ``strain`` from ``z0`` (its prescribed dofs set): Newton with the tangent of
-        :meth:`jacobian` and a backtracking line search on |F|; where that stalls (no equilibrium near: a sphere
-        slides off another, a branch snaps through), pseudo-transient continuation (Kelley and Keyes, SIAM J.
-        Numer. Anal. 35:508, 1998): (J + D / tau) dz = -F, D the tangent's diagonal, every step taken, tau grown
-        as |F| falls (switched evolution relaxation), which follows a damped motion to a stable equilibrium.
-        (z, iterations), None where neither converged."""
+        :meth:`jacobian` and a backtracking line search on |F|, the tangent's factors kept for chord steps while
+        each more than halves |F|; where Newton stalls (no equilibrium near: a sphere slides on another, a branch
+        snaps through), up to ``ptc_max`` steps of pseudo-transient continuation (Kelley and Keyes, SIAM J. Numer.
+        Anal. 35:508, 1998): (J + D / tau) dz = -F, D the tangent's diagonal, the pseudo time step tau cut by 4
+        until |F| falls and lengthened by 3 after each step that lowers it (a damped motion towards a stable
+        equilibrium).  (z, iterations), None where neither converged."""
         from scipy.sparse.linalg import splu
 
         z = self.prescribed(z0, strain)
+        self.refresh(z)
         F = self.residual(z)
-        norm, it = np.linalg.norm(F), 0
-        ptc, shift = False, 1.0
-        while it < 10 * maxiter:
+        norm, it, found = np.linalg.norm(F), 0, 0
+        ptc, shift, lu = False, 1.0, None
+        while it < maxiter + ptc_max:
             if np.max(np.abs(F)) <= f_tol:
-                return z, it
+                if self.contacts is None or found >= 5 or not self.contacts.missed(z):
+                    return z, it
+                found += 1                      # a pair came to touch outside the candidates: again with it
+                self.refresh(z)
+                F, lu = self.residual(z), None
+                norm = np.linalg.norm(F)
+                continue
             if not ptc and it >= maxiter:
                 return None
             it += 1
-            J = self.jacobian(z, F, 1e-7 * max(1.0, float(np.max(np.abs(z)))))
+            if lu is not None and not ptc:
+                # a chord step: the last tangent's factors, kept while they more than halve |F| each step
+                dz = np.where(self.free, -lu.solve(F), 0.0)
+                F_try = self.residual(z + dz)
+                n_try = np.linalg.norm(F_try)
+                if np.isfinite(n_try) and n_try < 0.5 * norm:
+                    z, F, norm = z + dz, F_try, n_try
+                    continue
+            J = self.jacobian(z, 1e-7 * max(1.0, float(np.max(np.abs(z)))))
             if ptc:
-                J = J + sp_diags(shift * np.abs(J.diagonal()) + 1e-30)
+                # the pseudo time step: shortened (a larger shift) until |F| falls, lengthened after each success
+                D = sp_diags(np.abs(J.diagonal()) + 1e-30)
+                for _ in range(30):
+                    try:
+                        dz = np.where(self.free, -splu((J + shift * D).tocsc()).solve(F), 0.0)
+                    except RuntimeError:
+                        dz = None
+                    if dz is not None:
+                        F_new = self.residual(z + dz)
+                        n_new = np.linalg.norm(F_new)
+                        if np.isfinite(n_new) and n_new < norm:
+                            break
+                    shift *= 4.0
+                else:
+                    return None
+                z, F, norm = z + dz, F_new, n_new
+                shift /= 3.0
+                continue
             try:
-                dz = np.where(self.free, -splu(J.tocsc()).solve(F), 0.0)
+                lu = splu(J.tocsc())
             except RuntimeError:                 # a singular tangent (a mechanism)
                 return None
-            if ptc:
-                z = z + dz
-                F_new = self.residual(z)
-                n_new = np.linalg.norm(F_new)
-                if not np.isfinite(n_new):
-                    return None
-                shift *= min(max(n_new / norm, 0.1), 10.0)      # SER: the pseudo time step grows as |F| falls
-                F, norm = F_new, n_new
-                continue
+            dz = np.where(self.free, -lu.solve(F), 0.0)
             t = 1.0
             while t > 1e-2:
                 z_try = z + t * dz
@@ -321,22 +375,38 @@ class _Network:
     def stress(self, z: np.ndarray) -> float:
         return self.held.stress(self.internal(z))
 
+    def refresh(self, z: np.ndarray) -> None:
+        """The contact candidates of a step from z and the colouring they need (nothing without contacts)."""
+        if self.contacts is not None:
+            self.contacts.find(z)
+            self.groups = self.colours()
+
+    def commit(self, z: np.ndarray) -> int:
+        """z accepted: the contacts' slip histories from here; the number of pairs touching (0 without contacts)."""
+        if self.contacts is None:
+            return 0
+        self.contacts.find(z)
+        return self.contacts.commit(z)
+
 
 def solve_nonlinear_fracture(net: BondNetwork, strengths: Strengths, supports: Supports, *,
                              strain_max: float, first_strain: float, stop_fraction: float = 0.5,
                              events_max: int = 100_000, tolerance: float = 0.0, steps_to_first: int = 8,
                              locate_rtol: float = 1e-3, f_rtol: float = 1e-6, maxiter: int = 50,
-                             say=print) -> FractureResult:
+                             ptc_in_step: int = 100, ptc_after_event: int = 200,
+                             contacts: GranularContacts | None = None, say=print) -> FractureResult:
     """Events of the nonlinear network (the module docstring) as :class:`opalflow.bpm.quasistatic.FractureResult`
     (``modulus_MPa`` the first step's secant; ``resolver`` "newton").  ``first_strain``: the linear
-    method's first event (sets the step); ``f_rtol``: Newton's residual over the first step's largest force."""
+    method's first event (sets the step); ``f_rtol``: Newton's residual over the first step's largest force;
+    ``contacts``: Hertz-Mindlin contacts with friction (:class:`opalflow.bpm.contacts.GranularContacts`) or none."""
     if strengths.rule != "lammps":
         raise InputError("bonds.breaking", strengths.rule, 'must be "lammps" with compression.geometry = '
                          '"nonlinear" (LAMMPS\'s bpm/rotational rule, the one its bond law carries)')
     t0 = time.perf_counter()
-    nw = _Network(net, supports, np.ones(len(net.L), bool), strengths)
+    nw = _Network(net, supports, np.ones(len(net.L), bool), strengths, contacts)
     setup = time.perf_counter() - t0
     step = first_strain / steps_to_first if math.isfinite(first_strain) and first_strain > 0 else strain_max / 50
+    base_step = step
     z, strain, secant = np.zeros(supports.drive.size), 0.0, None
     scale = None
     events: list[Event] = []
@@ -346,7 +416,7 @@ def solve_nonlinear_fracture(net: BondNetwork, strengths: Strengths, supports: S
         """Equilibrium at e_to from the one at e_from, predicted by the secant of the last two (the linear
         network's unit solution where there is none)."""
         slope = nw.unit if secant is None else secant
-        return nw.solve(z_from + slope * (e_to - e_from), e_to, f_tol, maxiter)
+        return nw.solve(z_from + slope * (e_to - e_from), e_to, f_tol, maxiter, ptc_in_step)
 
     f_tol = math.inf
     while strain < strain_max and len(events) < events_max:
@@ -362,13 +432,16 @@ def solve_nonlinear_fracture(net: BondNetwork, strengths: Strengths, supports: S
                 break
             step *= 0.5
             continue
-        z_new, _ = got
+        z_new, iterations = got
         B, _ = breaking_index(nw.loads(z_new), nw.strengths)
         if math.isnan(modulus):
             modulus = nw.stress(z_new) / target
         if B.max(initial=0.0) < 1.0:
             secant = (z_new - z) / (target - strain)
             z, strain = z_new, target
+            nw.commit(z)
+            if iterations <= 3:                 # an easy step: back towards the first step's size
+                step = min(1.5 * step, base_step)
             say(f"quasi-static (nonlinear): strain {strain:.4f} of {strain_max:g}, stress {nw.stress(z):.4g} MPa, "
                 f"max B {B.max(initial=0.0):.3f}, {got[1]} Newton iterations, "
                 f"{time.perf_counter() - t0:.0f} s")
@@ -386,6 +459,7 @@ def solve_nonlinear_fracture(net: BondNetwork, strengths: Strengths, supports: S
             else:
                 lo, z_lo = mid, got[0]
         z, strain = z_hi, hi
+        touching = nw.commit(z)
         stress = nw.stress(z)
         B, which = breaking_index(nw.loads(z), nw.strengths)
         k = B >= (1.0 - tolerance) * B.max()
@@ -395,15 +469,17 @@ def solve_nonlinear_fracture(net: BondNetwork, strengths: Strengths, supports: S
         alive = nw.alive.copy()
         alive[ids] = False
         nw.set_alive(alive)
-        got = nw.solve(z, strain, f_tol, maxiter)
+        got = nw.solve(z, strain, f_tol, maxiter, ptc_after_event)
         if got is None:         # no equilibrium near the last one: the network snaps through (dynamic): no stress after
             events.append(Event(strain, stress, math.nan, [int(b) for b in ids], 0, False,
-                                [int(c) for c in which[k]]))
+                                [int(c) for c in which[k]], touching))
             stopped = f"no equilibrium after the event at strain {strain:.5g} (snap-through)"
             break
         z, secant = got[0], None
+        touching = nw.commit(z)
         after = nw.stress(z)
-        events.append(Event(strain, stress, after, [int(b) for b in ids], got[1], False, [int(c) for c in which[k]]))
+        events.append(Event(strain, stress, after, [int(b) for b in ids], got[1], False, [int(c) for c in which[k]],
+                            touching))
         say(f"quasi-static (nonlinear): event {len(events)}, {int((~nw.alive).sum())} bonds broken, strain "
             f"{strain:.5f}, stress {stress:.4g} -> {after:.4g} MPa (peak {peak:.4g})")
         if after < stop_fraction * peak:

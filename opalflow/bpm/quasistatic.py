@@ -580,7 +580,9 @@ class Event:
     iterations: int = 0
     settled: bool = False       # by the local step alone (no global re-solve)
     checks: list[int] = field(default_factory=list)     # each broken bond's check (an index into CHECKS)
-    contacts: int = 0                                   # contacts pressing after the event (contacts.quasistatic)
+    #: contacts pressing after the event (contacts.quasistatic; the nonlinear method's contacts: touching after it,
+    #: or at it where no equilibrium follows)
+    contacts: int = 0
 
 
 @dataclass

@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from opalflow.analysis import fracture
-from opalflow.bpm.contacts import Contacts, contact_elements, describe as describe_contacts
-from opalflow.bpm.deck import particle_material
+from opalflow.bpm.contacts import Contacts, GranularContacts, contact_elements, describe as describe_contacts
+from opalflow.bpm.deck import particle_contacts, particle_material
 from opalflow.bpm.facts import RunFacts
 from opalflow.bpm.loading import LOADINGS
 from opalflow.materials import contact_properties
@@ -94,6 +94,16 @@ def contacts_of(spec: BpmWorkflow, data) -> Contacts | None:
                             data.types - 1, k.quasistatic, k.reference_strain)
 
 
+def granular_contacts(spec: BpmWorkflow, data) -> GranularContacts | None:
+    """The nonlinear method's contacts (``contacts.enabled``): the dynamic deck's Hertz-Mindlin law, friction and
+    materials (:func:`opalflow.bpm.deck.particle_contacts`); None where contacts are off."""
+    if not spec.contacts.enabled:
+        return None
+    _, props, _ = particle_contacts(spec, data)
+    return GranularContacts.of(data.positions, data.diameters, data.box_lengths, data.periodic,
+                               [props[t] for t in sorted(props)], data.types - 1)
+
+
 def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=print) -> CompressionResult:
     """Build the scene, run the event loop, write the results (see the module docstring)."""
     t0 = time.perf_counter()
@@ -124,7 +134,8 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
             res = solve_nonlinear_fracture(net, strengths, supports, strain_max=c.strain_max,
                                            first_strain=res.events[0].strain if res.events else math.inf,
                                            stop_fraction=c.stop_fraction, events_max=c.events_max,
-                                           tolerance=c.event_tolerance, say=tell)
+                                           tolerance=c.event_tolerance, contacts=granular_contacts(spec, data),
+                                           say=tell)
     except Stopped as exc:                       # a scheduler's signal: the state is saved, a requeue resumes
         record.end(out, "interrupted", last_step=exc.events)
         raise Preempted(out, exc.events) from None
@@ -199,7 +210,8 @@ def _event_facts(spec: BpmWorkflow, res, events: int, contacts) -> EventFacts:
         cg_iterations=(int(sum(e.iterations for e in res.events)) if res.resolver not in ("direct", "newton")
                        else 0),
         local_rtol=c.local_rtol, settled_locally=int(sum(e.settled for e in res.events)), loose_particles=res.loose,
-        contacts=spec.contacts.quasistatic, contact_pairs=len(contacts.bond) if contacts else 0,
+        contacts=("hertz-mindlin (nonlinear)" if c.geometry == "nonlinear" and spec.contacts.enabled
+                  else spec.contacts.quasistatic), contact_pairs=len(contacts.bond) if contacts else 0,
         contacts_pressing_at_peak=res.events[max(res.peak - 1, 0)].contacts if res.events else 0,
         contacts_pressing_at_end=res.events[-1].contacts if res.events else 0,
         peak_memory_MiB=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0)

@@ -74,7 +74,9 @@ class ContactsSpec:
     """Hertz-Mindlin contacts between unbonded particles (pair_style granular); friction and restitution
     replace every material's (data/materials.toml) when given."""
 
-    enabled: bool = True             # contacts between unbonded particles in the dynamic method (pair_style granular)
+    #: contacts between unbonded particles in the dynamic method (pair_style granular) and in the nonlinear
+    #: quasi-static one (the same law, static: opalflow.bpm.contacts.GranularContacts)
+    enabled: bool = True
     model: str = "hertz"             # hertz: hertz/material + mindlin; linear: hooke + linear_history
     friction: float | None = None    # Coulomb friction coefficient of every contact (None: each material's)
     restitution: float | None = None  # coefficient of restitution of every contact (None: each material's)
@@ -119,7 +121,8 @@ class CompressionSpec:
     resolve_rtol: float = 1e-6       # quasistatic, amg and block-amg: each re-solve to this residual (of |b|)
     local_rtol: float = 0.0          # quasistatic: events settle by a local solve while the residual stays below this
     #: quasistatic: "linear" (small rotations: one solve an event) or "nonlinear" (LAMMPS's bond law at finite
-    #: rotation, Newton at each load step: opalflow/bpm/nonlinear.py; bending networks at large strain)
+    #: rotation, Newton at each load step, with contacts.enabled its Hertz-Mindlin contacts with friction:
+    #: opalflow/bpm/nonlinear.py; bending networks at large strain)
     geometry: str = "linear"
     plots: str = "auto"              # the report's plots: all, none, or auto (all but for the static method)
 
@@ -250,9 +253,9 @@ class BpmWorkflow(WorkflowSpec):
               'must be "linear" or "nonlinear" (quasistatic method)')
         check(c.geometry == "linear" or c.method == "quasistatic", "compression.geometry", c.geometry,
               'is the quasi-static method\'s (the dynamic one is LAMMPS, at finite rotation already)')
-        check(c.geometry == "linear" or not self.contacts.enabled, "contacts.enabled", self.contacts.enabled,
-              'must be false with compression.geometry = "nonlinear" (its contacts are not built: '
-              "opalflow/bpm/nonlinear.py says why; the dynamic method has them)")
+        check(c.geometry == "linear" or not self.contacts.enabled or self.contacts.model == "hertz",
+              "contacts.model", self.contacts.model, 'must be "hertz" with compression.geometry = "nonlinear" and '
+              "contacts.enabled (its contacts are Hertz-Mindlin's; contacts.enabled = false: none)")
         check(c.geometry == "linear" or b.breaking == "lammps", "bonds.breaking", b.breaking,
               'must be "lammps" with compression.geometry = "nonlinear" (LAMMPS\'s bpm/rotational law and rule)')
         check(c.geometry == "linear" or self.contacts.quasistatic == "off", "contacts.quasistatic",

@@ -62,6 +62,15 @@ def bond_force(xp, n, L, a_r, a_s, du, st):
     return (a_r - a_s) * xp.sum(n * du, axis=1, keepdims=True) * n + a_s * du + 0.5 * a_s * L[:, None] * xp.cross(n, st)
 
 
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Rows a x b of (M, 3) arrays (numpy's cross moves axes for every call: 3x slower at these sizes)."""
+    out = np.empty_like(a)
+    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    return out
+
+
 @dataclass
 class BondNetwork:
     """Linear bonds between particles i and j (i < j): unit vector n = (x_i - x_j) / L and the four
