@@ -426,10 +426,15 @@ def solve_nonlinear_fracture(net: BondNetwork, strengths: Strengths, supports: S
             scale = float(np.max(np.abs(np.where(nw.free, 0.0, trial.ravel()))))
             f_tol = f_rtol * scale
         got = equilibrium(z, strain, target)
-        if got is None:
-            if step < 1e-6 * strain_max:
-                stopped = f"Newton did not converge at strain {target:.5g}"
+        if got is None and step < base_step / 64:
+            # no equilibrium near, however short the step (a sphere slips off another, a branch buckles): the
+            # motion followed by continuation as after an event
+            got = nw.solve(z + (nw.unit if secant is None else secant) * (target - strain), target, f_tol, maxiter,
+                           ptc_after_event)
+            if got is None:
+                stopped = f"no equilibrium found at strain {target:.5g} (an instability the steps do not follow)"
                 break
+        if got is None:
             step *= 0.5
             continue
         z_new, iterations = got

@@ -163,8 +163,8 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
         headline=f"E = {E:.4g} GPa, strength = {got.strength_MPa:.4g} MPa (strain at peak "
                  f"{got.strain_at_peak:.4f}; quasi-static, {got.events} events, {got.broken_bonds} "
                  f"bonds broken)" if got.events else
-                 f"E = {E:.4g} GPa, no strength: no bond reached its limit up to strain {c.strain_max:g} "
-                 "(quasi-static)",
+                 f"E = {E:.4g} GPa, no strength: no bond reached its limit before the run stopped ({res.stopped}; "
+                 "quasi-static)",
     ).refer(run.references)
     summary = result.summary()
     record.sessions[-1].last_step = got.events
