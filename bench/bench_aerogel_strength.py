@@ -63,6 +63,11 @@ def at_peak(out: Path, summary: dict) -> dict:
     with h5py.File(out / "results.h5", "r") as h:
         if summary["method"] == "quasistatic":
             e, s = h["quasistatic/strain"][()], h["quasistatic/stress_MPa"][()]
+            if not len(s):                                  # stopped before any bond broke: no strength
+                return {"strength_kPa": math.nan, "strain_at_peak": math.nan, "broken_at_peak": 0,
+                        "first_break_kPa": math.nan, "strain_at_first_break": math.nan,
+                        "E_kPa": summary["youngs_modulus_GPa"] * 1e6, "tangent_kPa": None,
+                        "wall_s": summary["wall_s"], "broken_bonds": 0}
             broken = np.cumsum(h["quasistatic/bonds_per_event"][()])
             k = int(np.argmax(s))
             at = int(broken[k - 1]) if k > 0 else 0          # events before the peak's (the peak: before its event)
@@ -279,13 +284,16 @@ def report(a) -> dict:
     errors = [abs(r["strength_error"]) for r in rows]
     nl_errors = [abs(r["nonlinear_error"]) for r in rows if "nonlinear_error" in r]
     first_errors = [abs(r["first_break_error"]) for r in rows if "first_break_error" in r]
+    stopped = sum(math.isnan(e) for e in nl_errors)              # the nonlinear runs that stopped before a break
+    nl_errors = [e for e in nl_errors if not math.isnan(e)]
+    first_errors = [e for e in first_errors if not math.isnan(e)]
     v = {**machine(), "rows": rows, "checks": checks, "partial": len(rows) < len(a.series) * 9 or len(checks) < 2,
          "strength_error_max": max(errors), "strength_error_mean": float(np.mean(errors)),
          "within_10_percent": sum(e <= 0.10 for e in errors), "cases": len(rows),
          "nonlinear_error_max": max(nl_errors, default=None),
          "nonlinear_within_10_percent": sum(e <= 0.10 for e in nl_errors), "nonlinear_cases": len(nl_errors),
          "first_break_error_max": max(first_errors, default=None),
-         "first_break_within_10_percent": sum(e <= 0.10 for e in first_errors)}
+         "first_break_within_10_percent": sum(e <= 0.10 for e in first_errors), "nonlinear_stopped_before_a_break": stopped}
     (RESULTS / "aerogel_strength_validation.json").write_text(json.dumps(v, indent=1) + "\n")
     lines = ["| slab | spheres | E static / LAMMPS 0.5-2 % (kPa) | LAMMPS: strength (kPa), strain, bonds broken "
              "before | linear quasi-static: strength (error) | nonlinear + contacts: strength (error), strain | "
@@ -303,9 +311,11 @@ def report(a) -> dict:
             f"| {r['series']} {r['solid_fraction']} s{r['seed']} | {r['particles']} | {kpa(r['static']['E_kPa'])} / "
             f"{kpa(d['tangent_kPa'])} | {kpa(d['strength_kPa'])}, {d['strain_at_peak']:.3f}, {d['broken_at_peak']} | "
             f"{kpa(q['strength_kPa'])} ({r['strength_error']:+.1%}) | "
-            + (f"{kpa(n['strength_kPa'])} ({r['nonlinear_error']:+.1%}), {n['strain_at_peak']:.3f} | " if n else "- | ")
+            + (f"{kpa(n['strength_kPa'])} ({r['nonlinear_error']:+.1%}), {n['strain_at_peak']:.3f} | "
+               if n and not math.isnan(n["strength_kPa"]) else f"stopped: {n['stopped']} | " if n else "- | ")
             + f"{kpa(d['first_break_kPa'])}, {d['strain_at_first_break']:.3f} | "
-            + (f"{kpa(n['first_break_kPa'])} ({r['first_break_error']:+.1%}) | " if n else "- | ")
+            + (f"{kpa(n['first_break_kPa'])} ({r['first_break_error']:+.1%}) | "
+               if n and not math.isnan(n["strength_kPa"]) else "- | ")
             + f"{bare} | {d['wall_s']:.0f} / {q['wall_s']:.1f} / " + (f"{n['wall_s']:.0f} |" if n else "- |"))
     for c in v["checks"]:
         lines.append(f"\nCheck `{c['case']}` ({c['series']}, {c['solid_fraction']}, seed {c['seed']}): strength "
