@@ -85,16 +85,22 @@ start_munge() {
   chmod 400 /etc/munge/munge.key
   mkdir -p /run/munge /var/log/munge /var/lib/munge
   chown munge:munge /run/munge /var/log/munge /var/lib/munge
-  su -s /bin/sh munge -c /usr/sbin/munged
+  su -s /bin/sh munge -c /usr/sbin/munged 9>&-
 }
 
 start() {
   if [ "$(id -u)" != 0 ]; then say "must run as root (it starts munged, slurmctld and slurmd)"; exit 2; fi
+  # one start at a time: two test workers starting it together raced for munged's socket (the second
+  # one's munged failed on its lock and that worker's SLURM tests were skipped); the second waits here and
+  # then finds the daemons running
+  exec 9> /run/lock/opalflow-local-slurm.lock
+  flock 9
   install_packages
   write_config
   start_munge
-  pgrep -x slurmctld > /dev/null || (slurmctld -D > "$STATE/slurmctld.out" 2>&1 &)
-  pgrep -x slurmd > /dev/null || (slurmd -D > "$STATE/slurmd.out" 2>&1 &)
+  # (the daemons do not inherit the lock's descriptor: they would hold it for good)
+  pgrep -x slurmctld > /dev/null || (slurmctld -D > "$STATE/slurmctld.out" 2>&1 9>&- &)
+  pgrep -x slurmd > /dev/null || (slurmd -D > "$STATE/slurmd.out" 2>&1 9>&- &)
   for _ in $(seq 1 60); do
     if sinfo -h -o '%t' 2> /dev/null | grep -qE '^(idle|mix|alloc)'; then
       scontrol update nodename="$(hostname -s)" state=resume > /dev/null 2>&1 || true

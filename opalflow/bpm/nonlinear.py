@@ -209,7 +209,7 @@ class _Network:
         K = block_matrix(self.net, self.free)[0]
         self.factor = Factor(K, self.free)
         self.factorizations = getattr(self, "factorizations", 0) + 1
-        self.groups = self.colours()
+        self.colours()
         drive = self.held.drive.ravel()
         # the linear network's displacements at unit strain: the first predictor
         self.unit = drive - np.where(self.free, self.factor.solve(np.where(self.free, self.net.matvec(drive), 0.0)),
@@ -233,7 +233,8 @@ class _Network:
     def colours(self) -> list[np.ndarray]:
         """Groups of particles no two of which share a bond or a bonded neighbour (a greedy colouring of the
         square of the graph of bonds and the step's contact candidates): one residual per group and dof gives
-        6 x groups columns of the Jacobian."""
+        6 x groups columns of the Jacobian.  Kept with each group's own bonds and contacts (``group_parts``,
+        what :meth:`jacobian` evaluates)."""
         import scipy.sparse as sp
 
         n = self.net.n_particles
@@ -274,9 +275,8 @@ class _Network:
 
         n = self.net.n_particles
         rows, cols, vals = [], [], []
-        X = z.reshape(-1, 6)
+        q = quat_from_rotation(z.reshape(-1, 6)[:, 3:])
         for group, touched, owner, part, pairs in self.group_parts:
-            q = quat_from_rotation(X[:, 3:])
 
             def local(zz, qq):
                 g = internal_force(part, bond_loads(part, zz.reshape(-1, 6)[:, :3], qq))
@@ -381,7 +381,7 @@ class _Network:
         """The contact candidates of a step from z and the colouring they need (nothing without contacts)."""
         if self.contacts is not None:
             self.contacts.find(z)
-            self.groups = self.colours()
+            self.colours()
 
     def commit(self, z: np.ndarray) -> int:
         """z accepted: the contacts' slip histories from here; the number of pairs touching (0 without contacts)."""
