@@ -72,7 +72,7 @@ def at_peak(out: Path, summary: dict) -> dict:
             k = int(np.argmax(s))
             at = int(broken[k - 1]) if k > 0 else 0          # events before the peak's (the peak: before its event)
             tangent = None
-            first = (float(s[0]) if len(s) else math.nan, float(e[0]) if len(e) else math.nan)
+            first = (float(s[0]), float(e[0]))                # the first event's stress and strain
         elif summary["method"] == "dynamic":
             e, s = h["curve/strain"][()], h["curve/stress_MPa"][()]
             k = int(np.argmax(s))
