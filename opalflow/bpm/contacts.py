@@ -61,13 +61,17 @@ class Contacts:
         return np.einsum("ij,ij->i", self.net.n, x[self.net.i, :3] - x[self.net.j, :3])
 
 
+def effective_moduli(E_a, nu_a, E_b, nu_b):
+    """Hertz-Mindlin's pair moduli (E*, G*) of the module docstring (MPa; scalars or arrays), G = E / (2 (1 + nu))."""
+    e_star = 1.0 / ((1 - nu_a**2) / E_a + (1 - nu_b**2) / E_b)
+    g_star = 1.0 / (2 * (2 - nu_a) * (1 + nu_a) / E_a + 2 * (2 - nu_b) * (1 + nu_b) / E_b)
+    return e_star, g_star
+
+
 def hertz_mindlin_springs(a: ContactProperties, b: ContactProperties, r_a: np.ndarray, r_b: np.ndarray,
                           reference_strain: float) -> tuple[np.ndarray, np.ndarray]:
     """(k_n, k_t) of the module docstring for pairs of radii r_a, r_b (nm) of materials a and b (pN/nm)."""
-    e_star = 1.0 / ((1 - a.poisson_ratio**2) / a.youngs_modulus_MPa + (1 - b.poisson_ratio**2) / b.youngs_modulus_MPa)
-    g_a = a.youngs_modulus_MPa / (2 * (1 + a.poisson_ratio))
-    g_b = b.youngs_modulus_MPa / (2 * (1 + b.poisson_ratio))
-    g_star = 1.0 / ((2 - a.poisson_ratio) / g_a + (2 - b.poisson_ratio) / g_b)
+    e_star, g_star = effective_moduli(a.youngs_modulus_MPa, a.poisson_ratio, b.youngs_modulus_MPa, b.poisson_ratio)
     r_star = r_a * r_b / (r_a + r_b)
     root = np.sqrt(r_star * reference_strain * (r_a + r_b))
     return 4.0 / 3.0 * e_star * root, 8.0 * g_star * root
@@ -144,7 +148,7 @@ class GranularContacts:
     - torques (-(R - delta / 2) n) x F_t on i and on j (LAMMPS's dist_to_contact), no rolling or twisting
       resistance (the deck's contacts have none).
 
-    E*, G* as :func:`hertz_mindlin_springs`, mu the geometric mean of the two particles' (LAMMPS's mixing).
+    E*, G* by :func:`effective_moduli`, mu the geometric mean of the two particles' (LAMMPS's mixing).
     A load step is one increment of the history from the last accepted equilibrium (:meth:`commit`): the slip
     increment (du_i - du_j) - (R_i dphi_i + R_j dphi_j) x n, its tangential part; so the forces are a function of
     the displacements and rotations z alone within a step, and Newton's tangent sees the friction's return map.
@@ -185,15 +189,10 @@ class GranularContacts:
     def _near(self, z: np.ndarray, factor: float) -> np.ndarray:
         """Pairs (i < j) no intact bond joins, neither particle loose, with centres within ``factor`` x (R_i + R_j)
         at z."""
-        from opalflow.neighbors import pairs_within
-
         x = self._positions(z)
         for k in np.flatnonzero(self.periodic):
             x[:, k] = np.mod(x[:, k], self.box[k])
-        pairs = pairs_within(x, factor * 2.0 * float(self.radius.max()), self.box, self.periodic)
-        if len(pairs):
-            r = np.linalg.norm(separations(x, pairs, self.box, self.periodic), axis=1)
-            pairs = pairs[r < factor * (self.radius[pairs[:, 0]] + self.radius[pairs[:, 1]])]
+        pairs = find_bonds(x, 2.0 * self.radius, self.box, self.periodic, factor)
         keys = pairs[:, 0] * len(self.x0) + pairs[:, 1]
         return pairs[~np.isin(keys, self.bonded) & ~self.loose[pairs[:, 0]] & ~self.loose[pairs[:, 1]]]
 
@@ -229,9 +228,7 @@ class GranularContacts:
         delta = Ri + Rj - r
         on = delta > 0
         d = np.where(on, delta, 0.0)
-        e_star = 1.0 / ((1 - self.nu[i] ** 2) / self.E[i] + (1 - self.nu[j] ** 2) / self.E[j])
-        g_star = 1.0 / (2 * (2 - self.nu[i]) * (1 + self.nu[i]) / self.E[i]
-                        + 2 * (2 - self.nu[j]) * (1 + self.nu[j]) / self.E[j])
+        e_star, g_star = effective_moduli(self.E[i], self.nu[i], self.E[j], self.nu[j])
         a = np.sqrt(Ri * Rj / (Ri + Rj) * d)
         Fn = 4.0 / 3.0 * e_star * a * d
         # the history into the tangent plane, its length kept; plus the slip of this step

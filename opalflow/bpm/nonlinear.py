@@ -378,16 +378,19 @@ class _Network:
         return self.held.stress(self.internal(z))
 
     def refresh(self, z: np.ndarray) -> None:
-        """The contact candidates of a step from z and the colouring they need (nothing without contacts)."""
+        """The contact candidates of a step from z and, where they changed, the colouring they need (nothing
+        without contacts)."""
         if self.contacts is not None:
+            before = self.contacts.pairs
             self.contacts.find(z)
-            self.colours()
+            if not np.array_equal(before, self.contacts.pairs):
+                self.colours()
 
     def commit(self, z: np.ndarray) -> int:
         """z accepted: the contacts' slip histories from here; the number of pairs touching (0 without contacts)."""
         if self.contacts is None:
             return 0
-        self.contacts.find(z)
+        self.refresh(z)
         return self.contacts.commit(z)
 
 
