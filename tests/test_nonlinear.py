@@ -140,3 +140,25 @@ def test_contacts_change_a_trees_strength_and_leave_its_modulus(tmp_path):
     assert both["strength_MPa"] == pytest.approx(13.66e-3, rel=0.02) and bare["strength_MPa"] == pytest.approx(
         12.99e-3, rel=0.02)
     assert both["strain_at_peak"] < 0.95 * bare["strain_at_peak"]
+
+
+@pytest.mark.parametrize("slide", [1e-6, "rounded", 0.05])
+def test_contacts_tangent_is_the_derivative_of_their_forces(slide):
+    """The contacts' tangent (complex steps) against central differences of their forces, sticking, inside the
+    cap's rounding (0.95 of mu F_n, where it turns within ~1e-5 of slip) and sliding far past it, each with a
+    slip along y and z, a spin and an approach: the same to 1e-6 of the tangent's largest entry."""
+    c, z = _pair()
+    c.find(z)
+    c.commit(z)
+    c.find(z)
+    if slide == "rounded":
+        e_star, g_star = 6530.0 / (2 * (1 - 0.17**2)), 6530.0 / (4 * (2 - 0.17) * (1 + 0.17))
+        a = np.sqrt(0.5 * 0.02)
+        slide = 0.95 * 0.3 * (4 / 3 * e_star * a * 0.02) / (8 * g_star * a)
+    z = z.copy()
+    z[[1, 2, 5, 6, 9, 10]] = [slide, 0.3 * slide, 2e-3 * slide, -1e-4, 1e-4 * slide, -0.5 * slide]
+    J = c.tangent(z).toarray()
+    h = 1e-9
+    fd = np.column_stack([(c.internal(z + h * e) - c.internal(z - h * e)).ravel() / (2 * h) for e in np.eye(12)])
+    assert np.abs(J).max() > 0
+    assert np.abs(J - fd).max() < 1e-6 * np.abs(J).max()

@@ -215,55 +215,90 @@ class GranularContacts:
         inside = np.isin(over[:, 0] * n + over[:, 1], self.pairs[:, 0] * n + self.pairs[:, 1])
         return not np.all(inside)
 
-    def _state(self, z: np.ndarray, sel=None):
-        """Each candidate's (those of ``sel``) overlap, normal, forces and slip history at z (the class
-        docstring)."""
-        pairs, xi0 = (self.pairs, self.xi0) if sel is None else (self.pairs[sel], self.xi0[sel])
-        i, j = pairs[:, 0], pairs[:, 1]
-        X, X0 = z.reshape(-1, 6), self.z_c.reshape(-1, 6)
-        sep = separations(self._positions(z), pairs, self.box, self.periodic)      # x_j - x_i
-        r = np.linalg.norm(sep, axis=1)
+    def _state(self, z: np.ndarray):
+        """Each candidate's overlap flag, normal, forces, slip history and lever arms at z (:meth:`_pair_state`)."""
+        X = z.reshape(-1, 6)
+        return self._pair_state(X[self.pairs[:, 0]], X[self.pairs[:, 1]])
+
+    def _pair_state(self, Zi: np.ndarray, Zj: np.ndarray):
+        """The candidates' overlap flag, normal n, F_n, F_t, slip history and the arms of i and j (the class
+        docstring) for the displacements and rotations Zi, Zj (M, 6) of each pair's two particles.  Analytic in
+        them (the lengths as square roots, the branches chosen on real parts), so that complex Zi, Zj give the
+        derivatives (:meth:`tangent`)."""
+        i, j = self.pairs[:, 0], self.pairs[:, 1]
+        m = len(i)
+        C = self.z_c.reshape(-1, 6)
+        ends = np.concatenate([self.x0[i] + Zi[:, :3], self.x0[j] + Zj[:, :3]])
+        sep = separations(ends, np.column_stack([np.arange(m), np.arange(m, 2 * m)]), self.box, self.periodic)
+        r = np.sqrt(np.einsum("ij,ij->i", sep, sep))
         n = -sep / r[:, None]
         Ri, Rj = self.radius[i], self.radius[j]
         delta = Ri + Rj - r
-        on = delta > 0
+        on = delta.real > 0
         d = np.where(on, delta, 0.0)
         e_star, g_star = effective_moduli(self.E[i], self.nu[i], self.E[j], self.nu[j])
         a = np.sqrt(Ri * Rj / (Ri + Rj) * d)
         Fn = 4.0 / 3.0 * e_star * a * d
         # the history into the tangent plane, its length kept; plus the slip of this step
-        xi = xi0 - np.einsum("ij,ij->i", xi0, n)[:, None] * n
-        old, new = np.linalg.norm(xi0, axis=1), np.linalg.norm(xi, axis=1)
-        xi *= np.divide(old, new, out=np.ones_like(old), where=new > 0)[:, None]
-        du = (X[i, :3] - X0[i, :3]) - (X[j, :3] - X0[j, :3])
-        dphi = Ri[:, None] * (X[i, 3:] - X0[i, 3:]) + Rj[:, None] * (X[j, 3:] - X0[j, 3:])
+        xi = self.xi0 - np.einsum("ij,ij->i", self.xi0, n)[:, None] * n
+        old, new = np.linalg.norm(self.xi0, axis=1), np.sqrt(np.einsum("ij,ij->i", xi, xi))
+        xi = xi * np.divide(old, new, out=np.ones_like(new), where=new.real > 0)[:, None]
+        du = (Zi[:, :3] - C[i, :3]) - (Zj[:, :3] - C[j, :3])
+        dphi = Ri[:, None] * (Zi[:, 3:] - C[i, 3:]) + Rj[:, None] * (Zj[:, 3:] - C[j, 3:])
         slip = du - cross(dphi, n)
         xi = xi + slip - np.einsum("ij,ij->i", slip, n)[:, None] * n
         kt = 8.0 * g_star * a
         Ft = -kt[:, None] * xi
         limit = np.sqrt(self.mu[i] * self.mu[j]) * Fn
-        size = np.linalg.norm(Ft, axis=1)
-        ratio = np.divide(size, limit, out=np.zeros_like(size), where=limit > 0)
-        over = ratio > STICK
+        size = np.sqrt(np.einsum("ij,ij->i", Ft, Ft))
+        ratio = np.divide(size, limit, out=np.zeros_like(size), where=limit.real > 0)
+        over = ratio.real > STICK
         cap = STICK + (1 - STICK) * np.tanh((ratio[over] - STICK) / (1 - STICK))
         Ft[over] *= (cap / ratio[over])[:, None]
-        xi[over] = -Ft[over] / np.where(kt[over] > 0, kt[over], 1.0)[:, None]
+        xi[over] = -Ft[over] / np.where(kt[over].real > 0, kt[over], 1.0)[:, None]
         Ft[~on], xi[~on] = 0.0, 0.0
         return on, n, Fn, Ft, xi, Ri - 0.5 * d, Rj - 0.5 * d
 
-    def internal(self, z: np.ndarray, sel=None) -> np.ndarray:
-        """(N, 6): minus the contacts' (the candidates ``sel``'s) force and torque on each particle at z (as the
-        bonds' internal force)."""
-        on, n, Fn, Ft, _, arm_i, arm_j = self._state(z, sel)
-        pairs = self.pairs if sel is None else self.pairs[sel]
-        i, j = pairs[:, 0], pairs[:, 1]
+    def _pair_internal(self, Zi: np.ndarray, Zj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(M, 6) each: minus the force and torque of each candidate's contact on its i and on its j."""
+        on, n, Fn, Ft, _, arm_i, arm_j = self._pair_state(Zi, Zj)
         f = np.where(on[:, None], Fn[:, None] * n + Ft, 0.0)         # on i; -f on j
         nxF = cross(n, Ft)
+        return np.hstack([-f, arm_i[:, None] * nxF]), np.hstack([f, arm_j[:, None] * nxF])
+
+    def internal(self, z: np.ndarray) -> np.ndarray:
+        """(N, 6): minus the contacts' force and torque on each particle at z (as the bonds' internal force)."""
+        X = z.reshape(-1, 6)
+        i, j = self.pairs[:, 0], self.pairs[:, 1]
+        gi, gj = self._pair_internal(X[i], X[j])
         g = np.zeros((len(self.x0), 6))
-        for k in range(3):
-            g[:, k] = np.bincount(j, f[:, k], len(g)) - np.bincount(i, f[:, k], len(g))
-            g[:, 3 + k] = np.bincount(i, arm_i * nxF[:, k], len(g)) + np.bincount(j, arm_j * nxF[:, k], len(g))
+        for k in range(6):
+            g[:, k] = np.bincount(i, gi[:, k], len(g)) + np.bincount(j, gj[:, k], len(g))
         return g
+
+    def tangent(self, z: np.ndarray):
+        """d(internal)/dz at z (6N x 6N, sparse): each pair's 12 x 12 block by complex steps (Squire and Trapp,
+        SIAM Rev. 40:110, 1998: f'(x) = Im f(x + i h) / h, exact to rounding for any small h).  The friction's
+        rounded cap turns within ~0.1 mu F_n / k_t of slip (1e-5 nm at the aerogels' contacts), where a forward
+        difference of the forces is off by its curvature times its step: Newton's direction there was wrong."""
+        import scipy.sparse as sp
+
+        X = z.reshape(-1, 6)
+        i, j = self.pairs[:, 0], self.pairs[:, 1]
+        Zi, Zj = X[i].astype(complex), X[j].astype(complex)
+        h = 1e-30
+        rows_of = np.hstack([i[:, None] * 6 + np.arange(6), j[:, None] * 6 + np.arange(6)])     # (M, 12)
+        rows, cols, vals = [], [], []
+        for d in range(12):
+            Ai, Aj = Zi.copy(), Zj.copy()
+            (Ai if d < 6 else Aj)[:, d % 6] += 1j * h
+            gi, gj = self._pair_internal(Ai, Aj)
+            rows.append(rows_of)
+            cols.append(np.repeat(((i if d < 6 else j) * 6 + d % 6)[:, None], 12, axis=1))
+            vals.append(np.hstack([gi.imag, gj.imag]) / h)
+        size = 6 * len(self.x0)
+        return sp.csr_matrix((np.concatenate(vals).ravel(), (np.concatenate(rows).ravel(),
+                                                             np.concatenate(cols).ravel())), shape=(size, size))
 
     def commit(self, z: np.ndarray) -> int:
         """Accept z: the touching candidates' histories become the next step's start; the number touching."""

@@ -64,7 +64,7 @@ def bond_force(xp, n, L, a_r, a_s, du, st):
 
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Rows a x b of (M, 3) arrays (numpy's cross moves axes for every call: 3x slower at these sizes)."""
-    out = np.empty_like(a)
+    out = np.empty(a.shape, np.result_type(a, b))
     out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
     out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
     out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
