@@ -35,12 +35,13 @@ so on until the stress falls below ``stop_fraction`` of the peak or the strain r
 Contacts (``contacts.enabled``, the dynamic deck's own): LAMMPS's Hertz-Mindlin contacts with Coulomb friction
 between spheres no intact bond joins (:class:`opalflow.bpm.contacts.GranularContacts`), their slip histories
 carried from one accepted equilibrium to the next, found as the spheres move; a load step whose Newton iterations
-stall is halved (after ``ptc_in_step`` continuation steps) and grows back by 1.5 after easy ones, and the solve
-after an event (and a load step that fails however short) may take ``ptc_after_event`` (the network settling
-after a snap-through).  Where no equilibrium is found after an event the run stops there (a snap-through that the
-continuation does not follow: no stress after it), and where none is found in a load step it stops with no event
-there; LAMMPS's dynamics goes on through both (bench/results/aerogel_strength_validation.md: where its peak is
-the slab's first break the two agree to 0.3-2.5 %).
+stall gets ``ptc_in_step`` continuation steps, then up to ``fire_in_step`` steps of damped dynamics
+(:meth:`_Network.relax`), and is halved where neither finds the equilibrium (grown back by 1.5 after easy
+steps); the solve after an event (and a load step that fails however short) gets ``ptc_after_event`` and
+``fire_after_event`` (the network settling after a snap-through, as LAMMPS's dynamics settles it).  Where none is
+found after an event the run stops there (no stress after it), and where none is found in a load step it stops
+with no event there (bench/results/aerogel_strength_validation.md: the method against LAMMPS's dynamics on
+ten slabs).
 """
 from __future__ import annotations
 
@@ -64,6 +65,9 @@ SQRT_HALF = math.sqrt(0.5)
 #: a continuation step may raise |F| this much (the way out of an unstable state goes uphill first: measured, a
 #: continuation that had to lower |F| at every step stalled where one allowed 10x found the equilibrium)
 GROWTH = 10.0
+#: FIRE's first and longest time step (the masses the tangent's diagonal: a lone dof's period 2 pi) and its
+#: first mixing (Bitzek et al. 2006's alpha_start)
+FIRE_DT, FIRE_DT_MAX, FIRE_ALPHA = 0.1, 0.5, 0.1
 
 
 def quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -375,6 +379,51 @@ class _Network:
             z, F, norm = z_try, F_try, n_try
         return None
 
+    def relax(self, z0: np.ndarray, strain: float, f_tol: float, steps: int) -> tuple[np.ndarray, int] | None:
+        """Equilibrium at ``strain`` from ``z0`` by damped dynamics where :meth:`solve` finds none: FIRE (Bitzek et
+        al., Phys. Rev. Lett. 97:170201, 2006; LAMMPS's ``min_style fire``) with the residual as the force, each
+        dof's mass its tangent's diagonal (one time step fits translations and rotations), up to ``steps`` steps,
+        Newton from the best state every 1 000.  The way LAMMPS's dynamics goes where a cluster that hangs by a
+        few bonds snaps over (measured: the restructured 0.06 seed 2 slab at strain 0.0817, where Newton and the
+        continuation stalled, in 121 steps, 3 s).  (z, steps), None where it found none."""
+        z = self.prescribed(z0, strain)
+        self.refresh(z)
+        mass = np.abs(self.jacobian(z, 1e-7 * max(1.0, float(np.max(np.abs(z))))).diagonal())
+        root = np.sqrt(np.where(self.free & (mass > 0), mass, 1.0))
+        v, dt, alpha, calm = np.zeros_like(z), FIRE_DT, FIRE_ALPHA, 0
+        F = self.residual(z)
+        best, z_best, found = np.inf, z, 0
+        for k in range(steps):
+            worst = float(np.max(np.abs(F)))
+            if not math.isfinite(worst):
+                return None
+            if worst <= f_tol:
+                if self.contacts is None or found >= 5 or not self.contacts.missed(z):
+                    return z, k
+                found += 1                      # a pair came to touch outside the candidates: on with it
+                self.refresh(z)
+                F = self.residual(z)
+                continue
+            if worst < best:
+                best, z_best = worst, z
+            if k % 1000 == 999:
+                got = self.solve(z_best, strain, f_tol, 20, 0)
+                if got is not None:
+                    return got[0], k + got[1]
+            f = np.where(self.free, -F / root, 0.0)            # in mass-weighted coordinates
+            if f @ v > 0:                                       # going downhill: straighten, then speed up
+                calm += 1
+                v = (1 - alpha) * v + alpha * np.linalg.norm(v) * f / max(np.linalg.norm(f), 1e-300)
+                if calm > 5:
+                    dt, alpha = min(1.1 * dt, FIRE_DT_MAX), 0.99 * alpha
+            else:                                               # uphill: stop, shorten the step
+                calm, alpha, dt = 0, FIRE_ALPHA, 0.5 * dt
+                v = np.zeros_like(z)
+            v = v + dt * f
+            z = z + np.where(self.free, dt * v / root, 0.0)
+            F = self.residual(z)
+        return None
+
     def stress(self, z: np.ndarray) -> float:
         return self.held.stress(self.internal(z))
 
@@ -395,7 +444,8 @@ def solve_nonlinear_fracture(net: BondNetwork, strengths: Strengths, supports: S
                              strain_max: float, first_strain: float, stop_fraction: float = 0.5,
                              events_max: int = 100_000, tolerance: float = 0.0, steps_to_first: int = 8,
                              locate_rtol: float = 1e-3, f_rtol: float = 1e-5, maxiter: int = 50,
-                             ptc_in_step: int = 100, ptc_after_event: int = 200,
+                             ptc_in_step: int = 100, ptc_after_event: int = 200, fire_in_step: int = 2_000,
+                             fire_after_event: int = 20_000,
                              contacts: GranularContacts | None = None, say=print) -> FractureResult:
     """Events of the nonlinear network (the module docstring) as :class:`opalflow.bpm.quasistatic.FractureResult`
     (``modulus_MPa`` the first step's secant; ``resolver`` "newton").  ``first_strain``: the linear
@@ -420,7 +470,15 @@ def solve_nonlinear_fracture(net: BondNetwork, strengths: Strengths, supports: S
         """Equilibrium at e_to from the one at e_from, predicted by the secant of the last two (the linear
         network's unit solution where there is none)."""
         slope = nw.unit if secant is None else secant
-        return nw.solve(z_from + slope * (e_to - e_from), e_to, f_tol, maxiter, ptc_in_step)
+        z_guess = z_from + slope * (e_to - e_from)
+        return (nw.solve(z_guess, e_to, f_tol, maxiter, ptc_in_step)
+                or nw.relax(z_guess, e_to, f_tol, fire_in_step))
+
+    def settle(z_guess, e):
+        """Equilibrium at e after an event or where load steps however short find none: longer continuation and
+        dynamics."""
+        return (nw.solve(z_guess, e, f_tol, maxiter, ptc_after_event)
+                or nw.relax(z_guess, e, f_tol, fire_after_event))
 
     f_tol = math.inf
     while strain < strain_max and len(events) < events_max:
@@ -433,8 +491,7 @@ def solve_nonlinear_fracture(net: BondNetwork, strengths: Strengths, supports: S
         if got is None and step < base_step / 64:
             # no equilibrium near, however short the step (a sphere slips off another, a branch buckles): the
             # motion followed by continuation as after an event
-            got = nw.solve(z + (nw.unit if secant is None else secant) * (target - strain), target, f_tol, maxiter,
-                           ptc_after_event)
+            got = settle(z + (nw.unit if secant is None else secant) * (target - strain), target)
             if got is None:
                 stopped = f"no equilibrium found at strain {target:.5g} (an instability the steps do not follow)"
                 break
@@ -478,7 +535,7 @@ def solve_nonlinear_fracture(net: BondNetwork, strengths: Strengths, supports: S
         alive = nw.alive.copy()
         alive[ids] = False
         nw.set_alive(alive)
-        got = nw.solve(z, strain, f_tol, maxiter, ptc_after_event)
+        got = settle(z, strain)
         if got is None:         # no equilibrium near the last one: the network snaps through (dynamic): no stress after
             events.append(Event(strain, stress, math.nan, [int(b) for b in ids], 0, False,
                                 [int(c) for c in which[k]], touching))
