@@ -162,3 +162,28 @@ def test_contacts_tangent_is_the_derivative_of_their_forces(slide):
     fd = np.column_stack([(c.internal(z + h * e) - c.internal(z - h * e)).ravel() / (2 * h) for e in np.eye(12)])
     assert np.abs(J).max() > 0
     assert np.abs(J - fd).max() < 1e-6 * np.abs(J).max()
+
+
+def test_damped_dynamics_finds_newtons_equilibrium():
+    """FIRE (the fallback where Newton and the continuation stall) and Newton reach the same equilibrium of a
+    random bonded network pressed by 5 % between its bottom and top particles: stress to 1e-6, motions to 1e-4 of
+    the largest."""
+    from opalflow.bpm.loading import Supports
+    from opalflow.bpm.nonlinear import _Network
+    from opalflow.bpm.quasistatic import Strengths
+
+    X, net, rng = _network(2, n=40, m=120)
+    bottom, top = X[:, 2] < 2.5, X[:, 2] > 7.5
+    held = np.repeat((bottom | top)[:, None], 6, axis=1)
+    drive = np.zeros((net.n_particles, 6))
+    drive[top, 2] = -10.0                               # the top moves down by the strain x the gauge (10)
+    supports = Supports(held, drive, top, bottom | top, 1, 100.0, 10.0)
+    big = np.full(len(net.L), 1e9)
+    nw = _Network(net, supports, np.ones(len(net.L), bool), Strengths(big, big, big, big))
+    assert nw.free.any()
+    z0 = 0.05 * nw.unit
+    newton = nw.solve(z0, 0.05, 1e-9, 50, 0)
+    fire = nw.relax(z0, 0.05, 1e-9, 50_000)
+    assert newton is not None and fire is not None and fire[1] > 0
+    assert nw.stress(fire[0]) == pytest.approx(nw.stress(newton[0]), rel=1e-6)
+    assert np.abs(fire[0] - newton[0]).max() < 1e-4 * np.abs(newton[0]).max()
