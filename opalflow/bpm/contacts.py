@@ -279,8 +279,8 @@ class GranularContacts:
     def tangent(self, z: np.ndarray):
         """d(internal)/dz at z (6N x 6N, sparse): each pair's 12 x 12 block by complex steps (Squire and Trapp,
         SIAM Rev. 40:110, 1998: f'(x) = Im f(x + i h) / h, exact to rounding for any small h).  The friction's
-        rounded cap turns within ~0.1 mu F_n / k_t of slip (1e-5 nm at the aerogels' contacts), where a forward
-        difference of the forces is off by its curvature times its step: Newton's direction there was wrong."""
+        rounded cap turns within 0.1 mu F_n / k_t of slip (mu E* delta / (60 G*): 0.02 of the overlap for silica),
+        where a difference quotient of the forces is off by its curvature times its step."""
         import scipy.sparse as sp
 
         X = z.reshape(-1, 6)
