@@ -21,16 +21,17 @@ Kr, Ks are per unit length (``normalize yes``: the network's a_r, a_s), Kb, Kt i
 for small motions and that the forces balance).
 
 The solve: unknowns the displacements u and rotation vectors phi (q = exp(phi), the orientations at rest the
-identity, as the data file gives them) of the free particles; the residual the force and torque on each. Newton
-with the exact tangent (the bonds' by central differences, the particles coloured so that no two of a colour share
-a bond or a neighbour: 6 x colours residuals a tangent, 7 colours for a DLCA tree; the contacts' by complex steps)
-and a sparse LU, a backtracking line search on |F|, and pseudo-transient continuation where Newton stalls (:meth:`_Network.solve`); each step
-predicted by the secant of the last two equilibria (the linear network's unit solution at the start and after an
-event).  The strain grows by ``step`` (the linear method's first event strain / ``steps_to_first``), each
-equilibrium checked for B >= 1; the first crossing is located by bisection to ``locate_rtol`` of the strain, the
-bond of the largest B breaks (with ``tolerance``: every bond within it of the largest), particles that lose their
-path to the supports are held still, and the network is solved again at that strain (the stress after the event);
-so on until the stress falls below ``stop_fraction`` of the peak or the strain reaches ``strain_max``.
+identity, as the data file gives them) of the free particles; the residual the force and torque on each. Newton with
+the exact tangent (the bonds' by central differences, the particles coloured so that no two of a colour share a bond
+or a neighbour: 6 x colours residuals a tangent, 7 colours for a DLCA tree; the contacts' by complex steps) and a
+sparse LU, a backtracking line search on |F|, and pseudo-transient continuation where Newton stalls
+(:meth:`_Network.solve`); each step predicted by the secant of the last two equilibria (the linear network's unit
+solution at the start and after an event).  The strain grows by ``step`` (the linear method's first event strain /
+``steps_to_first``), each equilibrium checked for B >= 1; the first crossing is located by bisection to
+``locate_rtol`` of the strain, the bond of the largest B breaks (with ``tolerance``: every bond within it of the
+largest), particles that lose their path to the supports are held still, and the network is solved again at that
+strain (the stress after the event); so on until the stress falls below ``stop_fraction`` of the peak or the strain
+reaches ``strain_max``.
 
 Contacts (``contacts.enabled``, the dynamic deck's own): LAMMPS's Hertz-Mindlin contacts with Coulomb friction
 between spheres no intact bond joins (:class:`opalflow.bpm.contacts.GranularContacts`), their slip histories
@@ -39,10 +40,9 @@ stall gets ``ptc_in_step`` continuation steps, then up to ``fire_steps`` steps o
 (:meth:`_Network.relax`), and is halved where neither finds the equilibrium (grown back by 1.5 after easy
 steps); the solve after an event (and a load step that fails however short) gets ``ptc_after_event``
 continuation steps, then ``fire_steps`` of dynamics (the network settling after a snap-through, as LAMMPS's
-dynamics settles it).  Where none is
-found after an event the run stops there (no stress after it), and where none is found in a load step it stops
-with no event there (bench/results/aerogel_strength_validation.md: the method against LAMMPS's dynamics on
-ten slabs).
+dynamics settles it).  Where none is found after an event the run stops there (no stress after it), and where
+none is found in a load step it stops with no event there (bench/results/aerogel_strength_validation.md: the
+method against LAMMPS's dynamics on ten slabs).
 """
 from __future__ import annotations
 
@@ -271,10 +271,10 @@ class _Network:
 
     def jacobian(self, z: np.ndarray, h: float):
         """The tangent dF/dz of the residual (free dofs only; a prescribed dof's row and column the identity): the
-        bonds' by central differences over the colour groups (forward ones were off by 4 % along the near-rigid
-        motion of a cluster that hangs by a few bonds, where Newton's step is large; central: 0.2 %), each group's columns from the bonds that touch it
-        alone (the others' forces do not change); the contacts' by complex steps
-        (:meth:`opalflow.bpm.contacts.GranularContacts.tangent`)."""
+        bonds' by central differences over the colour groups, each group's columns from the bonds that touch it
+        alone (the others' forces do not change); forward ones were off by 4 % along the near-rigid motion of a
+        cluster that hangs by a few bonds, where Newton's step is large (central: 0.2 %); the contacts' by complex
+        steps (:meth:`opalflow.bpm.contacts.GranularContacts.tangent`)."""
         import scipy.sparse as sp
 
         n = self.net.n_particles
@@ -386,7 +386,7 @@ class _Network:
         dof's mass its tangent's diagonal (one time step fits translations and rotations), up to ``steps`` steps,
         Newton from the best state every 1 000.  The way LAMMPS's dynamics goes where a cluster that hangs by a
         few bonds snaps over (measured: the restructured 0.06 seed 2 slab at strain 0.0817, where Newton and the
-        continuation stalled, in 121 steps, 3 s).  (z, steps), None where it found none."""
+        continuation stalled, in 122 steps, 0.5 s).  (z, steps), None where it found none."""
         z = self.prescribed(z0, strain)
         self.refresh(z)
         mass = np.abs(self.jacobian(z, 1e-7 * max(1.0, float(np.max(np.abs(z))))).diagonal())
@@ -450,8 +450,9 @@ def solve_nonlinear_fracture(net: BondNetwork, strengths: Strengths, supports: S
     """Events of the nonlinear network (the module docstring) as :class:`opalflow.bpm.quasistatic.FractureResult`
     (``modulus_MPa`` the first step's secant; ``resolver`` "newton").  ``first_strain``: the linear
     method's first event (sets the step); ``f_rtol``: Newton's residual over the first step's largest force
-    (1e-5: at 1e-6 the solves stalled near clusters that hang by a few bonds, at 1.2-9x that tolerance, where the
-    stress agrees with LAMMPS's to 0.3-2 % at 1e-5: restructured 0.12 seed 1 at strain 0.0528, 0.06 seed 2 at 0.078);
+    (1e-5: at 1e-6 the solves stalled near clusters that hang by a few bonds, at 1.2-9x that tolerance; at 1e-5
+    they converge there with the stress 0.3 and 2.4 % below LAMMPS's: restructured 0.12 seed 1 at strain 0.0528,
+    0.06 seed 2 at 0.078);
     ``contacts``: Hertz-Mindlin contacts with friction (:class:`opalflow.bpm.contacts.GranularContacts`) or none."""
     if strengths.rule != "lammps":
         raise InputError("bonds.breaking", strengths.rule, 'must be "lammps" with compression.geometry = '
