@@ -269,7 +269,7 @@ class _Network:
             self.group_parts.append((group, np.flatnonzero(owner >= 0), owner, part))
         return groups
 
-    def jacobian(self, z: np.ndarray, h: float):
+    def jacobian(self, z: np.ndarray):
         """The tangent dF/dz of the residual (free dofs only; a prescribed dof's row and column the identity): the
         bonds' by central differences over the colour groups, each group's columns from the bonds that touch it
         alone (the others' forces do not change); forward ones were off by 4 % along the near-rigid motion of a
@@ -278,6 +278,7 @@ class _Network:
         import scipy.sparse as sp
 
         n = self.net.n_particles
+        h = 1e-7 * max(1.0, float(np.max(np.abs(z))))          # the difference step
         rows, cols, vals = [], [], []
         q = quat_from_rotation(z.reshape(-1, 6)[:, 3:])
         for group, touched, owner, part in self.group_parts:
@@ -322,10 +323,9 @@ class _Network:
         ptc, shift, lu = False, 1.0, None
         while it < maxiter + ptc_max:
             if np.max(np.abs(F)) <= f_tol:
-                if self.contacts is None or found >= 5 or not self.contacts.missed(z):
+                if self.settled(z, found):
                     return z, it
-                found += 1                      # a pair came to touch outside the candidates: again with it
-                self.refresh(z)
+                found += 1
                 F, lu = self.residual(z), None
                 norm = np.linalg.norm(F)
                 continue
@@ -340,7 +340,7 @@ class _Network:
                 if np.isfinite(n_try) and n_try < 0.5 * norm:
                     z, F, norm = z + dz, F_try, n_try
                     continue
-            J = self.jacobian(z, 1e-7 * max(1.0, float(np.max(np.abs(z)))))
+            J = self.jacobian(z)
             if ptc:
                 # the pseudo time step: a step is taken unless |F| grows more than GROWTH-fold (then shortened:
                 # a larger shift), lengthened after a step that lowers |F| and shortened after one that raises it
@@ -389,7 +389,7 @@ class _Network:
         continuation stalled, in 122 steps, 0.5 s).  (z, steps), None where it found none."""
         z = self.prescribed(z0, strain)
         self.refresh(z)
-        mass = np.abs(self.jacobian(z, 1e-7 * max(1.0, float(np.max(np.abs(z))))).diagonal())
+        mass = np.abs(self.jacobian(z).diagonal())
         root = np.sqrt(np.where(self.free & (mass > 0), mass, 1.0))
         v, dt, alpha, calm = np.zeros_like(z), FIRE_DT, FIRE_ALPHA, 0
         F = self.residual(z)
@@ -399,10 +399,9 @@ class _Network:
             if not math.isfinite(worst):
                 return None
             if worst <= f_tol:
-                if self.contacts is None or found >= 5 or not self.contacts.missed(z):
+                if self.settled(z, found):
                     return z, k
-                found += 1                      # a pair came to touch outside the candidates: on with it
-                self.refresh(z)
+                found += 1
                 F = self.residual(z)
                 continue
             if worst < best:
@@ -424,6 +423,15 @@ class _Network:
             z = z + np.where(self.free, dt * v / root, 0.0)
             F = self.residual(z)
         return None
+
+    def settled(self, z: np.ndarray, found: int) -> bool:
+        """Whether an equilibrium z is one: no pair overlaps outside the step's contact candidates (or ``found``,
+        the times they were renewed, has reached 5); where one does, the candidates are renewed from z (the
+        caller solves on with them)."""
+        if self.contacts is None or found >= 5 or not self.contacts.missed(z):
+            return True
+        self.refresh(z)
+        return False
 
     def stress(self, z: np.ndarray) -> float:
         return self.held.stress(self.internal(z))
