@@ -164,12 +164,9 @@ def test_contacts_tangent_is_the_derivative_of_their_forces(slide):
     assert np.abs(J - fd).max() < 1e-6 * np.abs(J).max()
 
 
-def test_damped_dynamics_finds_newtons_equilibrium():
-    """FIRE (the fallback where Newton and the continuation stall) and Newton reach the same equilibrium of a
-    random bonded network pressed by 5 % between its bottom and top particles: stress to 1e-6, motions to 1e-4 of
-    the largest."""
+def _pressed():
+    """A random bonded network of 40 particles pressed between its bottom and top ones (no bond breaks)."""
     from opalflow.bpm.loading import Supports
-    from opalflow.bpm.nonlinear import _Network
     from opalflow.bpm.quasistatic import Strengths
 
     X, net, rng = _network(2, n=40, m=120)
@@ -177,9 +174,18 @@ def test_damped_dynamics_finds_newtons_equilibrium():
     held = np.repeat((bottom | top)[:, None], 6, axis=1)
     drive = np.zeros((net.n_particles, 6))
     drive[top, 2] = -10.0                               # the top moves down by the strain x the gauge (10)
-    supports = Supports(held, drive, top, bottom | top, 1, 100.0, 10.0)
     big = np.full(len(net.L), 1e9)
-    nw = _Network(net, supports, np.ones(len(net.L), bool), Strengths(big, big, big, big))
+    return net, Supports(held, drive, top, bottom | top, 1, 100.0, 10.0), Strengths(big, big, big, big)
+
+
+def test_damped_dynamics_finds_newtons_equilibrium():
+    """FIRE (the fallback where Newton and the continuation stall) and Newton reach the same equilibrium of a
+    random bonded network pressed by 5 % between its bottom and top particles: stress to 1e-6, motions to 1e-4 of
+    the largest."""
+    from opalflow.bpm.nonlinear import _Network
+
+    net, supports, strengths = _pressed()
+    nw = _Network(net, supports, np.ones(len(net.L), bool), strengths)
     assert nw.free.any()
     z0 = 0.05 * nw.unit
     newton = nw.solve(z0, 0.05, 1e-9, 50, 0)
@@ -187,3 +193,38 @@ def test_damped_dynamics_finds_newtons_equilibrium():
     assert newton is not None and fire is not None and fire[1] > 0
     assert nw.stress(fire[0]) == pytest.approx(nw.stress(newton[0]), rel=1e-6)
     assert np.abs(fire[0] - newton[0]).max() < 1e-4 * np.abs(newton[0]).max()
+
+
+def test_a_solve_that_finds_no_equilibrium_keeps_its_least_unbalanced_state():
+    """Newton held to a tolerance it cannot reach returns None, and the network keeps the state of least max |F|
+    it passed: that state's own residual, below the start's."""
+    from opalflow.bpm.nonlinear import _Network
+
+    net, supports, strengths = _pressed()
+    nw = _Network(net, supports, np.ones(len(net.L), bool), strengths)
+    z0 = 0.05 * nw.unit
+    start = np.abs(nw.residual(nw.prescribed(z0, 0.05))).max()
+    assert nw.solve(z0, 0.05, 0.0, 3, 0) is None
+    least, z = nw.best
+    assert least == np.abs(nw.residual(z)).max() and least < 1e-3 * start
+
+
+@pytest.mark.parametrize("out_of_balance", [1e-3, 0.0])
+def test_states_out_of_balance_carry_the_loading_on_within_their_limit(out_of_balance):
+    """Newton given one iteration and a tolerance it cannot reach (1e-15 of the largest reaction), no
+    continuation, no dynamics: every load step ends out of balance.  Allowed 1e-3 of the forces' scale, the run
+    takes those states, lists each (all within the limit) and ends where the converged run does (motions to 1e-4
+    of the largest); allowed none, it stops at its first step."""
+    from opalflow.bpm.nonlinear import solve_nonlinear_fracture
+
+    net, supports, strengths = _pressed()
+    quiet = dict(strain_max=0.004, first_strain=0.02, steps_to_first=1, say=lambda line: None)
+    converged = solve_nonlinear_fracture(net, strengths, supports, **quiet)
+    res = solve_nonlinear_fracture(net, strengths, supports, f_rtol=1e-15, maxiter=1, ptc_in_step=0,
+                                   ptc_after_event=0, fire_steps=0, out_of_balance=out_of_balance, **quiet)
+    assert converged.stopped == "strain_max 0.004 reached" and not converged.unbalanced
+    if out_of_balance:
+        assert res.stopped == converged.stopped and res.unbalanced and max(res.unbalanced) <= out_of_balance
+        assert np.abs(res.end_x - converged.end_x).max() < 1e-4 * np.abs(converged.end_x).max()
+    else:
+        assert res.stopped.startswith("no equilibrium found at strain") and not res.unbalanced

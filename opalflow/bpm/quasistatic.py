@@ -610,6 +610,7 @@ class FractureResult:
     peak_x: np.ndarray | None = None        # displacements and rotations (N, 6) just before the peak event
     end_x: np.ndarray | None = None         # ... just after the last event
     loose: int = 0
+    unbalanced: list[float] = field(default_factory=list)   # the nonlinear method's states out of balance: max|F|/scale
 
     @property
     def peak(self) -> int:

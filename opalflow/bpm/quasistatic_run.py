@@ -214,7 +214,8 @@ def _event_facts(spec: BpmWorkflow, res, events: int, contacts) -> EventFacts:
                   else spec.contacts.quasistatic), contact_pairs=len(contacts.bond) if contacts else 0,
         contacts_pressing_at_peak=res.events[max(res.peak - 1, 0)].contacts if res.events else 0,
         contacts_pressing_at_end=res.events[-1].contacts if res.events else 0,
-        peak_memory_MiB=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0)
+        peak_memory_MiB=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        out_of_balance_states=len(res.unbalanced), out_of_balance_max=max(res.unbalanced, default=0.0))
 
 
 def _length_bins(sample) -> tuple[np.ndarray, list[str]]:

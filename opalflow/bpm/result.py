@@ -61,6 +61,10 @@ class EventFacts:
     contacts_pressing_at_peak: int
     contacts_pressing_at_end: int
     peak_memory_MiB: float
+    #: the nonlinear method's states taken out of balance (:func:`opalflow.bpm.nonlinear.solve_nonlinear_fracture`)
+    #: and the largest of their max |F| over the forces' scale
+    out_of_balance_states: int = 0
+    out_of_balance_max: float = 0.0
 
 
 @dataclass
