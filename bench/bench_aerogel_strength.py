@@ -88,7 +88,8 @@ def at_peak(out: Path, summary: dict) -> dict:
             k = int(np.argmax(s[:fell[0] if len(fell) else len(s)]))
             largest = int(np.argmax(s))
             over_run = {"largest_kPa": float(s[largest]) * 1e3, "strain_at_largest": float(e[largest]),
-                        "collapsed": bool(len(fell)), "peak_inside_run": bool(len(fell)) or e[k] < 0.98 * e[-1]}
+                        "strain_end": float(e[-1]),
+                        "collapsed": bool(len(fell)), "peak_inside_run": bool(len(fell)) or bool(e[k] < 0.98 * e[-1])}
             at = int(b[k])
             m = (e >= 0.005) & (e <= 0.02)
             tangent = float(np.polyfit(e[m], s[m], 1)[0] * 1e3) if m.sum() > 2 else None
@@ -257,6 +258,10 @@ def report(a) -> dict:
     """The validation table from the run folders that finished (all of ``validate``'s or, stopped early, those
     done): bench/results/aerogel_strength_validation.json (``partial``: true where some are missing) and .md."""
     root = Path(a.runs) / "validate"
+    # what is not here (``validate --no-checks``; the runs without contacts, ``nonlinear`` stopped before them) is
+    # taken from the last table with its date
+    stored = RESULTS / "aerogel_strength_validation.json"
+    last = json.loads(stored.read_text()) if stored.exists() else {"checks": [], "rows": []}
     rows = []
     for series in SERIES:
         for phi in FRACTIONS:
@@ -288,10 +293,16 @@ def report(a) -> dict:
                 if "dynamic_nocontact" in row and "nonlinear_nocontact" in row:
                     row["nonlinear_error_nocontact"] = (row["nonlinear_nocontact"]["strength_kPa"]
                                                         / row["dynamic_nocontact"]["strength_kPa"] - 1)
+                else:
+                    row.pop("dynamic_nocontact", None)
+                    row.pop("nonlinear_nocontact", None)
+                    before = [r for r in last["rows"] if "nonlinear_error_nocontact" in r
+                              and (r["series"], r["solid_fraction"], r["seed"]) == (series, phi, seed)]
+                    if before:
+                        row.update({k: before[0][k] for k in ("dynamic_nocontact", "nonlinear_nocontact",
+                                                              "nonlinear_error_nocontact")},
+                                   nocontact_measured=last.get("date"))
                 rows.append(row)
-    # the checks' runs where they are here, else the last table's (``validate --no-checks``), with their date
-    stored = RESULTS / "aerogel_strength_validation.json"
-    last = json.loads(stored.read_text()) if stored.exists() else {"checks": []}
     checks = []
     for name in ("half_speed", "smooth"):
         base, _ = slab(root, a.series[0], FRACTIONS[0], SEEDS[0])
@@ -312,6 +323,10 @@ def report(a) -> dict:
          "within_10_percent": sum(e <= 0.10 for e in errors), "cases": len(rows),
          "nonlinear_error_max": max(nl_errors, default=None),
          "nonlinear_within_10_percent": sum(e <= 0.10 for e in nl_errors), "nonlinear_cases": len(nl_errors),
+         # the rows whose LAMMPS run collapsed (elsewhere its strength is a bound: the run ended first)
+         "lammps_collapsed": sum(r["dynamic"].get("collapsed", True) for r in rows),
+         "nonlinear_within_10_percent_where_lammps_collapsed": sum(
+             abs(r.get("nonlinear_error", math.nan)) <= 0.10 for r in rows if r["dynamic"].get("collapsed", True)),
          "first_break_error_max": max(first_errors, default=None),
          "first_break_within_10_percent": sum(e <= 0.10 for e in first_errors), "nonlinear_stopped_before_a_break": stopped}
     (RESULTS / "aerogel_strength_validation.json").write_text(json.dumps(v, indent=1) + "\n")
@@ -326,16 +341,20 @@ def report(a) -> dict:
     for r in v["rows"]:
         d, q, n = r["dynamic"], r["quasistatic"], r.get("nonlinear")
         bare = (f"{kpa(r['dynamic_nocontact']['strength_kPa'])}, {kpa(r['nonlinear_nocontact']['strength_kPa'])} "
-                f"({r['nonlinear_error_nocontact']:+.1%})" if "nonlinear_error_nocontact" in r else "-")
+                f"({r['nonlinear_error_nocontact']:+.1%})" + (f" (run {r['nocontact_measured']}, not repeated)"
+                                                               if "nocontact_measured" in r else "")
+                if "nonlinear_error_nocontact" in r else "-")
         lines.append(
             f"| {r['series']} {r['solid_fraction']} s{r['seed']} | {r['particles']} | {kpa(r['static']['E_kPa'])} / "
             f"{kpa(d['tangent_kPa'])} | {kpa(d['strength_kPa'])}, {d['strain_at_peak']:.3f}, {d['broken_at_peak']}"
             + (f" (largest of the run {kpa(d['largest_kPa'])} at {d['strain_at_largest']:.3f})"
                if d.get("largest_kPa", d["strength_kPa"]) > 1.01 * d["strength_kPa"] else "")
-            + ("" if d.get("peak_inside_run", True) else " (the run's end)") + " | "
+            + ("" if d.get("collapsed", True) else f" (no collapse by the run's end at {d['strain_end']:.3f})")
+            + " | "
             f"{kpa(q['strength_kPa'])} ({r['strength_error']:+.1%}) | "
             + (f"{kpa(n['strength_kPa'])} ({r['nonlinear_error']:+.1%}), {n['strain_at_peak']:.3f}"
-               + (f"; {n['out_of_balance'][0]} states out of balance (max {n['out_of_balance'][1]:.1g})"
+               + (f"; {n['out_of_balance'][0]} state{'s' * (n['out_of_balance'][0] > 1)} out of balance "
+                  f"(max {n['out_of_balance'][1]:.1g})"
                   if n.get("out_of_balance", [0])[0] else "") + " | "
                if n and not math.isnan(n["strength_kPa"]) else f"stopped: {n['stopped']} | " if n else "- | ")
             + f"{kpa(d['first_break_kPa'])}, {d['strain_at_first_break']:.3f} | "
