@@ -301,7 +301,7 @@ def report(a) -> dict:
                     if before:
                         row.update({k: before[0][k] for k in ("dynamic_nocontact", "nonlinear_nocontact",
                                                               "nonlinear_error_nocontact")},
-                                   nocontact_measured=last.get("date"))
+                                   nocontact_measured=before[0].get("nocontact_measured", last.get("date")))
                 rows.append(row)
     checks = []
     for name in ("half_speed", "smooth"):
