@@ -3,6 +3,7 @@ strength study's cost, the curve to densification.
 
     python bench/bench_aerogel_strength.py validate   # 2 000-sphere slabs, 3 densities x 3 seeds x trees / loops
     python bench/bench_aerogel_strength.py nonlinear  # the nonlinear method, and LAMMPS without contacts, on them
+    python bench/bench_aerogel_strength.py extend     # LAMMPS twice as far where its run ended before a collapse
     python bench/bench_aerogel_strength.py report     # the validation table (.json, .md) from the runs that finished
     python bench/bench_aerogel_strength.py study      # workflows/aerogel_strength.toml: n and m, its wall time
     python bench/bench_aerogel_strength.py densify    # one slab to 35 % strain by LAMMPS's dynamics, with contacts
@@ -235,6 +236,27 @@ def nonlinear(a) -> dict:
     return {"runs": len(got), "wall_s": time.perf_counter() - t}
 
 
+def extend(a) -> dict:
+    """LAMMPS again, twice as far (to QS_STRAIN_MAX at most), on the validation slabs whose dynamic run ended
+    before a collapse (its strength then a lower bound): RUNS/validate/NAME_dynamic_long, which ``report`` reads in
+    its place."""
+    root = Path(a.runs) / "validate"
+    todo = []
+    for case in [(series, phi, seed) for series in SERIES for phi in FRACTIONS for seed in SEEDS]:
+        base, sets = slab(root, *case)
+        short = base.with_name(f"{base.name}_dynamic")
+        if finished(short):
+            d = at_peak(short, finished(short))
+            if not d["collapsed"]:
+                reach = min(QS_STRAIN_MAX, round(2 * d["strain_end"], 3))
+                todo.append((base.with_name(f"{base.name}_dynamic_long"),
+                             [*sets, *BRITTLE, f"compression.strain_max={reach}", "compression.snapshot_strains=[]"]))
+    t = time.perf_counter()
+    with ThreadPoolExecutor(a.workers) as pool:
+        got = list(pool.map(lambda job: run(*job), todo))
+    return {"runs": len(got), "wall_s": time.perf_counter() - t}
+
+
 def study(a) -> dict:
     """workflows/aerogel_strength.toml run into RUNS/strength (kept: a rerun reads it), its summary and report
     copied to bench/results/aerogel_strength.json and .md with the machine and the wall time of the run that
@@ -268,6 +290,8 @@ def report(a) -> dict:
             for seed in SEEDS:
                 base, _ = slab(root, series, phi, seed)
                 runs = {m: base.with_name(f"{base.name}_{m}") for m in ("quasistatic", "static", "dynamic")}
+                if finished(base.with_name(f"{base.name}_dynamic_long")):         # ``extend``'s
+                    runs["dynamic"] = base.with_name(f"{base.name}_dynamic_long")
                 got = {m: finished(out) for m, out in runs.items()}
                 if not all(got.values()):
                     continue
@@ -373,7 +397,7 @@ def report(a) -> dict:
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("part", choices=["validate", "nonlinear", "study", "densify", "report"])
+    p.add_argument("part", choices=["validate", "nonlinear", "extend", "study", "densify", "report"])
     p.add_argument("--runs", default="runs/bench_aerogel_strength", help="folder of the runs (kept: rerun reads them)")
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--no-checks", action="store_true",
@@ -384,7 +408,7 @@ def main(argv=None) -> int:
     p.add_argument("--series", nargs="+", default=["restructuring"], choices=SERIES,
                    help="loop models (a tree at 0.03 breaks near 25 %% strain: 10-20 min of LAMMPS a slab)")
     a = p.parse_args(argv)
-    out = {"validate": validate, "nonlinear": nonlinear, "study": study, "densify": densify,
+    out = {"validate": validate, "nonlinear": nonlinear, "extend": extend, "study": study, "densify": densify,
            "report": report}[a.part](a)
     print(json.dumps({k: v for k, v in out.items() if not isinstance(v, list)}, indent=1))
     return 0
