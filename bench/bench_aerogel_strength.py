@@ -245,8 +245,8 @@ def extend(a) -> dict:
     for case in [(series, phi, seed) for series in SERIES for phi in FRACTIONS for seed in SEEDS]:
         base, sets = slab(root, *case)
         short = base.with_name(f"{base.name}_dynamic")
-        if finished(short):
-            d = at_peak(short, finished(short))
+        if summary := finished(short):
+            d = at_peak(short, summary)
             if not d["collapsed"]:
                 reach = min(QS_STRAIN_MAX, round(2 * d["strain_end"], 3))
                 todo.append((base.with_name(f"{base.name}_dynamic_long"),
@@ -304,9 +304,9 @@ def report(a) -> dict:
                     row["dynamic_nocontact"] = at_peak(bare, finished(bare))
                 for key, tail in (("nonlinear", "_nonlinear_contacts"), ("nonlinear_nocontact", "_nonlinear")):
                     nl = base.with_name(base.name + tail)
-                    if finished(nl):
-                        row[key] = at_peak(nl, finished(nl))
-                        q = finished(nl)["quasistatic"]
+                    if summary := finished(nl):
+                        row[key] = at_peak(nl, summary)
+                        q = summary["quasistatic"]
                         row[key]["stopped"] = q["stopped"]
                         row[key]["out_of_balance"] = [q.get("out_of_balance_states", 0),
                                                       q.get("out_of_balance_max", 0.0)]

@@ -328,8 +328,7 @@ class _Network:
         norm, it, found = np.linalg.norm(F), 0, 0
         ptc, shift, lu = False, 1.0, None
         while True:
-            self.keep(z, F)
-            if np.max(np.abs(F)) <= f_tol:
+            if self.keep(z, F) <= f_tol:
                 if self.settled(z, found):
                     return z, it
                 found += 1
@@ -412,7 +411,7 @@ class _Network:
                 continue
             if worst < best:
                 best, z_best = worst, z
-                self.keep(z, F)
+                self.keep(z, F, worst)
             if k % 1000 == 999:
                 got = self.solve(z_best, strain, f_tol, 20, 0)
                 if got is not None:
@@ -431,13 +430,14 @@ class _Network:
             F = self.residual(z)
         return None
 
-    def keep(self, z: np.ndarray, F: np.ndarray) -> None:
-        """The state of least max |F| that :meth:`solve` and :meth:`relax` passed through since ``best`` was last
-        reset (the driver takes it where neither converges: :func:`solve_nonlinear_fracture`'s
-        ``out_of_balance``)."""
-        worst = float(np.max(np.abs(F)))
+    def keep(self, z: np.ndarray, F: np.ndarray, worst: float | None = None) -> float:
+        """max |F| at z (``worst`` where the caller has it), z kept as ``best`` if it is the least that
+        :meth:`solve` and :meth:`relax` passed through since ``best`` was last reset (the driver takes it where
+        neither converges: :func:`solve_nonlinear_fracture`'s ``out_of_balance``)."""
+        worst = float(np.max(np.abs(F))) if worst is None else worst
         if worst < self.best[0]:
             self.best = (worst, z)
+        return worst
 
     def settled(self, z: np.ndarray, found: int) -> bool:
         """Whether an equilibrium z is one: no pair overlaps outside the step's contact candidates (or ``found``,
