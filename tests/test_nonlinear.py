@@ -209,6 +209,35 @@ def test_a_solve_that_finds_no_equilibrium_keeps_its_least_unbalanced_state():
     assert least == np.abs(nw.residual(z)).max() and least < 1e-3 * start
 
 
+def test_a_sphere_moved_into_one_it_was_not_checked_against_is_followed():
+    """Contact candidates found at rest within 0.1 % of contact; a free sphere moved into an unbonded one (as the
+    continuation and the dynamics move spheres far) overlaps a pair outside them: ``follow`` renews the candidates
+    and its residual carries the pair's Hertz force along their line (the stale one none); with nothing missed it is F itself."""
+    from opalflow.bpm.contacts import GranularContacts
+    from opalflow.bpm.nonlinear import _Network
+
+    net, supports, strengths = _pressed()
+    X = _network(2, n=40, m=120)[0]
+    contacts = GranularContacts(X, np.full(40, 0.5), E=np.full(40, 6530.0), nu=np.full(40, 0.17),
+                                mu=np.full(40, 0.3), box=np.full(3, 100.0), periodic=np.zeros(3, bool), reach=1.001)
+    nw = _Network(net, supports, np.ones(len(net.L), bool), strengths, contacts)
+    free = np.flatnonzero(nw.free.reshape(-1, 6)[:, 0])
+    bonded = {(int(a), int(b)) for a, b in zip(net.i, net.j)} | {(int(b), int(a)) for a, b in zip(net.i, net.j)}
+    p, q = next((int(a), int(b)) for a in free for b in free if a != b and (a, b) not in bonded)
+    z = np.zeros(6 * 40)
+    nw.refresh(z)
+    F = nw.residual(z)
+    assert nw.follow(z, F) is F
+    z[6 * p:6 * p + 3] = X[q] - X[p] + np.array([0.9, 0.0, 0.0])       # p's centre 0.9 from q's: 0.1 overlap
+    stale = nw.residual(z)
+    followed = nw.follow(z, stale)
+    assert contacts.missed(z) is False and {p, q} <= set(contacts.pairs.ravel().tolist())
+    push = followed.reshape(-1, 6)[p, :3] - stale.reshape(-1, 6)[p, :3]
+    r_star, delta = 0.25, 0.1
+    hertz = 4 / 3 * 6530.0 / (2 * (1 - 0.17**2)) * np.sqrt(r_star * delta) * delta
+    assert push[0] == pytest.approx(-hertz, rel=1e-9)      # -force along q to p (the slip's friction across)
+
+
 @pytest.mark.parametrize("out_of_balance", [1e-3, 0.0])
 def test_states_out_of_balance_carry_the_loading_on_within_their_limit(out_of_balance):
     """Newton given one iteration and a tolerance it cannot reach (1e-15 of the largest reaction), no
