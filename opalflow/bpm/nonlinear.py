@@ -35,7 +35,9 @@ reaches ``strain_max``.
 
 Contacts (``contacts.enabled``, the dynamic deck's own): LAMMPS's Hertz-Mindlin contacts with Coulomb friction
 between spheres no intact bond joins (:class:`opalflow.bpm.contacts.GranularContacts`), their slip histories
-carried from one accepted equilibrium to the next, found as the spheres move.
+carried from one accepted equilibrium to the next, found as the spheres move: the candidates of a load step are the
+pairs near contact where it starts, renewed where a pair overlaps outside them, at an equilibrium, after each
+continuation step and every :data:`FOLLOW_STEPS` FIRE steps (:meth:`_Network.follow`).
 
 Where no equilibrium is found: a load step whose Newton iterations stall gets ``ptc_in_step`` continuation
 steps, and is taken where the least unbalanced state they passed is within 10x Newton's tolerance (the stalls of
