@@ -212,7 +212,8 @@ def test_a_solve_that_finds_no_equilibrium_keeps_its_least_unbalanced_state():
 def test_a_sphere_moved_into_one_it_was_not_checked_against_is_followed():
     """Contact candidates found at rest within 0.1 % of contact; a free sphere moved into an unbonded one (as the
     continuation and the dynamics move spheres far) overlaps a pair outside them: ``follow`` renews the candidates
-    and its residual carries the pair's Hertz force along their line (the stale one none); with nothing missed it is F itself."""
+    and its residual carries the pair's Hertz force along their line (the stale one none); with nothing missed it
+    is F itself."""
     from opalflow.bpm.contacts import GranularContacts
     from opalflow.bpm.nonlinear import _Network
 
@@ -235,7 +236,7 @@ def test_a_sphere_moved_into_one_it_was_not_checked_against_is_followed():
     push = followed.reshape(-1, 6)[p, :3] - stale.reshape(-1, 6)[p, :3]
     r_star, delta = 0.25, 0.1
     hertz = 4 / 3 * 6530.0 / (2 * (1 - 0.17**2)) * np.sqrt(r_star * delta) * delta
-    assert push[0] == pytest.approx(-hertz, rel=1e-9)      # -force along q to p (the slip's friction across)
+    assert push[0] == pytest.approx(-hertz, rel=1e-9)      # -force along q to p (friction acts across it)
 
 
 @pytest.mark.parametrize("out_of_balance", [1e-3, 0.0])

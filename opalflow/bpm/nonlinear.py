@@ -441,9 +441,9 @@ class _Network:
     def follow(self, z: np.ndarray, F: np.ndarray) -> np.ndarray:
         """F, or where a pair overlaps at z outside the contact candidates the residual with them renewed from z:
         spheres that move far in the continuation or the dynamics come to touch spheres that were not near where
-        the solve started (measured: the restructured 0.12 seed 1 slab at strain 0.0745, where the dynamics'
-        least unbalanced state, its contacts found again, was out of balance by 79x the forces' scale, twelve
-        spheres pushed into others they had not been checked against)."""
+        the solve started (measured: the restructured 0.12 seed 1 slab at strain 0.0745, where the least
+        unbalanced state the continuation and the dynamics passed, its contacts found again, was out of balance by
+        79x the forces' scale, twelve spheres pushed into others they had not been checked against)."""
         if self.contacts is None or not self.contacts.missed(z):
             return F
         self.refresh(z)
