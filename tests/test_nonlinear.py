@@ -239,6 +239,40 @@ def test_a_sphere_moved_into_one_it_was_not_checked_against_is_followed():
     assert push[0] == pytest.approx(-hertz, rel=1e-9)      # -force along q to p (friction acts across it)
 
 
+def test_a_cluster_cut_off_the_supports_is_pressed_on_by_its_contacts():
+    """A sphere bonded to nothing between a held sphere and a driven one, the three touching along z (and a bonded
+    pair beside them, the network's one bond): with contacts it floats, free, and carries the load through its two
+    contacts in series, Hertz's F = 4/3 E* sqrt(R*) (d/2)^1.5 for an approach d (the stress of a sphere held still
+    without contacts, as before, would be 0); without contacts it is held still."""
+    from opalflow.bpm.contacts import GranularContacts
+    from opalflow.bpm.loading import Supports
+    from opalflow.bpm.nonlinear import _Network
+    from opalflow.bpm.quasistatic import Strengths
+
+    X = np.array([[5.0, 5.0, 1.0], [5.0, 5.0, 2.0], [5.0, 5.0, 3.0], [8.0, 5.0, 1.0], [9.0, 5.0, 1.0]])
+    net = BondNetwork(5, np.array([3]), np.array([4]), np.array([[-1.0, 0.0, 0.0]]), np.ones(1), np.ones(1),
+                      np.ones(1), np.full(1, 0.1), np.full(1, 0.1))
+    bottom, top = np.isin(np.arange(5), [0, 3]), np.isin(np.arange(5), [2])
+    held = np.repeat((bottom | top)[:, None], 6, axis=1)
+    drive = np.zeros((5, 6))
+    drive[top, 2] = -2.0                                # the top moves down by the strain x the gauge (2)
+    supports = Supports(held, drive, top, bottom | top, 1, 1.0, 2.0)
+    big = np.full(1, 1e9)
+    contacts = GranularContacts(X, np.full(5, 0.5), E=np.full(5, 6530.0), nu=np.full(5, 0.17), mu=np.full(5, 0.3),
+                                box=np.full(3, 100.0), periodic=np.zeros(3, bool))
+    nw = _Network(net, supports, np.ones(1, bool), Strengths(big, big, big, big), contacts)
+    assert nw.loose.tolist() == [False, True, False, False, False]
+    assert nw.free.reshape(5, 6)[1].all()
+    strain = 0.002                                      # the top 0.004 down: each contact 0.002
+    got = nw.solve(np.zeros(30), strain, 1e-9, 50, 0)
+    assert got is not None
+    hertz = 4 / 3 * 6530.0 / (2 * (1 - 0.17**2)) * np.sqrt(0.25) * 0.002**1.5
+    assert nw.stress(got[0]) == pytest.approx(hertz, rel=1e-6)
+    assert got[0].reshape(5, 6)[1, 2] == pytest.approx(-0.002, rel=1e-6)          # halfway down
+    bare = _Network(net, supports, np.ones(1, bool), Strengths(big, big, big, big))
+    assert not bare.free.reshape(5, 6)[1].any()
+
+
 @pytest.mark.parametrize("out_of_balance", [1e-3, 0.0])
 def test_states_out_of_balance_carry_the_loading_on_within_their_limit(out_of_balance):
     """Newton given one iteration and a tolerance it cannot reach (1e-15 of the largest reaction), no
