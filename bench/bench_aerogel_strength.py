@@ -6,13 +6,14 @@ strength study's cost, the curve to densification.
     python bench/bench_aerogel_strength.py extend     # LAMMPS twice as far where its run ended before a collapse
     python bench/bench_aerogel_strength.py report     # the validation table (.json, .md) from the runs that finished
     python bench/bench_aerogel_strength.py study      # workflows/aerogel_strength.toml: n and m, its wall time
+    python bench/bench_aerogel_strength.py study --workflow aerogel_strength_linear    # the linear method's
     python bench/bench_aerogel_strength.py densify    # one slab to 35 % strain by LAMMPS's dynamics, with contacts
 
 ``validate`` runs each slab three ways: LAMMPS (``bpm/rotational``, wall at 0.1 m/s, bonds breaking at full load:
 ``bonds.smooth = false``), the quasi-static method (event-driven breaking of the linear network, the same rule) and
 the static solver (E); one slab again at half the wall speed (is the dynamic run quasi-static?) and with LAMMPS's
 ``smooth yes`` (the fade-out 1 - B^4: how much it lowers the strength).  Rows go to
-bench/results/aerogel_strength_validation.json; ``study`` writes bench/results/aerogel_strength.json; ``densify``
+bench/results/aerogel_strength_validation.json; ``study`` writes bench/results/WORKFLOW.json; ``densify``
 bench/results/aerogel_densification.json.  Two runs at a time (one LAMMPS process each) on this 2-core machine.
 """
 from __future__ import annotations
@@ -258,14 +259,15 @@ def extend(a) -> dict:
 
 
 def study(a) -> dict:
-    """workflows/aerogel_strength.toml run into RUNS/strength (kept: a rerun reads it), its summary and report
-    copied to bench/results/aerogel_strength.json and .md with the machine and the wall time of the run that
-    computed its jobs."""
-    out = Path(a.runs) / "strength"
-    summary = run(out, [], workflow="aerogel_strength")
+    """workflows/WORKFLOW.toml (``--workflow``: aerogel_strength, the nonlinear method; aerogel_strength_linear, the
+    linear one on 20 000-sphere slabs) run into RUNS/WORKFLOW (kept: a rerun reads it), its summary and report
+    copied to bench/results/WORKFLOW.json and .md with the machine and the wall time of the run that computed its
+    jobs."""
+    out = Path(a.runs) / a.workflow
+    summary = run(out, [], workflow=a.workflow)
     row = {**machine(), "load": a.load, **summary}
-    (RESULTS / "aerogel_strength.json").write_text(json.dumps(row, indent=1) + "\n")
-    (RESULTS / "aerogel_strength.md").write_text((out / "report.md").read_text())
+    (RESULTS / f"{a.workflow}.json").write_text(json.dumps(row, indent=1) + "\n")
+    (RESULTS / f"{a.workflow}.md").write_text((out / "report.md").read_text())
     return {k: summary[k] for k in ("modulus_exponent", "modulus_exponent_ci95", "strength_exponent",
                                     "strength_exponent_ci95", "wall_s")}
 
@@ -404,6 +406,8 @@ def main(argv=None) -> int:
                    help="validate: leave out the half-speed and smooth LAMMPS runs (~30 min; report keeps the last)")
     p.add_argument("--fractions", nargs="+", type=float, default=FRACTIONS, help="validate: solid fractions")
     p.add_argument("--seeds", nargs="+", type=int, default=SEEDS, help="validate: seeds")
+    p.add_argument("--workflow", default="aerogel_strength", choices=["aerogel_strength", "aerogel_strength_linear"],
+                   help="study: the workflow")
     p.add_argument("--load", default="", help="what else ran on the machine meanwhile (recorded with the study)")
     p.add_argument("--series", nargs="+", default=["restructuring"], choices=SERIES,
                    help="loop models (a tree at 0.03 breaks near 25 %% strain: 10-20 min of LAMMPS a slab)")

@@ -245,11 +245,11 @@ def test_density_study_fits_each_loop_model(tmp_path):
 
 
 def test_strength_study_gives_n_and_m_from_the_same_slabs(tmp_path):
-    """aerogel_strength on small slabs (one loop model, 2 fractions x 2 seeds): each slab's quasi-static run gives
+    """aerogel_strength_linear on small slabs (one loop model, 2 fractions x 2 seeds): each slab's quasi-static run gives
     a strength, E equal to a static solve of the same slab (the same linear network), the energy to the peak as the area under
     its saw-tooth (the first event's peak: sigma eps / 2), and the summary's n and m with their intervals."""
     out = tmp_path / "strength"
-    assert main(["run", "aerogel_strength", "--out", str(out), "--set", "study.solid_fractions=[0.06, 0.12]",
+    assert main(["run", "aerogel_strength_linear", "--out", str(out), "--set", "study.solid_fractions=[0.06, 0.12]",
                  "--set", "study.seeds=[1, 2]", "--set", 'study.loop_models=["restructuring"]',
                  "--set", 'study.set=["aggregate.particles=600", "bonds.smooth=false", "compression.strain_max=0.5"]',
                  "--set", "executor.workers=2"]) == 0
