@@ -71,6 +71,7 @@ from opalflow.bpm.quasistatic import Event, FractureResult, Strengths
 from opalflow.bpm.static import block_matrix, loose_particles
 from opalflow.bpm.stiffness import BondNetwork, cross
 from opalflow.linalg.direct import Factor
+from opalflow.jit import njit
 from opalflow.spec import InputError
 
 SQRT_HALF = math.sqrt(0.5)
@@ -82,20 +83,12 @@ GROWTH = 10.0
 FIRE_DT, FIRE_DT_MAX, FIRE_ALPHA = 0.1, 0.5, 0.1
 #: the springs that hold a floating cluster's unresisted motions in Newton's tangent, over the dofs' stiffness
 FLOAT_SPRING = 1e-6
+#: SuperLU's options for the tangent: minimum degree on its symmetric pattern with diagonal pivots preferred (the
+#: bonds' tangent is symmetric in pattern and near it in value: measured on a 2 000-sphere slab's, 2.5x less
+#: fill and 2x faster than the default column ordering, the same residual)
+LU_OPTIONS = {"permc_spec": "MMD_AT_PLUS_A", "diag_pivot_thresh": 0.1, "options": {"SymmetricMode": True}}
 #: FIRE steps between two checks for pairs that came to overlap outside the contact candidates
 FOLLOW_STEPS = 50
-
-
-def quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Rows of quaternions (w, x, y, z): a b."""
-    aw, ax, ay, az = a.T
-    bw, bx, by, bz = b.T
-    return np.stack([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw], axis=1)
-
-
-def quat_conjugate(q: np.ndarray) -> np.ndarray:
-    return q * np.array([1.0, -1.0, -1.0, -1.0])
 
 
 def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -114,13 +107,6 @@ def quat_from_rotation(phi: np.ndarray) -> np.ndarray:
     return np.column_stack([np.cos(half), k[:, None] * phi])
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
-    """Rows of v over their length (zero rows stay zero: LAMMPS's norm3 of a zero vector is a 0/0 there,
-    reached only by a bond exactly at rest, where the term it scales is zero)."""
-    n = np.linalg.norm(v, axis=1, keepdims=True)
-    return np.divide(v, n, out=np.zeros_like(v), where=n > 0)
-
-
 @dataclasses.dataclass
 class BondLoads:
     """Each bond's loads (LAMMPS's elastic_forces): the force on j (``force1on2``, lab frame), the torques on
@@ -135,59 +121,95 @@ class BondLoads:
     Tt: np.ndarray
 
 
-def bond_loads(net: BondNetwork, u: np.ndarray, q: np.ndarray) -> BondLoads:
-    """The loads of the bonds of ``net`` at displacements ``u`` (N, 3) from rest and orientations ``q`` (the module
-    docstring, term by term).  The bond vector r = r0 + u_i - u_j, r0 = L n at rest (the nearest image across a
-    periodic side, as the network has it)."""
+def bond_loads(net: BondNetwork, u: np.ndarray, phi: np.ndarray) -> BondLoads:
+    """The loads of the bonds of ``net`` at displacements ``u`` (N, 3) from rest and rotation vectors ``phi``
+    (N, 3; the orientations at rest the identity) (the module docstring, term by term; :func:`_elastic_forces`)."""
     i, j = net.i, net.j
-    qj = q[j]
-    qj_inv = quat_conjugate(qj)
-    r0 = net.L[:, None] * net.n
-    r = r0 + u[i] - u[j]
-    r_mag = np.linalg.norm(r, axis=1)
-    r0_mag = net.L
-    rb = quat_rotate(qj_inv, r)
-    Fr = net.a_r * (r_mag - r0_mag)
-    F_rot = (Fr / r_mag)[:, None] * rb
-    rb_x_r0 = cross(rb, r0)
-    # acos of the cosines as LAMMPS writes them, taken as atan2 (the same angles without acos's loss of
-    # precision near 0: sqrt(machine epsilon) in the angle, which a difference quotient of the forces would see)
-    gamma = np.arctan2(np.linalg.norm(rb_x_r0, axis=1), np.einsum("ij,ij->i", r0, rb))
-    s = _unit(cross(rb, rb_x_r0))
-    Fs = (net.a_s * r_mag * gamma)[:, None] * s
-    t = _unit(cross(r0, rb))
-    Ts = (0.5 * net.a_s * r_mag * r_mag * gamma)[:, None] * t
-    # mq: the rotation of z onto rb (Wang and Mora's X'Y'Z' representation)
-    mq = np.zeros((len(r), 4))
-    mq[:, 0] = SQRT_HALF * np.sqrt(np.maximum(r_mag + rb[:, 2], 0.0) / r_mag)
-    rxy = np.sqrt(rb[:, 0] ** 2 + rb[:, 1] ** 2)
-    off = rxy != 0.0
-    k = np.zeros(len(r))
-    k[off] = -SQRT_HALF / rxy[off] * np.sqrt(np.maximum(r_mag[off] - rb[off, 2], 0.0) / r_mag[off])
-    mq[:, 1], mq[:, 2] = k * rb[:, 1], -k * rb[:, 0]
-    q21 = quat_multiply(quat_multiply(quat_conjugate(mq), quat_multiply(qj_inv, q[i])), mq)
-    w, a, b, z = q21.T
-    out_plane, in_plane = w * w + z * z, a * a + b * b
-    psi = 2.0 * np.arctan2(np.abs(z), w) * np.sign(z)        # 2 acos(w / |(w, z)|), negative where z is
-    theta = 2.0 * np.arctan2(np.sqrt(in_plane), np.sqrt(out_plane))     # acos(w^2 - a^2 - b^2 + z^2)
-    both = np.sqrt(out_plane * in_plane)
-    cos_phi = np.where(in_plane == 0.0, 0.0, np.where(
-        out_plane == 0.0, np.divide(b, np.sqrt(in_plane), out=np.zeros_like(b), where=in_plane > 0),
-        np.divide(a * z + w * b, both, out=np.zeros_like(b), where=both > 0)))
-    sin_phi = np.where(in_plane == 0.0, 0.0, np.where(
-        out_plane == 0.0, np.divide(-a, np.sqrt(in_plane), out=np.zeros_like(a), where=in_plane > 0),
-        np.divide(b * z - w * a, both, out=np.zeros_like(a), where=both > 0)))
-    zero = np.zeros(len(r))
-    Tbp = np.column_stack([-net.bend * theta * sin_phi, net.bend * theta * cos_phi, zero])
-    Ttp = np.column_stack([zero, zero, net.twist * psi])
-    Fsp = np.column_stack([-0.5 * net.a_s * r_mag * theta * cos_phi, -0.5 * net.a_s * r_mag * theta * sin_phi, zero])
-    Tsp = np.column_stack([0.25 * net.a_s * r_mag**2 * theta * sin_phi, -0.25 * net.a_s * r_mag**2 * theta * cos_phi,
-                           zero])
-    Fs = Fs + quat_rotate(mq, Fsp)
-    Ts = Ts + quat_rotate(mq, Tsp)
-    Tb, Tt = quat_rotate(mq, Tbp), quat_rotate(mq, Ttp)
-    return BondLoads(quat_rotate(qj, F_rot + Fs), quat_rotate(qj, Ts + Tt + Tb), quat_rotate(qj, Ts - Tt - Tb),
-                     Fr, np.linalg.norm(Fs, axis=1), np.linalg.norm(Tb, axis=1), np.linalg.norm(Tt, axis=1))
+    out = np.empty((len(i), 13))
+    _elastic_forces(net.L[:, None] * net.n, net.L, net.a_r, net.a_s, net.bend, net.twist,
+                    np.hstack([u[i], phi[i]]), np.hstack([u[j], phi[j]]), out)
+    return BondLoads(*out[:, :9].reshape(-1, 3, 3).transpose(1, 0, 2), *out[:, 9:].T)
+
+
+@njit(cache=True, nogil=True)
+def _elastic_forces(r0, L, a_r, a_s, bend, twist, zi, zj, out):
+    """Row b of ``out`` (M, 13): the loads of bond b (rest vector r0 = L n, stiffnesses a_r, a_s, bend, twist)
+    with its particles at displacements and rotation vectors ``zi``, ``zj`` (M, 6): the force
+    on j (3, lab frame), the torques on j and on i (3 each), Fr, |Fs|, |Tb|, |Tt|.  LAMMPS's
+    BondBPMRotational::elastic_forces term by term (the module docstring), one bond at a time (numpy's
+    gathers over ~80 short arrays cost 10-20x more: the tangent takes 24 of these per bond); the angles LAMMPS
+    takes as acos of cosines are taken as atan2 (the same angles without acos's loss of precision near 0:
+    sqrt(machine epsilon) in the angle, which a difference quotient of the forces would see)."""
+
+    def mul(a0, a1, a2, a3, b0, b1, b2, b3):                 # the quaternion product a b
+        return (a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3, a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2,
+                a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1, a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0)
+
+    def rot(w, x, y, z, v0, v1, v2):                          # v rotated by the unit quaternion (w, x, y, z)
+        t0, t1, t2 = 2.0 * (y * v2 - z * v1), 2.0 * (z * v0 - x * v2), 2.0 * (x * v1 - y * v0)
+        return (v0 + w * t0 + y * t2 - z * t1, v1 + w * t1 + z * t0 - x * t2, v2 + w * t2 + x * t1 - y * t0)
+
+    def quat(p0, p1, p2):                  # the unit quaternion of a rotation vector (quat_from_rotation's)
+        angle = math.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
+        k = math.sin(0.5 * angle) / angle if angle > 1e-4 else 0.5 - angle * angle / 48.0
+        return math.cos(0.5 * angle), k * p0, k * p1, k * p2
+
+    def unit(v0, v1, v2):                  # zero stays zero (LAMMPS's norm3 of a zero vector: a 0/0 there, reached
+        # only by a bond exactly at rest, where the term it scales is zero)
+        n = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+        return (v0 / n, v1 / n, v2 / n) if n > 0 else (0.0, 0.0, 0.0)
+
+    for b in range(len(L)):
+        jw, jx, jy, jz = quat(zj[b, 3], zj[b, 4], zj[b, 5])
+        iw, ix, iy, iz = quat(zi[b, 3], zi[b, 4], zi[b, 5])
+        p0, p1, p2 = r0[b, 0], r0[b, 1], r0[b, 2]
+        r_0, r_1, r_2 = p0 + zi[b, 0] - zj[b, 0], p1 + zi[b, 1] - zj[b, 1], p2 + zi[b, 2] - zj[b, 2]
+        r_mag = math.sqrt(r_0 * r_0 + r_1 * r_1 + r_2 * r_2)
+        rb0, rb1, rb2 = rot(jw, -jx, -jy, -jz, r_0, r_1, r_2)
+        Fr = a_r[b] * (r_mag - L[b])
+        c0, c1, c2 = rb1 * p2 - rb2 * p1, rb2 * p0 - rb0 * p2, rb0 * p1 - rb1 * p0          # rb x r0
+        gamma = math.atan2(math.sqrt(c0 * c0 + c1 * c1 + c2 * c2), p0 * rb0 + p1 * rb1 + p2 * rb2)
+        s0, s1, s2 = unit(rb1 * c2 - rb2 * c1, rb2 * c0 - rb0 * c2, rb0 * c1 - rb1 * c0)   # rb x (rb x r0)
+        t0, t1, t2 = unit(-c0, -c1, -c2)                                                   # r0 x rb
+        fs = a_s[b] * r_mag * gamma
+        ts = 0.5 * a_s[b] * r_mag * r_mag * gamma
+        # mq: the rotation of z onto rb (Wang and Mora's X'Y'Z' representation)
+        m0 = SQRT_HALF * math.sqrt(max(r_mag + rb2, 0.0) / r_mag)
+        rxy = math.sqrt(rb0 * rb0 + rb1 * rb1)
+        k = -SQRT_HALF / rxy * math.sqrt(max(r_mag - rb2, 0.0) / r_mag) if rxy != 0.0 else 0.0
+        m1, m2 = k * rb1, -k * rb0
+        # q21 = mq^-1 (qj^-1 qi) mq
+        a = mul(jw, -jx, -jy, -jz, iw, ix, iy, iz)
+        a = mul(a[0], a[1], a[2], a[3], m0, m1, m2, 0.0)
+        w, x, y, z = mul(m0, -m1, -m2, 0.0, a[0], a[1], a[2], a[3])
+        out_plane, in_plane = w * w + z * z, x * x + y * y
+        sign = 1.0 if z > 0 else (-1.0 if z < 0 else 0.0)
+        psi = 2.0 * math.atan2(abs(z), w) * sign                                # 2 acos(w / |(w, z)|)
+        theta = 2.0 * math.atan2(math.sqrt(in_plane), math.sqrt(out_plane))     # acos(w^2 - x^2 - y^2 + z^2)
+        if in_plane == 0.0:
+            cos_phi, sin_phi = 0.0, 0.0
+        elif out_plane == 0.0:
+            cos_phi, sin_phi = y / math.sqrt(in_plane), -x / math.sqrt(in_plane)
+        else:
+            both = math.sqrt(out_plane * in_plane)
+            cos_phi, sin_phi = (x * z + w * y) / both, (y * z - w * x) / both
+        e = a_s[b] * r_mag * theta
+        Fsp = rot(m0, m1, m2, 0.0, -0.5 * e * cos_phi, -0.5 * e * sin_phi, 0.0)
+        Tsp = rot(m0, m1, m2, 0.0, 0.25 * e * r_mag * sin_phi, -0.25 * e * r_mag * cos_phi, 0.0)
+        Tb = rot(m0, m1, m2, 0.0, -bend[b] * theta * sin_phi, bend[b] * theta * cos_phi, 0.0)
+        Tt = rot(m0, m1, m2, 0.0, 0.0, 0.0, twist[b] * psi)
+        Fs = (fs * s0 + Fsp[0], fs * s1 + Fsp[1], fs * s2 + Fsp[2])
+        Ts = (ts * t0 + Tsp[0], ts * t1 + Tsp[1], ts * t2 + Tsp[2])
+        g = Fr / r_mag
+        f = rot(jw, jx, jy, jz, g * rb0 + Fs[0], g * rb1 + Fs[1], g * rb2 + Fs[2])
+        tj = rot(jw, jx, jy, jz, Ts[0] + Tt[0] + Tb[0], Ts[1] + Tt[1] + Tb[1], Ts[2] + Tt[2] + Tb[2])
+        ti = rot(jw, jx, jy, jz, Ts[0] - Tt[0] - Tb[0], Ts[1] - Tt[1] - Tb[1], Ts[2] - Tt[2] - Tb[2])
+        for k3 in range(3):
+            out[b, k3], out[b, 3 + k3], out[b, 6 + k3] = f[k3], tj[k3], ti[k3]
+        out[b, 9] = Fr
+        out[b, 10] = math.sqrt(Fs[0] * Fs[0] + Fs[1] * Fs[1] + Fs[2] * Fs[2])
+        out[b, 11] = math.sqrt(Tb[0] * Tb[0] + Tb[1] * Tb[1] + Tb[2] * Tb[2])
+        out[b, 12] = math.sqrt(Tt[0] * Tt[0] + Tt[1] * Tt[1] + Tt[2] * Tt[2])
 
 
 def internal_force(net: BondNetwork, loads: BondLoads) -> np.ndarray:
@@ -237,7 +259,6 @@ class _Network:
         K = block_matrix(self.net, bonded_free)[0]
         self.factor = Factor(K, bonded_free)
         self.factorizations = getattr(self, "factorizations", 0) + 1
-        self.colours()
         drive = self.held.drive.ravel()
         # the linear network's displacements at unit strain: the first predictor
         self.unit = drive - np.where(bonded_free, self.factor.solve(np.where(bonded_free, self.net.matvec(drive),
@@ -245,7 +266,7 @@ class _Network:
 
     def loads(self, z: np.ndarray) -> BondLoads:
         X = z.reshape(-1, 6)
-        return bond_loads(self.net, X[:, :3], quat_from_rotation(X[:, 3:]))
+        return bond_loads(self.net, X[:, :3], X[:, 3:])
 
     def internal(self, z: np.ndarray) -> np.ndarray:
         """(N, 6): the bonds' (and the contacts') internal force at z."""
@@ -258,71 +279,40 @@ class _Network:
     def prescribed(self, z: np.ndarray, strain: float) -> np.ndarray:
         return np.where(self.free, z, self.held.drive.ravel() * strain)
 
-    def colours(self) -> list[np.ndarray]:
-        """Groups of particles no two of which share a bond or a bonded neighbour (a greedy colouring of the
-        square of the graph of bonds): one residual per group and dof gives 6 x groups columns of the bonds'
-        Jacobian.  Kept with each group's own bonds (``group_parts``, what :meth:`jacobian` evaluates)."""
-        import scipy.sparse as sp
-
-        n = self.net.n_particles
-        i, j = self.net.i, self.net.j
-        A = sp.coo_matrix((np.ones(2 * len(i)), (np.r_[i, j], np.r_[j, i])), shape=(n, n)).tocsr()
-        A = (A + sp.identity(n, format="csr")).tocsr()
-        A2 = (A @ A).tocsr()
-        colour = np.full(n, -1)
-        for p in np.argsort(-np.diff(A2.indptr), kind="stable"):
-            used = set(colour[A2.indices[A2.indptr[p]:A2.indptr[p + 1]]])
-            c = 0
-            while c in used:
-                c += 1
-            colour[p] = c
-        groups = [np.flatnonzero(colour == c) for c in range(colour.max() + 1)]
-        self.group_parts = []
-        for group in groups:
-            # each particle's perturbed neighbour in this group (at most one: the colouring)
-            owner = np.full(n, -1)
-            sub = A[:, group].tocoo()
-            owner[sub.row] = group[sub.col]
-            mine = np.zeros(n, bool)
-            mine[group] = True
-            part = self.net.part(np.flatnonzero(mine[self.net.i] | mine[self.net.j]))
-            self.group_parts.append((group, np.flatnonzero(owner >= 0), owner, part))
-        return groups
-
     def jacobian(self, z: np.ndarray):
-        """The tangent dF/dz of the residual (free dofs only; a prescribed dof's row and column the identity): the
-        bonds' by central differences over the colour groups, each group's columns from the bonds that touch it
-        alone (the others' forces do not change); forward ones were off by 4 % along the near-rigid motion of a
-        cluster that hangs by a few bonds, where Newton's step is large (central: 0.2 %); the contacts' by complex
-        steps (:meth:`opalflow.bpm.contacts.GranularContacts.tangent`)."""
+        """The tangent dF/dz of the residual (free dofs only; a prescribed dof's row and column the identity): each
+        bond's 12 x 12 block by central differences of its loads in each of its two particles' 12 dofs (24
+        evaluations of :func:`_elastic_forces` a bond; forward ones were off by 4 % along the near-rigid motion of
+        a cluster that hangs by a few bonds, where Newton's step is large: central, 0.2 %); the contacts' by
+        complex steps (:meth:`opalflow.bpm.contacts.GranularContacts.tangent`)."""
         import scipy.sparse as sp
 
-        n = self.net.n_particles
+        net, X = self.net, z.reshape(-1, 6)
+        i, j, m = net.i, net.j, len(net.i)
         h = 1e-7 * max(1.0, float(np.max(np.abs(z))))          # the difference step
-        rows, cols, vals = [], [], []
-        q = quat_from_rotation(z.reshape(-1, 6)[:, 3:])
-        for group, touched, owner, part in self.group_parts:
-
-            def local(zz, qq):
-                return internal_force(part, bond_loads(part, zz.reshape(-1, 6)[:, :3], qq))
-
-            for d in range(6):
-                dz = np.zeros(n * 6)
-                dz[group * 6 + d] = h
-                dz = np.where(self.free, dz, 0.0)
-                sides = [local(zz, q if d < 3 else quat_from_rotation(zz.reshape(-1, 6)[:, 3:]))[touched]
-                         for zz in (z + dz, z - dz)]
-                dF = (sides[0] - sides[1]) / (2.0 * h)
-                r = (touched[:, None] * 6 + np.arange(6)).ravel()
-                c = np.repeat(owner[touched] * 6 + d, 6)
-                rows.append(r)
-                cols.append(c)
-                vals.append(dF.ravel())
-        J = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(6 * n, 6 * n))
+        # rows (dof d of the bond's 12, side +h / -h, bond): i's dofs, then j's
+        Zi, Zj = np.tile(X[i], (24, 1)), np.tile(X[j], (24, 1))
+        for d in range(12):
+            for side, sign in enumerate((h, -h)):
+                (Zi if d < 6 else Zj)[(2 * d + side) * m:(2 * d + side + 1) * m, d % 6] += sign
+        out = np.empty((24 * m, 13))
+        _elastic_forces(np.tile(net.L[:, None] * net.n, (24, 1)), *(np.tile(a, 24) for a in (
+            net.L, net.a_r, net.a_s, net.bend, net.twist)), Zi, Zj, out)
+        # each bond's internal force on i and on j (internal_force's signs), differenced
+        g = np.hstack([out[:, 0:3], -out[:, 6:9], -out[:, 0:3], -out[:, 3:6]]).reshape(12, 2, m, 12)
+        vals = (g[:, 0] - g[:, 1]) / (2.0 * h)                                 # (column d, bond, row)
+        rows = np.broadcast_to(np.hstack([i[:, None] * 6 + np.arange(6), j[:, None] * 6 + np.arange(6)]), vals.shape)
+        cols = np.broadcast_to(np.concatenate([i[None, :] * 6 + np.arange(6)[:, None],
+                                               j[None, :] * 6 + np.arange(6)[:, None]])[:, :, None], vals.shape)
+        rows, cols, vals = rows.ravel(), cols.ravel(), vals.ravel()
         if self.contacts is not None:
-            J = J + self.contacts.tangent(z)
-        keep = sp.diags(self.free.astype(float))
-        J = keep @ J @ keep + sp.diags((~self.free).astype(float))
+            C = self.contacts.tangent(z).tocoo()
+            rows, cols, vals = np.r_[rows, C.row], np.r_[cols, C.col], np.r_[vals, C.data]
+        on = self.free[rows] & self.free[cols]              # free dofs only; a prescribed one's the identity
+        held = np.flatnonzero(~self.free)
+        size = 6 * net.n_particles
+        J = sp.csr_matrix((np.r_[vals[on], np.ones(len(held))], (np.r_[rows[on], held], np.r_[cols[on], held])),
+                          shape=(size, size))
         if self.floating.any():
             J = J + sp.diags(self.float_springs(J.diagonal()))
         return J.tocsc()
@@ -382,7 +372,7 @@ class _Network:
                 D = sp_diags(np.abs(J.diagonal()) + 1e-30)
                 for _ in range(30):
                     try:
-                        dz = np.where(self.free, -splu((J + shift * D).tocsc()).solve(F), 0.0)
+                        dz = np.where(self.free, -splu((J + shift * D).tocsc(), **LU_OPTIONS).solve(F), 0.0)
                     except RuntimeError:
                         dz = None
                     if dz is not None:
@@ -399,7 +389,7 @@ class _Network:
                 norm = n_new if F is F_new else np.linalg.norm(F)
                 continue
             try:
-                lu = splu(J.tocsc())
+                lu = splu(J, **LU_OPTIONS)
             except RuntimeError:                 # a singular tangent (a mechanism)
                 return None
             dz = np.where(self.free, -lu.solve(F), 0.0)
