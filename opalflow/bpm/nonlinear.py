@@ -69,7 +69,7 @@ from opalflow.bpm.contacts import GranularContacts
 from opalflow.bpm.loading import Supports
 from opalflow.bpm.quasistatic import Event, FractureResult, Strengths
 from opalflow.bpm.static import block_matrix, loose_particles
-from opalflow.bpm.stiffness import BondNetwork, cross
+from opalflow.bpm.stiffness import BondNetwork
 from opalflow.linalg.direct import Factor
 from opalflow.jit import njit
 from opalflow.spec import InputError
@@ -91,22 +91,6 @@ LU_OPTIONS = {"permc_spec": "MMD_AT_PLUS_A", "diag_pivot_thresh": 0.1, "options"
 FOLLOW_STEPS = 50
 
 
-def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rows of vectors v rotated by the unit quaternions q (q v q^-1; LAMMPS's MathExtra::quatrotvec)."""
-    w, u = q[:, :1], q[:, 1:]
-    t = 2.0 * cross(u, v)
-    return v + w * t + cross(u, t)
-
-
-def quat_from_rotation(phi: np.ndarray) -> np.ndarray:
-    """Unit quaternions of rotation vectors phi (N, 3) (angle |phi| about phi / |phi|)."""
-    angle = np.linalg.norm(phi, axis=1)
-    half = 0.5 * angle
-    # sin(a/2)/a -> 1/2 as a -> 0 (its series to a^4 where a is small)
-    k = np.where(angle > 1e-4, np.sin(half) / np.where(angle > 1e-4, angle, 1.0), 0.5 - angle**2 / 48.0)
-    return np.column_stack([np.cos(half), k[:, None] * phi])
-
-
 @dataclasses.dataclass
 class BondLoads:
     """Each bond's loads (LAMMPS's elastic_forces): the force on j (``force1on2``, lab frame), the torques on
@@ -123,7 +107,8 @@ class BondLoads:
 
 def bond_loads(net: BondNetwork, u: np.ndarray, phi: np.ndarray) -> BondLoads:
     """The loads of the bonds of ``net`` at displacements ``u`` (N, 3) from rest and rotation vectors ``phi``
-    (N, 3; the orientations at rest the identity) (the module docstring, term by term; :func:`_elastic`)."""
+    (N, 3; the orientations at rest the identity) (the module docstring, term by term; :func:`_elastic`): the bond
+    vector r = r0 + u_i - u_j, r0 = L n at rest (the nearest image across a periodic side, as the network has it)."""
     i, j = net.i, net.j
     out = np.empty((len(i), 13))
     _elastic(net.L[:, None] * net.n, net.L, net.a_r, net.a_s, net.bend, net.twist, np.hstack([u[i], phi[i]]),
@@ -150,9 +135,9 @@ def _elastic(r0, L, a_r, a_s, bend, twist, zi, zj, h, out, blocks):
         t0, t1, t2 = 2.0 * (y * v2 - z * v1), 2.0 * (z * v0 - x * v2), 2.0 * (x * v1 - y * v0)
         return (v0 + w * t0 + y * t2 - z * t1, v1 + w * t1 + z * t0 - x * t2, v2 + w * t2 + x * t1 - y * t0)
 
-    def quat(p0, p1, p2):                  # the unit quaternion of a rotation vector (quat_from_rotation's)
+    def quat(p0, p1, p2):                  # the unit quaternion of the rotation vector p: |p| about p / |p|
         angle = math.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
-        k = math.sin(0.5 * angle) / angle if angle > 1e-4 else 0.5 - angle * angle / 48.0
+        k = math.sin(0.5 * angle) / angle if angle > 1e-4 else 0.5 - angle * angle / 48.0    # (its series near 0)
         return math.cos(0.5 * angle), k * p0, k * p1, k * p2
 
     def unit(v0, v1, v2):                  # zero stays zero (LAMMPS's norm3 of a zero vector: a 0/0 there, reached
