@@ -244,6 +244,31 @@ def test_density_study_fits_each_loop_model(tmp_path):
     assert (out / "density.png").stat().st_size > 0
 
 
+def test_the_strength_study_as_shipped_runs_the_nonlinear_method_with_contacts(tmp_path):
+    """aerogel_strength with its own settings (the nonlinear method, LAMMPS's bond law at finite rotation with
+    Hertz-Mindlin contacts) on small slabs (600 spheres, 2 fractions x 2 seeds): every job is a Newton run with
+    contacts that ends with the stress below half its peak, and the summary carries n and m with intervals."""
+    import tomllib
+
+    from opalflow.resources import WORKFLOWS
+
+    shipped = tomllib.loads((WORKFLOWS / "aerogel_strength.toml").read_text())["study"]["set"]
+    out, small = tmp_path / "strength", json.dumps(["aggregate.particles=600", *shipped])
+    assert main(["run", "aerogel_strength", "--out", str(out), "--set", "study.solid_fractions=[0.06, 0.12]",
+                 "--set", "study.seeds=[1, 2]", "--set", f"study.set={small}", "--set", "executor.workers=2"]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert s["failed_jobs"] == {}
+    jobs = [json.loads(p.read_text()) for p in sorted((out / "jobs").glob("*/summary.json"))]
+    assert len(jobs) == 4
+    for job in jobs:
+        q = job["quasistatic"]
+        assert q["resolver"] == "newton" and q["contacts"] == "hertz-mindlin (nonlinear)", q
+        assert q["stopped"] == "stress fell below 0.5 of the peak", q
+    for key in ("modulus_exponent", "strength_exponent"):
+        lo, hi = s[f"{key}_ci95"]
+        assert math.isfinite(s[key]) and lo < s[key] < hi
+
+
 def test_strength_study_gives_n_and_m_from_the_same_slabs(tmp_path):
     """aerogel_strength_linear on small slabs (one loop model, 2 fractions x 2 seeds): each slab's quasi-static run gives
     a strength, E equal to a static solve of the same slab (the same linear network), the energy to the peak as the area under
