@@ -22,13 +22,13 @@ for small motions and that the forces balance).
 
 The solve: unknowns the displacements u and rotation vectors phi (q = exp(phi), the orientations at rest the
 identity, as the data file gives them) of the free particles; the residual the force and torque on each. Newton with
-the exact tangent (the bonds' by central differences, the particles coloured so that no two of a colour share a bond
-or a neighbour: 6 x colours residuals a tangent, 7 colours for a DLCA tree; the contacts' by complex steps) and a
-sparse LU, a backtracking line search on |F|, and pseudo-transient continuation where Newton stalls
-(:meth:`_Network.solve`); each step predicted by the secant of the last two equilibria (the linear network's unit
-solution at the start and after an event).  The strain grows by ``step`` (the linear method's first event strain /
-``steps_to_first``), each equilibrium checked for B >= 1; the first crossing is located by bisection to
-``locate_rtol`` of the strain, the bond of the largest B breaks (with ``tolerance``: every bond within it of the
+the exact tangent (the bonds' by central differences, each bond's 12 x 12 block from 24 evaluations of its loads in
+one numba kernel, :func:`_elastic`; the contacts' by complex steps) and a sparse LU (SuperLU on the tangent's
+symmetric pattern, :data:`LU_OPTIONS`), a backtracking line search on |F|, and pseudo-transient continuation where
+Newton stalls (:meth:`_Network.solve`); each step predicted by the secant of the last two equilibria (the linear
+network's unit solution at the start and after an event).  The strain grows by ``step`` (the linear method's first
+event strain / ``steps_to_first``), each equilibrium checked for B >= 1; the first crossing is located by bisection
+to ``locate_rtol`` of the strain, the bond of the largest B breaks (with ``tolerance``: every bond within it of the
 largest), particles that lose their path to the supports are held still (with contacts they float: below), and the
 network is solved again at that strain (the stress after the event); so on until the stress falls below
 ``stop_fraction`` of the peak or the strain reaches ``strain_max``.
@@ -69,7 +69,7 @@ from opalflow.bpm.contacts import GranularContacts
 from opalflow.bpm.loading import Supports
 from opalflow.bpm.quasistatic import Event, FractureResult, Strengths
 from opalflow.bpm.static import block_matrix, loose_particles
-from opalflow.bpm.stiffness import BondNetwork, cross
+from opalflow.bpm.stiffness import BondNetwork
 from opalflow.linalg.direct import Factor
 from opalflow.jit import njit
 from opalflow.spec import InputError
@@ -91,22 +91,6 @@ LU_OPTIONS = {"permc_spec": "MMD_AT_PLUS_A", "diag_pivot_thresh": 0.1, "options"
 FOLLOW_STEPS = 50
 
 
-def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rows of vectors v rotated by the unit quaternions q (q v q^-1; LAMMPS's MathExtra::quatrotvec)."""
-    w, u = q[:, :1], q[:, 1:]
-    t = 2.0 * cross(u, v)
-    return v + w * t + cross(u, t)
-
-
-def quat_from_rotation(phi: np.ndarray) -> np.ndarray:
-    """Unit quaternions of rotation vectors phi (N, 3) (angle |phi| about phi / |phi|)."""
-    angle = np.linalg.norm(phi, axis=1)
-    half = 0.5 * angle
-    # sin(a/2)/a -> 1/2 as a -> 0 (its series to a^4 where a is small)
-    k = np.where(angle > 1e-4, np.sin(half) / np.where(angle > 1e-4, angle, 1.0), 0.5 - angle**2 / 48.0)
-    return np.column_stack([np.cos(half), k[:, None] * phi])
-
-
 @dataclasses.dataclass
 class BondLoads:
     """Each bond's loads (LAMMPS's elastic_forces): the force on j (``force1on2``, lab frame), the torques on
@@ -123,22 +107,24 @@ class BondLoads:
 
 def bond_loads(net: BondNetwork, u: np.ndarray, phi: np.ndarray) -> BondLoads:
     """The loads of the bonds of ``net`` at displacements ``u`` (N, 3) from rest and rotation vectors ``phi``
-    (N, 3; the orientations at rest the identity) (the module docstring, term by term; :func:`_elastic_forces`)."""
+    (N, 3; the orientations at rest the identity) (the module docstring, term by term; :func:`_elastic`): the bond
+    vector r = r0 + u_i - u_j, r0 = L n at rest (the nearest image across a periodic side, as the network has it)."""
     i, j = net.i, net.j
     out = np.empty((len(i), 13))
-    _elastic_forces(net.L[:, None] * net.n, net.L, net.a_r, net.a_s, net.bend, net.twist,
-                    np.hstack([u[i], phi[i]]), np.hstack([u[j], phi[j]]), out)
+    _elastic(net.L[:, None] * net.n, net.L, net.a_r, net.a_s, net.bend, net.twist, np.hstack([u[i], phi[i]]),
+             np.hstack([u[j], phi[j]]), 0.0, out, np.empty((0, 12, 12)))
     return BondLoads(*out[:, :9].reshape(-1, 3, 3).transpose(1, 0, 2), *out[:, 9:].T)
 
 
 @njit(cache=True, nogil=True)
-def _elastic_forces(r0, L, a_r, a_s, bend, twist, zi, zj, out):
-    """Row b of ``out`` (M, 13): the loads of bond b (rest vector r0 = L n, stiffnesses a_r, a_s, bend, twist)
-    with its particles at displacements and rotation vectors ``zi``, ``zj`` (M, 6): the force
-    on j (3, lab frame), the torques on j and on i (3 each), Fr, |Fs|, |Tb|, |Tt|.  LAMMPS's
-    BondBPMRotational::elastic_forces term by term (the module docstring), one bond at a time (numpy's
-    gathers over ~80 short arrays cost 10-20x more: the tangent takes 24 of these per bond); the angles LAMMPS
-    takes as acos of cosines are taken as atan2 (the same angles without acos's loss of precision near 0:
+def _elastic(r0, L, a_r, a_s, bend, twist, zi, zj, h, out, blocks):
+    """Bond b (rest vector r0 = L n, stiffnesses a_r, a_s, bend, twist) with its particles at displacements and
+    rotation vectors ``zi``, ``zj`` (M, 6): with ``h`` = 0, row b of ``out`` (M, 13) its loads: the force on j (3,
+    lab frame), the torques on j and on i (3 each), Fr, |Fs|, |Tb|, |Tt|; with ``h`` > 0, ``blocks[b]`` (M, 12, 12)
+    the derivative of its internal force on i and on j (:func:`internal_force`'s signs) in i's and j's 12 dofs by
+    central differences of step h (24 evaluations a bond).  LAMMPS's BondBPMRotational::elastic_forces term by term
+    (the module docstring), one bond at a time (numpy's gathers over ~80 short arrays cost 10-20x more); the angles
+    LAMMPS takes as acos of cosines are taken as atan2 (the same angles without acos's loss of precision near 0:
     sqrt(machine epsilon) in the angle, which a difference quotient of the forces would see)."""
 
     def mul(a0, a1, a2, a3, b0, b1, b2, b3):                 # the quaternion product a b
@@ -149,9 +135,9 @@ def _elastic_forces(r0, L, a_r, a_s, bend, twist, zi, zj, out):
         t0, t1, t2 = 2.0 * (y * v2 - z * v1), 2.0 * (z * v0 - x * v2), 2.0 * (x * v1 - y * v0)
         return (v0 + w * t0 + y * t2 - z * t1, v1 + w * t1 + z * t0 - x * t2, v2 + w * t2 + x * t1 - y * t0)
 
-    def quat(p0, p1, p2):                  # the unit quaternion of a rotation vector (quat_from_rotation's)
+    def quat(p0, p1, p2):                  # the unit quaternion of the rotation vector p: |p| about p / |p|
         angle = math.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
-        k = math.sin(0.5 * angle) / angle if angle > 1e-4 else 0.5 - angle * angle / 48.0
+        k = math.sin(0.5 * angle) / angle if angle > 1e-4 else 0.5 - angle * angle / 48.0    # (its series near 0)
         return math.cos(0.5 * angle), k * p0, k * p1, k * p2
 
     def unit(v0, v1, v2):                  # zero stays zero (LAMMPS's norm3 of a zero vector: a 0/0 there, reached
@@ -159,11 +145,11 @@ def _elastic_forces(r0, L, a_r, a_s, bend, twist, zi, zj, out):
         n = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
         return (v0 / n, v1 / n, v2 / n) if n > 0 else (0.0, 0.0, 0.0)
 
-    for b in range(len(L)):
-        jw, jx, jy, jz = quat(zj[b, 3], zj[b, 4], zj[b, 5])
-        iw, ix, iy, iz = quat(zi[b, 3], zi[b, 4], zi[b, 5])
+    def loads(b, x, res):                  # bond b's loads into res (13) at x (i's 6 dofs, then j's)
+        jw, jx, jy, jz = quat(x[9], x[10], x[11])
+        iw, ix, iy, iz = quat(x[3], x[4], x[5])
         p0, p1, p2 = r0[b, 0], r0[b, 1], r0[b, 2]
-        r_0, r_1, r_2 = p0 + zi[b, 0] - zj[b, 0], p1 + zi[b, 1] - zj[b, 1], p2 + zi[b, 2] - zj[b, 2]
+        r_0, r_1, r_2 = p0 + x[0] - x[6], p1 + x[1] - x[7], p2 + x[2] - x[8]
         r_mag = math.sqrt(r_0 * r_0 + r_1 * r_1 + r_2 * r_2)
         rb0, rb1, rb2 = rot(jw, -jx, -jy, -jz, r_0, r_1, r_2)
         Fr = a_r[b] * (r_mag - L[b])
@@ -205,11 +191,32 @@ def _elastic_forces(r0, L, a_r, a_s, bend, twist, zi, zj, out):
         tj = rot(jw, jx, jy, jz, Ts[0] + Tt[0] + Tb[0], Ts[1] + Tt[1] + Tb[1], Ts[2] + Tt[2] + Tb[2])
         ti = rot(jw, jx, jy, jz, Ts[0] - Tt[0] - Tb[0], Ts[1] - Tt[1] - Tb[1], Ts[2] - Tt[2] - Tb[2])
         for k3 in range(3):
-            out[b, k3], out[b, 3 + k3], out[b, 6 + k3] = f[k3], tj[k3], ti[k3]
-        out[b, 9] = Fr
-        out[b, 10] = math.sqrt(Fs[0] * Fs[0] + Fs[1] * Fs[1] + Fs[2] * Fs[2])
-        out[b, 11] = math.sqrt(Tb[0] * Tb[0] + Tb[1] * Tb[1] + Tb[2] * Tb[2])
-        out[b, 12] = math.sqrt(Tt[0] * Tt[0] + Tt[1] * Tt[1] + Tt[2] * Tt[2])
+            res[k3], res[3 + k3], res[6 + k3] = f[k3], tj[k3], ti[k3]
+        res[9] = Fr
+        res[10] = math.sqrt(Fs[0] * Fs[0] + Fs[1] * Fs[1] + Fs[2] * Fs[2])
+        res[11] = math.sqrt(Tb[0] * Tb[0] + Tb[1] * Tb[1] + Tb[2] * Tb[2])
+        res[12] = math.sqrt(Tt[0] * Tt[0] + Tt[1] * Tt[1] + Tt[2] * Tt[2])
+
+    x, res = np.empty(12), np.empty(13)
+    for b in range(len(L)):
+        for k in range(6):
+            x[k], x[6 + k] = zi[b, k], zj[b, k]
+        if h == 0.0:
+            loads(b, x, res)
+            out[b, :] = res
+            continue
+        for d in range(12):
+            at = x[d]
+            for sign in (1.0, -1.0):
+                x[d] = at + sign * h
+                loads(b, x, res)
+                c = sign / (2.0 * h)
+                for k in range(3):
+                    blocks[b, k, d] += c * res[k]                # on i: force1on2, minus the torque on i
+                    blocks[b, 3 + k, d] -= c * res[6 + k]
+                    blocks[b, 6 + k, d] -= c * res[k]            # on j: minus force1on2, minus the torque on j
+                    blocks[b, 9 + k, d] -= c * res[3 + k]
+            x[d] = at
 
 
 def internal_force(net: BondNetwork, loads: BondLoads) -> np.ndarray:
@@ -259,6 +266,7 @@ class _Network:
         K = block_matrix(self.net, bonded_free)[0]
         self.factor = Factor(K, bonded_free)
         self.factorizations = getattr(self, "factorizations", 0) + 1
+        self.pattern()
         drive = self.held.drive.ravel()
         # the linear network's displacements at unit strain: the first predictor
         self.unit = drive - np.where(bonded_free, self.factor.solve(np.where(bonded_free, self.net.matvec(drive),
@@ -279,40 +287,40 @@ class _Network:
     def prescribed(self, z: np.ndarray, strain: float) -> np.ndarray:
         return np.where(self.free, z, self.held.drive.ravel() * strain)
 
+    def pattern(self) -> None:
+        """The layout of the bonds' part of the tangent, fixed while the bonds and the free dofs are: each free x
+        free entry of the bonds' 12 x 12 blocks (``on``) and the prescribed dofs' diagonal, their slot in one CSR
+        pattern (``slot``; :meth:`jacobian` sums each block entry into its slot by a bincount)."""
+        i, j, size = self.net.i, self.net.j, 6 * self.net.n_particles
+        dof = np.hstack([i[:, None] * 6 + np.arange(6), j[:, None] * 6 + np.arange(6)])        # (bond, 12)
+        rows, cols = np.repeat(dof[:, :, None], 12, axis=2), np.repeat(dof[:, None, :], 12, axis=1)
+        self.on = (self.free[rows] & self.free[cols]).ravel()
+        held = np.flatnonzero(~self.free)
+        keys = np.r_[rows.ravel()[self.on], held] * size + np.r_[cols.ravel()[self.on], held]
+        unique, self.slot = np.unique(keys, return_inverse=True)
+        self.indices = unique % size
+        self.indptr = np.searchsorted(unique // size, np.arange(size + 1))
+        self.ones = np.ones(len(held))                          # the prescribed dofs' diagonal
+
     def jacobian(self, z: np.ndarray):
         """The tangent dF/dz of the residual (free dofs only; a prescribed dof's row and column the identity): each
-        bond's 12 x 12 block by central differences of its loads in each of its two particles' 12 dofs (24
-        evaluations of :func:`_elastic_forces` a bond; forward ones were off by 4 % along the near-rigid motion of
-        a cluster that hangs by a few bonds, where Newton's step is large: central, 0.2 %); the contacts' by
-        complex steps (:meth:`opalflow.bpm.contacts.GranularContacts.tangent`)."""
+        bond's 12 x 12 block by central differences of its loads in its two particles' 12 dofs (:func:`_elastic`;
+        forward ones were off by 4 % along the near-rigid motion of a cluster that hangs by a few bonds, where
+        Newton's step is large: central, 0.2 %), summed into :meth:`pattern`; the contacts' by complex steps
+        (:meth:`opalflow.bpm.contacts.GranularContacts.tangent`)."""
         import scipy.sparse as sp
 
         net, X = self.net, z.reshape(-1, 6)
-        i, j, m = net.i, net.j, len(net.i)
         h = 1e-7 * max(1.0, float(np.max(np.abs(z))))          # the difference step
-        # rows (dof d of the bond's 12, side +h / -h, bond): i's dofs, then j's
-        Zi, Zj = np.tile(X[i], (24, 1)), np.tile(X[j], (24, 1))
-        for d in range(12):
-            for side, sign in enumerate((h, -h)):
-                (Zi if d < 6 else Zj)[(2 * d + side) * m:(2 * d + side + 1) * m, d % 6] += sign
-        out = np.empty((24 * m, 13))
-        _elastic_forces(np.tile(net.L[:, None] * net.n, (24, 1)), *(np.tile(a, 24) for a in (
-            net.L, net.a_r, net.a_s, net.bend, net.twist)), Zi, Zj, out)
-        # each bond's internal force on i and on j (internal_force's signs), differenced
-        g = np.hstack([out[:, 0:3], -out[:, 6:9], -out[:, 0:3], -out[:, 3:6]]).reshape(12, 2, m, 12)
-        vals = (g[:, 0] - g[:, 1]) / (2.0 * h)                                 # (column d, bond, row)
-        rows = np.broadcast_to(np.hstack([i[:, None] * 6 + np.arange(6), j[:, None] * 6 + np.arange(6)]), vals.shape)
-        cols = np.broadcast_to(np.concatenate([i[None, :] * 6 + np.arange(6)[:, None],
-                                               j[None, :] * 6 + np.arange(6)[:, None]])[:, :, None], vals.shape)
-        rows, cols, vals = rows.ravel(), cols.ravel(), vals.ravel()
-        if self.contacts is not None:
-            C = self.contacts.tangent(z).tocoo()
-            rows, cols, vals = np.r_[rows, C.row], np.r_[cols, C.col], np.r_[vals, C.data]
-        on = self.free[rows] & self.free[cols]              # free dofs only; a prescribed one's the identity
-        held = np.flatnonzero(~self.free)
+        blocks = np.zeros((len(net.L), 12, 12))
+        _elastic(net.L[:, None] * net.n, net.L, net.a_r, net.a_s, net.bend, net.twist, X[net.i], X[net.j], h,
+                 np.empty((0, 13)), blocks)
         size = 6 * net.n_particles
-        J = sp.csr_matrix((np.r_[vals[on], np.ones(len(held))], (np.r_[rows[on], held], np.r_[cols[on], held])),
-                          shape=(size, size))
+        data = np.bincount(self.slot, np.concatenate([blocks.ravel()[self.on], self.ones]), len(self.indices))
+        J = sp.csr_matrix((data, self.indices, self.indptr), shape=(size, size))
+        if self.contacts is not None:
+            keep = sp.diags(self.free.astype(float))
+            J = J + keep @ self.contacts.tangent(z) @ keep
         if self.floating.any():
             J = J + sp.diags(self.float_springs(J.diagonal()))
         return J.tocsc()
@@ -517,122 +525,127 @@ def solve_nonlinear_fracture(net: BondNetwork, strengths: Strengths, supports: S
     if strengths.rule != "lammps":
         raise InputError("bonds.breaking", strengths.rule, 'must be "lammps" with compression.geometry = '
                          '"nonlinear" (LAMMPS\'s bpm/rotational rule, the one its bond law carries)')
-    t0 = time.perf_counter()
-    nw = _Network(net, supports, np.ones(len(net.L), bool), strengths, contacts)
-    setup = time.perf_counter() - t0
-    step = first_strain / steps_to_first if math.isfinite(first_strain) and first_strain > 0 else strain_max / 50
-    base_step = step
-    z, strain, secant = np.zeros(supports.drive.size), 0.0, None
-    scale = None
-    events: list[Event] = []
-    peak, peak_alive, peak_x, modulus, stopped = 0.0, None, None, float("nan"), f"strain_max {strain_max:g} reached"
+    from threadpoolctl import threadpool_limits
 
-    def out_of_balance_state(got, limit):
-        """got, or where it is None the least unbalanced state the solves passed if its max |F| is within
-        ``limit`` (iterations -1): the motion goes on in the next load steps, the residual left the force that
-        moves the spheres, as in LAMMPS's dynamics, where they move while the wall does.  Its residual is taken
-        again with the contact candidates found from it (the solves' were found where they started: a state of
-        small residual that overlapped pairs outside them was taken once, at 160x the stress of its neighbours)."""
-        if got is None and nw.best[1] is not None:
-            z_best = nw.best[1]
-            nw.refresh(z_best)
-            worst = float(np.max(np.abs(nw.residual(z_best))))
-            if worst <= limit:
-                unbalanced.append(worst / scale)
-                return z_best, -1
-        return got
+    # BLAS under one thread: its idle threads spin after numpy's dot products (a norm of the residual cost 3.6 ms
+    # with two runs on two cores: measured), on the cores the other run needs
+    with threadpool_limits(limits=1):
+        t0 = time.perf_counter()
+        nw = _Network(net, supports, np.ones(len(net.L), bool), strengths, contacts)
+        setup = time.perf_counter() - t0
+        step = first_strain / steps_to_first if math.isfinite(first_strain) and first_strain > 0 else strain_max / 50
+        base_step = step
+        z, strain, secant = np.zeros(supports.drive.size), 0.0, None
+        scale = None
+        events: list[Event] = []
+        peak, peak_alive, peak_x, modulus, stopped = 0.0, None, None, float("nan"), f"strain_max {strain_max:g} reached"
 
-    def equilibrium(z_from, e_from, e_to, accept=True):
-        """Equilibrium at e_to from the one at e_from, predicted by the secant of the last two (the linear
-        network's unit solution where there is none); with ``accept``, a state within 10x Newton's tolerance where
-        none is found (the stalls of clusters that hang by a few bonds sit at 1.2-9x it: measured)."""
-        slope = nw.unit if secant is None else secant
-        nw.best = (math.inf, None)
-        got = nw.solve(z_from + slope * (e_to - e_from), e_to, f_tol, maxiter, ptc_in_step)
-        return out_of_balance_state(got, 10.0 * f_tol) if accept else got
+        def out_of_balance_state(got, limit):
+            """got, or where it is None the least unbalanced state the solves passed if its max |F| is within
+            ``limit`` (iterations -1): the motion goes on in the next load steps, the residual left the force that
+            moves the spheres, as in LAMMPS's dynamics, where they move while the wall does.  Its residual is taken
+            again with the contact candidates found from it (the solves' were found where they started: a state of
+            small residual that overlapped pairs outside them was taken once, at 160x the stress of its neighbours)."""
+            if got is None and nw.best[1] is not None:
+                z_best = nw.best[1]
+                nw.refresh(z_best)
+                worst = float(np.max(np.abs(nw.residual(z_best))))
+                if worst <= limit:
+                    unbalanced.append(worst / scale)
+                    return z_best, -1
+            return got
 
-    def settle(z_guess, e):
-        """Equilibrium at e after an event or where load steps however short find none: longer continuation, then
-        dynamics (a longer run of it did not settle a slab after its first break: measured, the restructured 0.03
-        seed 1 slab still moving at 40-100x the tolerance after 20 000 steps), else a state out of balance."""
-        nw.best = (math.inf, None)
-        return out_of_balance_state(nw.solve(z_guess, e, f_tol, maxiter, ptc_after_event)
-                                    or nw.relax(z_guess, e, f_tol, fire_steps), out_of_balance * scale)
+        def equilibrium(z_from, e_from, e_to, accept=True):
+            """Equilibrium at e_to from the one at e_from, predicted by the secant of the last two (the linear
+            network's unit solution where there is none); with ``accept``, a state within 10x Newton's tolerance where
+            none is found (the stalls of clusters that hang by a few bonds sit at 1.2-9x it: measured)."""
+            slope = nw.unit if secant is None else secant
+            nw.best = (math.inf, None)
+            got = nw.solve(z_from + slope * (e_to - e_from), e_to, f_tol, maxiter, ptc_in_step)
+            return out_of_balance_state(got, 10.0 * f_tol) if accept else got
 
-    f_tol = math.inf
-    unbalanced: list[float] = []            # max |F| / the forces' scale of each state taken out of balance
-    while strain < strain_max and len(events) < events_max:
-        target = min(strain + step, strain_max)
-        if scale is None:       # the first step's reactions (the forces' scale) set Newton's tolerance
-            trial = nw.internal(nw.prescribed(z + nw.unit * (target - strain), target))
-            scale = float(np.max(np.abs(np.where(nw.free, 0.0, trial.ravel()))))
-            f_tol = f_rtol * scale
-        got = equilibrium(z, strain, target)
-        if got is None and step < base_step / 64:
-            # no equilibrium near, however short the step (a sphere slips off another, a branch buckles): the
-            # motion followed by continuation as after an event
-            got = settle(z + (nw.unit if secant is None else secant) * (target - strain), target)
+        def settle(z_guess, e):
+            """Equilibrium at e after an event or where load steps however short find none: longer continuation, then
+            dynamics (a longer run of it did not settle a slab after its first break: measured, the restructured 0.03
+            seed 1 slab still moving at 40-100x the tolerance after 20 000 steps), else a state out of balance."""
+            nw.best = (math.inf, None)
+            return out_of_balance_state(nw.solve(z_guess, e, f_tol, maxiter, ptc_after_event)
+                                        or nw.relax(z_guess, e, f_tol, fire_steps), out_of_balance * scale)
+
+        f_tol = math.inf
+        unbalanced: list[float] = []            # max |F| / the forces' scale of each state taken out of balance
+        while strain < strain_max and len(events) < events_max:
+            target = min(strain + step, strain_max)
+            if scale is None:       # the first step's reactions (the forces' scale) set Newton's tolerance
+                trial = nw.internal(nw.prescribed(z + nw.unit * (target - strain), target))
+                scale = float(np.max(np.abs(np.where(nw.free, 0.0, trial.ravel()))))
+                f_tol = f_rtol * scale
+            got = equilibrium(z, strain, target)
+            if got is None and step < base_step / 64:
+                # no equilibrium near, however short the step (a sphere slips off another, a branch buckles): the
+                # motion followed by continuation as after an event
+                got = settle(z + (nw.unit if secant is None else secant) * (target - strain), target)
+                if got is None:
+                    stopped = f"no equilibrium found at strain {target:.5g} (an instability the steps do not follow)"
+                    break
             if got is None:
-                stopped = f"no equilibrium found at strain {target:.5g} (an instability the steps do not follow)"
+                step *= 0.5
+                continue
+            z_new, iterations = got
+            B, _ = breaking_index(nw.loads(z_new), nw.strengths)
+            if math.isnan(modulus):
+                modulus = nw.stress(z_new) / target
+            if B.max(initial=0.0) < 1.0:
+                secant = (z_new - z) / (target - strain) if iterations >= 0 else None
+                z, strain = z_new, target
+                nw.commit(z)
+                if 0 <= iterations <= 3:                 # an easy step: back towards the first step's size
+                    step = min(1.5 * step, base_step)
+                say(f"quasi-static (nonlinear): strain {strain:.4f} of {strain_max:g}, stress {nw.stress(z):.4g} MPa, "
+                    f"max B {B.max(initial=0.0):.3f}, "
+                    + (f"{got[1]} Newton iterations, " if iterations >= 0 else
+                       f"out of balance by {unbalanced[-1]:.2g} of the forces' scale, ")
+                    + f"{time.perf_counter() - t0:.0f} s")
+                continue
+            # the first crossing between strain and target, by bisection
+            lo, hi, z_lo, z_hi = strain, target, z, z_new
+            while hi - lo > locate_rtol * hi:
+                mid = 0.5 * (lo + hi)
+                got = equilibrium(z_lo, lo, mid, accept=False)
+                if got is None:
+                    break
+                B_mid, _ = breaking_index(nw.loads(got[0]), nw.strengths)
+                if B_mid.max(initial=0.0) >= 1.0:
+                    hi, z_hi = mid, got[0]
+                else:
+                    lo, z_lo = mid, got[0]
+            z, strain = z_hi, hi
+            touching = nw.commit(z)
+            stress = nw.stress(z)
+            B, which = breaking_index(nw.loads(z), nw.strengths)
+            k = B >= (1.0 - tolerance) * B.max()
+            ids = np.flatnonzero(nw.alive)[k]
+            if stress > peak:
+                peak, peak_alive, peak_x = stress, nw.alive.copy(), z.reshape(-1, 6).copy()
+            alive = nw.alive.copy()
+            alive[ids] = False
+            nw.set_alive(alive)
+            got = settle(z, strain)
+            if got is None:         # no equilibrium near the last one: the network snaps through (dynamic): none after
+                events.append(Event(strain, stress, math.nan, [int(b) for b in ids], 0, False,
+                                    [int(c) for c in which[k]], touching))
+                stopped = f"no equilibrium after the event at strain {strain:.5g} (snap-through)"
                 break
-        if got is None:
-            step *= 0.5
-            continue
-        z_new, iterations = got
-        B, _ = breaking_index(nw.loads(z_new), nw.strengths)
-        if math.isnan(modulus):
-            modulus = nw.stress(z_new) / target
-        if B.max(initial=0.0) < 1.0:
-            secant = (z_new - z) / (target - strain) if iterations >= 0 else None
-            z, strain = z_new, target
-            nw.commit(z)
-            if 0 <= iterations <= 3:                 # an easy step: back towards the first step's size
-                step = min(1.5 * step, base_step)
-            say(f"quasi-static (nonlinear): strain {strain:.4f} of {strain_max:g}, stress {nw.stress(z):.4g} MPa, "
-                f"max B {B.max(initial=0.0):.3f}, "
-                + (f"{got[1]} Newton iterations, " if iterations >= 0 else
-                   f"out of balance by {unbalanced[-1]:.2g} of the forces' scale, ")
-                + f"{time.perf_counter() - t0:.0f} s")
-            continue
-        # the first crossing between strain and target, by bisection
-        lo, hi, z_lo, z_hi = strain, target, z, z_new
-        while hi - lo > locate_rtol * hi:
-            mid = 0.5 * (lo + hi)
-            got = equilibrium(z_lo, lo, mid, accept=False)
-            if got is None:
-                break
-            B_mid, _ = breaking_index(nw.loads(got[0]), nw.strengths)
-            if B_mid.max(initial=0.0) >= 1.0:
-                hi, z_hi = mid, got[0]
-            else:
-                lo, z_lo = mid, got[0]
-        z, strain = z_hi, hi
-        touching = nw.commit(z)
-        stress = nw.stress(z)
-        B, which = breaking_index(nw.loads(z), nw.strengths)
-        k = B >= (1.0 - tolerance) * B.max()
-        ids = np.flatnonzero(nw.alive)[k]
-        if stress > peak:
-            peak, peak_alive, peak_x = stress, nw.alive.copy(), z.reshape(-1, 6).copy()
-        alive = nw.alive.copy()
-        alive[ids] = False
-        nw.set_alive(alive)
-        got = settle(z, strain)
-        if got is None:         # no equilibrium near the last one: the network snaps through (dynamic): no stress after
-            events.append(Event(strain, stress, math.nan, [int(b) for b in ids], 0, False,
+            z, secant = got[0], None
+            touching = nw.commit(z)
+            after = nw.stress(z)
+            events.append(Event(strain, stress, after, [int(b) for b in ids], max(got[1], 0), False,
                                 [int(c) for c in which[k]], touching))
-            stopped = f"no equilibrium after the event at strain {strain:.5g} (snap-through)"
-            break
-        z, secant = got[0], None
-        touching = nw.commit(z)
-        after = nw.stress(z)
-        events.append(Event(strain, stress, after, [int(b) for b in ids], max(got[1], 0), False,
-                            [int(c) for c in which[k]], touching))
-        say(f"quasi-static (nonlinear): event {len(events)}, {int((~nw.alive).sum())} bonds broken, strain "
-            f"{strain:.5f}, stress {stress:.4g} -> {after:.4g} MPa (peak {peak:.4g})")
-        if after < stop_fraction * peak:
-            stopped = f"stress fell below {stop_fraction:g} of the peak"
-            break
-    return FractureResult(modulus, events, nw.alive, stopped, time.perf_counter() - t0, setup, "newton",
-                          nw.factorizations, peak_alive=peak_alive, peak_x=peak_x, end_x=z.reshape(-1, 6),
-                          loose=int(nw.loose.sum()), unbalanced=unbalanced)
+            say(f"quasi-static (nonlinear): event {len(events)}, {int((~nw.alive).sum())} bonds broken, strain "
+                f"{strain:.5f}, stress {stress:.4g} -> {after:.4g} MPa (peak {peak:.4g})")
+            if after < stop_fraction * peak:
+                stopped = f"stress fell below {stop_fraction:g} of the peak"
+                break
+        return FractureResult(modulus, events, nw.alive, stopped, time.perf_counter() - t0, setup, "newton",
+                              nw.factorizations, peak_alive=peak_alive, peak_x=peak_x, end_x=z.reshape(-1, 6),
+                              loose=int(nw.loose.sum()), unbalanced=unbalanced)
