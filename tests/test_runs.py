@@ -337,6 +337,25 @@ def test_a_quasistatic_job_is_priced_by_the_runs_measured_with_its_rule():
         assert d30.wall_s < d20.wall_s < paper.wall_s and d30.events <= d20.events <= events
 
 
+def test_a_nonlinear_job_is_priced_by_the_strength_study_jobs():
+    """Was: priced as its first linear solve (0.7 s, where the study's jobs took a median ~100 s); now the
+    median per bond of the aerogel strength study's jobs (bench/results/aerogel_strength.json ``job_costs``)."""
+    import numpy as np
+
+    from opalflow.runs.plan import NONLINEAR, CostFacts, laws, predict
+
+    jobs = json.loads(NONLINEAR.read_text())["job_costs"]
+    law = laws()
+    bonds = int(np.median([j["n_bonds"] for j in jobs]))
+    facts = dict(solver="amg", breaking="lammps", event_tolerance=0.0)
+    nonlinear = predict(CostFacts("quasistatic", 0, bonds, geometry="nonlinear", **facts), law)
+    linear = predict(CostFacts("quasistatic", 0, bonds, geometry="linear", **facts), law)
+    walls = sorted(j["wall_s"] for j in jobs)
+    assert nonlinear.priced_by == "nonlinear runs" and walls[0] < nonlinear.wall_s < walls[-1]
+    assert nonlinear.wall_s == pytest.approx(np.median([j["wall_s"] / j["n_bonds"] for j in jobs]) * bonds)
+    assert nonlinear.wall_s > 10 * linear.wall_s and linear.priced_by != "nonlinear runs"
+
+
 def test_a_relative_out_folder(tmp_path, monkeypatch, capsys):
     """Was: `run quickstart --out runs/quickstart` (relative, as the README's first command) failed at the
     first progress line: LAMMPS works inside the folder, progress.json was written relative to it."""

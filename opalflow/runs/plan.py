@@ -14,6 +14,9 @@ this kind of machine (``bench/bench_cost.py`` -> ``bench/results/cost_laws.json`
   and event tolerance (``bench/results/quasistatic_scale.json``: the standard sample at d = 60-15 nm, the
   fastest setting at each size), interpolated in bonds on log-log axes (extrapolated beyond by the end
   segments), plus the build; where none was measured, its first solve (a lower bound);
+- geometrically nonlinear quasi-static run (``compression.geometry = "nonlinear"``): the median wall time of the
+  jobs of the aerogel strength study (``bench/results/aerogel_strength.json``, ``job_costs``: 2 000-sphere slabs)
+  per bond, times the job's bonds, plus the build (their spread, max / min ~20, is each slab's own events);
 - peak memory: m0 + m1 * bonds per job (resident set of the job's process and its LAMMPS; for
   ``block-amg`` the solver's own law).
 
@@ -39,6 +42,7 @@ from opalflow.store import RECORD
 LAWS = ROOT / "bench" / "results" / "cost_laws.json"
 SOLVERS = ROOT / "bench" / "results" / "static_quickstart.json"
 QUASISTATIC = ROOT / "bench" / "results" / "quasistatic_scale.json"
+NONLINEAR = ROOT / "bench" / "results" / "aerogel_strength.json"
 #: SLURM asks for this much more than predicted (memory and time)
 MARGIN = 1.5
 
@@ -106,6 +110,8 @@ class CostLaws:
     solvers: dict[str, SolverLaw] = field(default_factory=dict)
     #: "breaking rule, event tolerance" -> the measured runs, by size
     quasistatic: dict[str, list[MeasuredRun]] = field(default_factory=dict)
+    #: the nonlinear method's jobs measured (the aerogel strength study's)
+    nonlinear: list[MeasuredRun] = field(default_factory=list)
 
 
 @dataclass
@@ -122,6 +128,7 @@ class CostFacts:
     solver: str | None = None              # a solve's solver
     breaking: str | None = None            # a quasi-static run's rule and event tolerance
     event_tolerance: float | None = None
+    geometry: str | None = None            # a quasi-static run's: "linear" or "nonlinear"
 
 
 @dataclass
@@ -190,7 +197,7 @@ def laws() -> CostLaws:
         p, logc = np.polyfit(np.log(b), np.log([r["total_s"] for r in mine]), 1)
         m1, m0 = np.polyfit(b, [1024 * r["peak_memory_GiB"] for r in mine], 1)
         law.solvers[solver] = SolverLaw(float(m0), float(m1), float(np.exp(logc)), float(p))
-    law.quasistatic = quasistatic_runs()
+    law.quasistatic, law.nonlinear = quasistatic_runs(), nonlinear_runs()
     return law
 
 
@@ -211,6 +218,12 @@ def quasistatic_runs() -> dict[str, list[MeasuredRun]]:
     for (setting, _), row in sorted(best.items(), key=lambda kv: kv[0][1]):
         runs.setdefault(setting, []).append(row)
     return runs
+
+
+def nonlinear_runs() -> list[MeasuredRun]:
+    """The nonlinear method's jobs measured: bench/results/aerogel_strength.json's ``job_costs`` (none: [])."""
+    rows = json.loads(NONLINEAR.read_text()).get("job_costs", []) if NONLINEAR.exists() else []
+    return [MeasuredRun(r["n_bonds"], r["wall_s"], r["events"], 0.0, r.get("peak_MiB")) for r in rows]
 
 
 def _loglog(x: float, xs: list[float], ys: list[float]) -> float:
@@ -243,7 +256,16 @@ def predict(facts: CostFacts, law: CostLaws, ranks: int = 1) -> Prediction:
         lammps = facts.steps * bonds * per_bond / (ranks * dyn.mpi_efficiency if ranks > 1 else 1.0)
         wall = facts.build_s + dyn.lammps_start_s + lammps + dyn.rest_s
         return Prediction(wall, wall * ranks, law.dynamic_memory.at(bonds))
-    runs = law.quasistatic.get(f"{facts.breaking}, {facts.event_tolerance or 0:g}")
+    if facts.geometry == "nonlinear" and law.nonlinear:    # the strength study's jobs, per bond
+        import numpy as np
+
+        per_bond = float(np.median([r.wall_s / r.bonds for r in law.nonlinear]))
+        wall = facts.build_s + per_bond * bonds
+        memory = [r.peak_MiB for r in law.nonlinear if r.peak_MiB]
+        return Prediction(wall, wall * ranks, max(memory) if memory else _solve_memory(facts, law, bonds),
+                          "nonlinear runs", round(float(np.median([r.events for r in law.nonlinear]))))
+    runs = None if facts.geometry == "nonlinear" else law.quasistatic.get(f"{facts.breaking}, "
+                                                                          f"{facts.event_tolerance or 0:g}")
     if facts.method == "quasistatic" and runs:          # whole runs measured with its rule and tolerance
         sizes = [r.bonds for r in runs]
         wall = facts.build_s + _loglog(bonds, sizes, [r.wall_s for r in runs])
@@ -357,7 +379,12 @@ def plan_lines(p: Plan) -> list[str]:
               f"SLURM (x{MARGIN} margin): --array={s['array']} --ntasks={s['ntasks']} --mem={s['mem']} "
               f"--time={s['time_min']}  ([executor] type = \"slurm\", mem_gb, time_min)"]
     quasistatic = [r for r in p.jobs if r.facts.method == "quasistatic"]
-    if any(r.prediction.priced_by for r in quasistatic):
+    if any(r.prediction.priced_by == "nonlinear runs" for r in quasistatic):
+        spread = [r.wall_s for r in laws().nonlinear]
+        lines.append(f"nonlinear quasi-static jobs are priced by the median per bond of the {len(spread)} jobs of the "
+                     f"aerogel strength study ({NONLINEAR.name}: {min(spread):.0f}-{max(spread):.0f} s a job, each "
+                     "slab's own breaks)")
+    if any(r.prediction.priced_by == "measured runs" for r in quasistatic):
         events = [r.prediction.events for r in quasistatic if r.prediction.events]
         lines.append("quasistatic jobs are priced by the whole runs measured with their breaking rule and event "
                      f"tolerance ({QUASISTATIC.name}: the standard sample's events, {min(events)}-{max(events)} "
