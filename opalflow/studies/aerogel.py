@@ -384,9 +384,13 @@ def aerogel_density_render(spec: StudyWorkflow, study: Density, out: Path) -> li
     st, ref = spec.study, study.literature
     method = next((r.loaded.method for r in study.runs if r.loaded), None)
     _plot_density(study.models, out / "density.png")
+    static_jobs = not METHODS[st.method].linear or not METHODS[st.method].strength     # (aerogel_density_jobs)
+    e_from = ("E from the static solver (the slab glued between its bottom layer and the wall, as the loaded run)"
+              if static_jobs else f"E from the {st.method} run's first load step (its secant; the static solver's E "
+              "where the run is linear)")
     lines = [f"Solid fractions {', '.join(map(str, st.solid_fractions))} x seeds {', '.join(map(str, st.seeds))} x "
-             f"loop models {', '.join(st.loop_models)}: E from the static solver (the slab glued between its bottom "
-             "layer and the wall, as the loaded run)" + (f", strength from the {method} run" if method else "")
+             f"loop models {', '.join(st.loop_models)}: {e_from}" + (f", strength from the {method} run" if method
+                                                                      else "")
              + "; density = the slab's after the cut.", "",
              "| loop model | law | exponent | 95 % interval | prefactor | R^2 | E max/min between seeds | "
              "coordination | loops per 10 000 | energy: bending / twisting / shear / stretching | reference |",
