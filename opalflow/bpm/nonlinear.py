@@ -591,10 +591,10 @@ def solve_nonlinear_fracture(net: BondNetwork, strengths: Strengths, supports: S
                 # no equilibrium near, however short the step (a sphere slips off another, a branch buckles): the
                 # motion followed by continuation as after an event
                 got = settle(z + (nw.unit if secant is None else secant) * (target - strain), target)
-                if got is None:
+                if got is None and step < base_step / 64:
                     stopped = f"no equilibrium found at strain {target:.5g} (an instability the steps do not follow)"
                     break
-                flowing = got[1] < 0
+                flowing = got is not None and got[1] < 0        # (a longer step that settles nowhere: halved)
             if got is None:
                 step *= 0.5
                 continue
