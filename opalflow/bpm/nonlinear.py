@@ -43,22 +43,21 @@ without contacts it carried nothing: measured, the restructured 0.12 seed 2 slab
 and its stress fell to 31 % of the stress before the break, LAMMPS's to 92 %); its motions that nothing resists (a
 sphere's spin about its one contact's normal) are held in Newton's tangent by :meth:`_Network.float_springs`.
 
-Where no equilibrium is found: a load step whose Newton iterations stall gets ``ptc_in_step`` continuation
-steps, and is taken where the least unbalanced state they passed is within 10x Newton's tolerance (the stalls of
-clusters that hang by a few bonds sat at 1.2-9x it), else it is halved; the step grows
-back by 1.5 after an easy step (<= 3 iterations) and after one taken out of balance (shorter steps find no
-equilibrium there either).  After an event, and where a step shorter than 1/64 of the first finds none,
-``ptc_after_event`` continuation steps, then up to ``fire_steps`` steps of damped dynamics (:meth:`_Network.relax`,
-the network settling as LAMMPS's dynamics settles it).  Where those end out of balance, the least unbalanced state
-they passed is taken if its largest force is within ``out_of_balance`` of the forces' scale (the first step's
-largest reaction): the loading goes on from it, its residual the force that still moves the spheres, as LAMMPS's
-dynamics moves them while the wall moves, and the next steps go to the continuation and the dynamics at once,
-growing, until they settle (a step held below 1/64 of the first, each out of balance, crawled: measured, the
-restructured 0.06 seed 10 slab after its first break, ~27 s a step for 2 900 s with B 0.83 -> 0.91; so, to its
-second break and the end in 240 s).  ``FractureResult.unbalanced`` lists each such state's largest force over the
-scale; the run's summary counts them.  Beyond that the run stops: with no stress after an event (a snap-through)
-or with no event in a load step (bench/results/aerogel_strength_validation.md: the method against LAMMPS's
-dynamics on ten slabs).
+Where no equilibrium is found: a load step whose Newton iterations stall gets ``ptc_in_step`` continuation steps,
+and is taken where the least unbalanced state they passed is within 10x Newton's tolerance (the stalls of clusters
+that hang by a few bonds sat at 1.2-9x it), else it is halved; the step grows back by 1.5 after an easy step (<= 3
+iterations) and after one taken out of balance (shorter steps find no equilibrium there either). After an event, and
+where a step shorter than 1/64 of the first finds none, ``ptc_after_event`` continuation steps, then up to
+``fire_steps`` steps of damped dynamics (:meth:`_Network.relax`, the network settling as LAMMPS's dynamics settles
+it). Where those end out of balance, the least unbalanced state they passed is taken if its largest force is within
+``out_of_balance`` of the forces' scale (the first step's largest reaction): the loading goes on from it, its
+residual the force that still moves the spheres, as LAMMPS's dynamics moves them while the wall moves, and the next
+steps go to the continuation and the dynamics at once, growing (one that settles nowhere halved), until they settle
+(a step held below 1/64 of the first, each out of balance, crawled: measured, the restructured 0.06 seed 10 slab
+after its first break, ~27 s a step for 2 900 s with B 0.83 -> 0.91; so, to its second break and the end in 259 s).
+``FractureResult.unbalanced`` lists each such state's largest force over the scale; the run's summary counts them.
+Beyond that the run stops: with no stress after an event (a snap-through) or with no event in a load step
+(bench/results/aerogel_strength_validation.md: the method against LAMMPS's dynamics on ten slabs).
 """
 from __future__ import annotations
 

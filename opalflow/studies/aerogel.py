@@ -306,6 +306,12 @@ def _strength_at(f: float, runs: list[DensityRun]) -> DensityStrength | None:
         float(np.corrcoef(E, eps)[0, 1]) if len(rs) > 2 and np.std(E) and np.std(eps) else float("nan"), checks)
 
 
+def has_static_jobs(st) -> bool:
+    """Whether the density study solves each slab statically beside its loaded run (E from there): for a method
+    that is not linear or gives no strength; a linear strength method's first solve is the static one."""
+    return not METHODS[st.method].linear or not METHODS[st.method].strength
+
+
 def aerogel_density_jobs(spec: StudyWorkflow) -> list[Job]:
     """Each loop model x solid fraction x seed (``at``: model, solid fraction, seed, the slab's name): a static solve
     (``NAME_static``: E, energy by mode), a quasi-static run (``NAME``: E by the same first solve, and the strength;
@@ -322,7 +328,7 @@ def aerogel_density_jobs(spec: StudyWorkflow) -> list[Job]:
                           "aggregate.loops": model}      # (one model too: the series is what its label says)
                 name = f"{prefix}phi{label_number(f)}_s{s}"
                 at = (model, f, s, name)
-                if not METHODS[st.method].linear or not METHODS[st.method].strength:
+                if has_static_jobs(st):
                     jobs.append(Job(f"{name}_static", job_spec(spec, {**common, "compression.method": "static"}),
                                     at=at))
                 if METHODS[st.method].strength:
@@ -383,7 +389,7 @@ def _m_text(f: Fit) -> str:
 def aerogel_density_render(spec: StudyWorkflow, study: Density, out: Path) -> list[str]:
     st, ref = spec.study, study.literature
     method = next((r.loaded.method for r in study.runs if r.loaded), None)
-    static_jobs = not METHODS[st.method].linear or not METHODS[st.method].strength     # (aerogel_density_jobs)
+    static_jobs = has_static_jobs(st)
     e_from = ("E from the static solver (the slab glued between its bottom layer and the wall, as the loaded run)"
               if static_jobs else f"E from the {st.method} run's first load step (its secant; the static solver's E "
               "where the run is linear)")
