@@ -265,11 +265,21 @@ def study(a) -> dict:
     jobs."""
     out = Path(a.runs) / a.workflow
     summary = run(out, [], workflow=a.workflow)
-    row = {**machine(), "load": a.load, **summary}
+    row = {**machine(), "load": a.load, **summary, "job_costs": job_costs(out)}
     (RESULTS / f"{a.workflow}.json").write_text(json.dumps(row, indent=1) + "\n")
     (RESULTS / f"{a.workflow}.md").write_text((out / "report.md").read_text())
     return {k: summary[k] for k in ("modulus_exponent", "modulus_exponent_ci95", "strength_exponent",
                                     "strength_exponent_ci95", "wall_s")}
+
+
+def job_costs(out: Path) -> list[dict]:
+    """Each finished job's size, wall time, events and peak memory (what ``plan`` prices the method's jobs by)."""
+    rows = []
+    for p in sorted(out.glob("jobs/*/summary.json")):
+        s, rec = json.loads(p.read_text()), json.loads((p.parent / "run.json").read_text())
+        rows.append({"label": rec.get("label", p.parent.name), "n_bonds": s["n_bonds"], "wall_s": s["wall_s"],
+                     "events": s.get("quasistatic", {}).get("events", 0), "peak_MiB": rec.get("peak_rss_MiB")})
+    return rows
 
 
 def finished(out: Path) -> dict | None:

@@ -267,6 +267,7 @@ def test_the_strength_study_as_shipped_runs_the_nonlinear_method_with_contacts(t
     for key in ("modulus_exponent", "strength_exponent"):
         lo, hi = s[f"{key}_ci95"]
         assert math.isfinite(s[key]) and lo < s[key] < hi
+    assert "E from the quasistatic run's first load step" in (out / "report.md").read_text()     # no static jobs
 
 
 def test_strength_study_gives_n_and_m_from_the_same_slabs(tmp_path):

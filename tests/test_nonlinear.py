@@ -344,3 +344,20 @@ def test_states_out_of_balance_carry_the_loading_on_within_their_limit(out_of_ba
         assert np.abs(res.end_x - converged.end_x).max() < 1e-4 * np.abs(converged.end_x).max()
     else:
         assert res.stopped.startswith("no equilibrium found at strain") and not res.unbalanced
+
+
+def test_steps_taken_out_of_balance_grow_back():
+    """Was: once load steps shorter than 1/64 of the first found no equilibrium, each was taken out of balance at
+    that length and the step never grew (the restructured 0.06 seed 10 slab crawled for 48 min after its first
+    break).  Every step here ends out of balance (Newton to 1e-15 of the largest reaction, one iteration): the step
+    halves below 1/64 of the first (0.02: 1/128), then grows by 1.5 a step, so 0.01 of strain takes ~10 steps, not
+    the 64 of steps held at 1/128."""
+    from opalflow.bpm.nonlinear import solve_nonlinear_fracture
+
+    net, supports, strengths = _pressed()
+    res = solve_nonlinear_fracture(net, strengths, supports, strain_max=0.01, first_strain=0.02, steps_to_first=1,
+                                   f_rtol=1e-15, maxiter=1, ptc_in_step=0, ptc_after_event=0, fire_steps=0,
+                                   out_of_balance=1e-3, say=lambda line: None)
+    assert res.stopped == "strain_max 0.01 reached" and max(res.unbalanced) <= 1e-3
+    assert len(res.unbalanced) <= 12, len(res.unbalanced)
+

@@ -233,6 +233,41 @@ def test_a_failed_job_keeps_its_failure_in_its_folder_and_status_shows_it(tmp_pa
     assert "2 job(s): 1 finished, 1 failed" in out and "FAILED    bad: LAMMPS failed" in out and "| ERROR" in out
 
 
+def test_a_job_whose_process_is_killed_fails_alone_and_the_study_goes_on(tmp_path):
+    """Was: a job's process killed (by hand, or out of memory) broke the local ProcessPoolExecutor: the study
+    ended with BrokenProcessPool and no summary, the jobs beside it lost."""
+    import os
+    import threading
+    import time
+
+    from opalflow.registry import load_spec
+    from opalflow.runs.executors import run_jobs
+    from opalflow.runs.jobs import Job
+    from opalflow.runs.spec import ExecutorSpec
+
+    jobs = [Job(f"a{a:g}", load_spec(WORKFLOWS / "lattice_sc.toml", [*LATTICE, f"lattice.spacing_nm={a}"]))
+            for a in (20.0, 22.0)]
+    jobs.insert(1, Job("slow", load_spec(WORKFLOWS / "lattice_sc.toml", [*LATTICE, "compression.strain_max=0.2"])))
+    root, killed = tmp_path / "study", []
+
+    def kill_the_slow_one():                    # as a user's kill -9 would, once its run has begun
+        folder, t0 = jobs[1].folder(root), time.time()
+        while not killed and time.time() - t0 < 300:
+            rec = RunRecord.read_or_none(folder) if folder.exists() else None
+            pid = rec.sessions[-1].pid if rec is not None and rec.state == "running" and rec.sessions else None
+            if pid and pid != os.getpid():
+                os.kill(pid, signal.SIGKILL)
+                killed.append(pid)
+            time.sleep(0.02)
+
+    threading.Thread(target=kill_the_slow_one, daemon=True).start()
+    res = run_jobs(jobs, root, ExecutorSpec(workers=2), say=lambda m: None)
+    assert killed, "the slow job was never seen running"
+    assert res["slow"].state == "failed" and "signal 9" in res["slow"].error
+    assert res["a20"].ok and res["a22"].ok
+    assert RunRecord.read(jobs[1].folder(root)).state == "failed"
+
+
 def test_executor_section_is_checked_in_one_line(tmp_path, capsys):
     from tests.conftest import assert_refused
 
@@ -335,6 +370,28 @@ def test_a_quasistatic_job_is_priced_by_the_runs_measured_with_its_rule():
         assert paper.peak_MiB == pytest.approx(1024 * run["peak_memory_GiB"], rel=1e-6)
         d30, d20 = predict(facts(1810179), law), predict(facts(6_000_000), law)
         assert d30.wall_s < d20.wall_s < paper.wall_s and d30.events <= d20.events <= events
+
+
+def test_a_nonlinear_job_is_priced_by_the_strength_study_jobs():
+    """Was: priced as its first linear solve (0.7 s, where the study's jobs took 13-638 s); now the mean per bond
+    of the aerogel strength study's jobs (bench/results/aerogel_strength.json ``job_costs``: the study's total), the
+    longest (SLURM's time limit) by the slowest per bond."""
+    import numpy as np
+
+    from opalflow.runs.plan import NONLINEAR, CostFacts, laws, predict
+
+    jobs = json.loads(NONLINEAR.read_text())["job_costs"]
+    law = laws()
+    bonds = int(np.median([j["n_bonds"] for j in jobs]))
+    facts = dict(solver="amg", breaking="lammps", event_tolerance=0.0)
+    nonlinear = predict(CostFacts("quasistatic", 0, bonds, geometry="nonlinear", **facts), law)
+    linear = predict(CostFacts("quasistatic", 0, bonds, geometry="linear", **facts), law)
+    walls = sorted(j["wall_s"] for j in jobs)
+    assert nonlinear.priced_by == "nonlinear runs" and walls[0] < nonlinear.wall_s < walls[-1]
+    assert nonlinear.wall_s == pytest.approx(np.mean([j["wall_s"] / j["n_bonds"] for j in jobs]) * bonds)
+    assert len(jobs) * nonlinear.wall_s == pytest.approx(sum(walls), rel=0.1)          # the study's total
+    assert nonlinear.wall_max_s == pytest.approx(max(j["wall_s"] / j["n_bonds"] for j in jobs) * bonds)
+    assert nonlinear.wall_s > 10 * linear.wall_s and linear.priced_by != "nonlinear runs"
 
 
 def test_a_relative_out_folder(tmp_path, monkeypatch, capsys):

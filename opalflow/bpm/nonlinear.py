@@ -43,17 +43,21 @@ without contacts it carried nothing: measured, the restructured 0.12 seed 2 slab
 and its stress fell to 31 % of the stress before the break, LAMMPS's to 92 %); its motions that nothing resists (a
 sphere's spin about its one contact's normal) are held in Newton's tangent by :meth:`_Network.float_springs`.
 
-Where no equilibrium is found: a load step whose Newton iterations stall gets ``ptc_in_step`` continuation
-steps, and is taken where the least unbalanced state they passed is within 10x Newton's tolerance (the stalls of
-clusters that hang by a few bonds sat at 1.2-9x it), else halved (grown back by 1.5 after easy steps); after an
-event, and where a step shorter than 1/64 of the first finds none, ``ptc_after_event`` continuation steps, then
-up to ``fire_steps`` steps of damped dynamics (:meth:`_Network.relax`, the network settling as LAMMPS's dynamics
-settles it).  Where those end out of balance, the least unbalanced state they passed is taken if its largest
-force is within ``out_of_balance`` of the forces' scale (the first step's largest reaction): the loading goes on
-from it, its residual the force that still moves the spheres, as LAMMPS's dynamics moves them while the wall
-moves (``FractureResult.unbalanced`` lists each such state's largest force over the scale; the run's summary
-counts them).  Beyond that the run stops: with no stress after an event (a snap-through) or with no event in a
-load step (bench/results/aerogel_strength_validation.md: the method against LAMMPS's dynamics on ten slabs).
+Where no equilibrium is found: a load step whose Newton iterations stall gets ``ptc_in_step`` continuation steps,
+and is taken where the least unbalanced state they passed is within 10x Newton's tolerance (the stalls of clusters
+that hang by a few bonds sat at 1.2-9x it), else it is halved; the step grows back by 1.5 after an easy step (<= 3
+iterations) and after one taken out of balance (shorter steps find no equilibrium there either). After an event, and
+where a step shorter than 1/64 of the first finds none, ``ptc_after_event`` continuation steps, then up to
+``fire_steps`` steps of damped dynamics (:meth:`_Network.relax`, the network settling as LAMMPS's dynamics settles
+it). Where those end out of balance, the least unbalanced state they passed is taken if its largest force is within
+``out_of_balance`` of the forces' scale (the first step's largest reaction): the loading goes on from it, its
+residual the force that still moves the spheres, as LAMMPS's dynamics moves them while the wall moves, and the next
+steps go to the continuation and the dynamics at once, growing (one that settles nowhere halved), until they settle
+(a step held below 1/64 of the first, each out of balance, crawled: measured, the restructured 0.06 seed 10 slab
+after its first break, ~27 s a step for 2 900 s with B 0.83 -> 0.91; so, to its second break and the end in 259 s).
+``FractureResult.unbalanced`` lists each such state's largest force over the scale; the run's summary counts them.
+Beyond that the run stops: with no stress after an event (a snap-through) or with no event in a load step
+(bench/results/aerogel_strength_validation.md: the method against LAMMPS's dynamics on ten slabs).
 """
 from __future__ import annotations
 
@@ -574,20 +578,22 @@ def solve_nonlinear_fracture(net: BondNetwork, strengths: Strengths, supports: S
 
         f_tol = math.inf
         unbalanced: list[float] = []            # max |F| / the forces' scale of each state taken out of balance
+        flowing = False                         # the last state settle's, out of balance: the next straight to settle
         while strain < strain_max and len(events) < events_max:
             target = min(strain + step, strain_max)
             if scale is None:       # the first step's reactions (the forces' scale) set Newton's tolerance
                 trial = nw.internal(nw.prescribed(z + nw.unit * (target - strain), target))
                 scale = float(np.max(np.abs(np.where(nw.free, 0.0, trial.ravel()))))
                 f_tol = f_rtol * scale
-            got = equilibrium(z, strain, target)
-            if got is None and step < base_step / 64:
+            got = None if flowing else equilibrium(z, strain, target)
+            if got is None and (flowing or step < base_step / 64):
                 # no equilibrium near, however short the step (a sphere slips off another, a branch buckles): the
                 # motion followed by continuation as after an event
                 got = settle(z + (nw.unit if secant is None else secant) * (target - strain), target)
-                if got is None:
+                if got is None and step < base_step / 64:
                     stopped = f"no equilibrium found at strain {target:.5g} (an instability the steps do not follow)"
                     break
+                flowing = got is not None and got[1] < 0        # (a longer step that settles nowhere: halved)
             if got is None:
                 step *= 0.5
                 continue
@@ -599,7 +605,7 @@ def solve_nonlinear_fracture(net: BondNetwork, strengths: Strengths, supports: S
                 secant = (z_new - z) / (target - strain) if iterations >= 0 else None
                 z, strain = z_new, target
                 nw.commit(z)
-                if 0 <= iterations <= 3:                 # an easy step: back towards the first step's size
+                if iterations <= 3:         # an easy step, or one out of balance: back towards the first step's size
                     step = min(1.5 * step, base_step)
                 say(f"quasi-static (nonlinear): strain {strain:.4f} of {strain_max:g}, stress {nw.stress(z):.4g} MPa, "
                     f"max B {B.max(initial=0.0):.3f}, "

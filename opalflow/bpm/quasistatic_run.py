@@ -385,6 +385,7 @@ def _report(run: RunFacts, summary: dict, result: CompressionResult, loading, sa
 
 def price(spec: BpmWorkflow, s) -> CostFacts:
     """What :mod:`opalflow.runs.plan` prices a quasi-static run by: the measured runs with its breaking rule and
-    event tolerance (or, where none, its first solve)."""
+    event tolerance (or, where none, its first solve); the nonlinear method's, by its measured jobs."""
     return CostFacts("quasistatic", s.n_particles, s.n_bonds, bond_model=spec.bonds.model, solver="amg",
-                     breaking=spec.bonds.breaking, event_tolerance=spec.compression.event_tolerance)
+                     breaking=spec.bonds.breaking, event_tolerance=spec.compression.event_tolerance,
+                     geometry=spec.compression.geometry)

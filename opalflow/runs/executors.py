@@ -2,7 +2,7 @@
 returns each one's outcome; a job's result lives in its folder, so the executor adds no state of its own
 and a rerun through any executor does only what is missing.
 
-- :class:`LocalExecutor`: a pool of spawned processes on this machine (no server).
+- :class:`LocalExecutor`: spawned processes on this machine, one per job (no server).
 - :class:`DaskExecutor`: any ``distributed`` scheduler (``executor.address``), or an embedded LocalCluster.
 - :class:`SlurmExecutor`: one SLURM job array per call (``sbatch --array=0-N%workers``); the array's
   script (``slurm/array-*.sh`` in the study folder) is plain bash a user can read and resubmit.  Each task
@@ -21,7 +21,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable, Iterator
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from multiprocessing.connection import wait
 from pathlib import Path
 
 from opalflow.runs.jobs import Outcome, job_record, outcome, run_job, settle
@@ -46,12 +46,36 @@ class LocalExecutor:
             for f in folders:
                 yield f, run_job(f, self.np, self.threads)
             return
-        # a fresh process per job: its peak memory is its own (its record), nothing leaks to the next job
-        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
-                                 max_tasks_per_child=1) as pool:
-            futures = {pool.submit(run_job, f, self.np, self.threads): f for f in folders}
-            for fut in as_completed(futures):
-                yield futures[fut], fut.result()
+        # a fresh spawned process per job: its peak memory is its own (its record), nothing leaks to the next
+        # job, and a process that dies (killed, out of memory) fails its job alone, the others run on (in a
+        # ProcessPoolExecutor it broke the pool, and the study with it)
+        spawn = multiprocessing.get_context("spawn")
+        waiting, running = list(folders), {}
+        try:
+            while waiting or running:
+                while waiting and len(running) < workers:
+                    proc = spawn.Process(target=run_job, args=(waiting[0], self.np, self.threads))
+                    proc.start()
+                    running[proc.sentinel] = (proc, waiting.pop(0))
+                for sentinel in wait(list(running)):
+                    proc, folder = running.pop(sentinel)
+                    proc.join()
+                    yield folder, ended(folder, proc.exitcode)
+        finally:
+            for proc, _ in running.values():          # the study stopped (Ctrl-C): its jobs with it
+                proc.terminate()
+
+
+def ended(folder: str, exitcode: int) -> Outcome:
+    """The outcome of a job whose process has ended: what its folder holds, or failed where the process died
+    without writing it (a signal: killed, out of memory)."""
+    got = outcome(folder)
+    if got.state in ("finished", "failed", "requeued") or exitcode == 0:
+        return got
+    how = f"signal {-exitcode}" if exitcode < 0 else f"exit code {exitcode}"
+    error = f"its process ended by {how} while it ran (killed, or out of memory); run the study again to retry it"
+    settle(Path(folder), "failed", error=error)
+    return Outcome("failed", str(folder), error=error, log_tail=got.log_tail)
 
 
 class DaskExecutor:

@@ -14,6 +14,10 @@ this kind of machine (``bench/bench_cost.py`` -> ``bench/results/cost_laws.json`
   and event tolerance (``bench/results/quasistatic_scale.json``: the standard sample at d = 60-15 nm, the
   fastest setting at each size), interpolated in bonds on log-log axes (extrapolated beyond by the end
   segments), plus the build; where none was measured, its first solve (a lower bound);
+- geometrically nonlinear quasi-static run (``compression.geometry = "nonlinear"``): the mean wall time per bond
+  of the jobs of the aerogel strength study (``bench/results/aerogel_strength.json``, ``job_costs``: 2 000-sphere
+  slabs) times the job's bonds, plus the build; their spread (13-638 s) is each slab's own breaks, so the longest
+  job (the SLURM time) is priced by the slowest of them per bond;
 - peak memory: m0 + m1 * bonds per job (resident set of the job's process and its LAMMPS; for
   ``block-amg`` the solver's own law).
 
@@ -39,6 +43,7 @@ from opalflow.store import RECORD
 LAWS = ROOT / "bench" / "results" / "cost_laws.json"
 SOLVERS = ROOT / "bench" / "results" / "static_quickstart.json"
 QUASISTATIC = ROOT / "bench" / "results" / "quasistatic_scale.json"
+NONLINEAR = ROOT / "bench" / "results" / "aerogel_strength.json"
 #: SLURM asks for this much more than predicted (memory and time)
 MARGIN = 1.5
 
@@ -106,6 +111,8 @@ class CostLaws:
     solvers: dict[str, SolverLaw] = field(default_factory=dict)
     #: "breaking rule, event tolerance" -> the measured runs, by size
     quasistatic: dict[str, list[MeasuredRun]] = field(default_factory=dict)
+    #: the nonlinear method's jobs measured (the aerogel strength study's)
+    nonlinear: list[MeasuredRun] = field(default_factory=list)
 
 
 @dataclass
@@ -122,6 +129,7 @@ class CostFacts:
     solver: str | None = None              # a solve's solver
     breaking: str | None = None            # a quasi-static run's rule and event tolerance
     event_tolerance: float | None = None
+    geometry: str | None = None            # a quasi-static run's: "linear" or "nonlinear"
 
 
 @dataclass
@@ -131,6 +139,7 @@ class Prediction:
     peak_MiB: float
     priced_by: str | None = None           # "measured runs": a quasi-static job priced by whole runs
     events: int | None = None
+    wall_max_s: float | None = None        # where jobs alike differ (the nonlinear method's): the slowest measured
 
 
 @dataclass
@@ -190,7 +199,7 @@ def laws() -> CostLaws:
         p, logc = np.polyfit(np.log(b), np.log([r["total_s"] for r in mine]), 1)
         m1, m0 = np.polyfit(b, [1024 * r["peak_memory_GiB"] for r in mine], 1)
         law.solvers[solver] = SolverLaw(float(m0), float(m1), float(np.exp(logc)), float(p))
-    law.quasistatic = quasistatic_runs()
+    law.quasistatic, law.nonlinear = quasistatic_runs(), nonlinear_runs()
     return law
 
 
@@ -211,6 +220,12 @@ def quasistatic_runs() -> dict[str, list[MeasuredRun]]:
     for (setting, _), row in sorted(best.items(), key=lambda kv: kv[0][1]):
         runs.setdefault(setting, []).append(row)
     return runs
+
+
+def nonlinear_runs() -> list[MeasuredRun]:
+    """The nonlinear method's jobs measured: bench/results/aerogel_strength.json's ``job_costs`` (none: [])."""
+    rows = json.loads(NONLINEAR.read_text()).get("job_costs", []) if NONLINEAR.exists() else []
+    return [MeasuredRun(r["n_bonds"], r["wall_s"], r["events"], 0.0, r.get("peak_MiB")) for r in rows]
 
 
 def _loglog(x: float, xs: list[float], ys: list[float]) -> float:
@@ -243,7 +258,17 @@ def predict(facts: CostFacts, law: CostLaws, ranks: int = 1) -> Prediction:
         lammps = facts.steps * bonds * per_bond / (ranks * dyn.mpi_efficiency if ranks > 1 else 1.0)
         wall = facts.build_s + dyn.lammps_start_s + lammps + dyn.rest_s
         return Prediction(wall, wall * ranks, law.dynamic_memory.at(bonds))
-    runs = law.quasistatic.get(f"{facts.breaking}, {facts.event_tolerance or 0:g}")
+    if facts.geometry == "nonlinear" and law.nonlinear:    # the strength study's jobs, per bond
+        import numpy as np
+
+        per_bond = [r.wall_s / r.bonds for r in law.nonlinear]
+        wall = facts.build_s + float(np.mean(per_bond)) * bonds
+        memory = [r.peak_MiB for r in law.nonlinear if r.peak_MiB]
+        return Prediction(wall, wall * ranks, max(memory) if memory else _solve_memory(facts, law, bonds),
+                          "nonlinear runs", round(float(np.mean([r.events for r in law.nonlinear]))),
+                          facts.build_s + max(per_bond) * bonds)
+    runs = None if facts.geometry == "nonlinear" else law.quasistatic.get(f"{facts.breaking}, "
+                                                                          f"{facts.event_tolerance or 0:g}")
     if facts.method == "quasistatic" and runs:          # whole runs measured with its rule and tolerance
         sizes = [r.bonds for r in runs]
         wall = facts.build_s + _loglog(bonds, sizes, [r.wall_s for r in runs])
@@ -327,7 +352,7 @@ def plan(spec, *, ranks: int = 1, sample: int = 3, against: Path | None = None, 
         rows.append(PlanRow(j.label, i in costs, facts, predict(facts, law, ranks),
                             None if against is None else measured(Path(against), j.label,
                                                                   single="executor" not in kind.options)))
-    longest = max(r.prediction.wall_s for r in rows)
+    longest = max(r.prediction.wall_max_s or r.prediction.wall_s for r in rows)
     peak = max(r.prediction.peak_MiB for r in rows)
     slurm = {"ntasks": ranks, "mem": f"{math.ceil(MARGIN * peak / 1024)}G",
              "time_min": max(1, math.ceil(MARGIN * longest / 60)), "array": f"0-{len(rows) - 1}"}
@@ -357,7 +382,12 @@ def plan_lines(p: Plan) -> list[str]:
               f"SLURM (x{MARGIN} margin): --array={s['array']} --ntasks={s['ntasks']} --mem={s['mem']} "
               f"--time={s['time_min']}  ([executor] type = \"slurm\", mem_gb, time_min)"]
     quasistatic = [r for r in p.jobs if r.facts.method == "quasistatic"]
-    if any(r.prediction.priced_by for r in quasistatic):
+    if any(r.prediction.priced_by == "nonlinear runs" for r in quasistatic):
+        spread = [r.wall_s for r in laws().nonlinear]
+        lines.append(f"nonlinear quasi-static jobs are priced by the mean per bond of the {len(spread)} jobs of the "
+                     f"aerogel strength study ({NONLINEAR.name}: {min(spread):.0f}-{max(spread):.0f} s a job, each "
+                     "slab's own breaks), the longest job (SLURM's time) by the slowest")
+    if any(r.prediction.priced_by == "measured runs" for r in quasistatic):
         events = [r.prediction.events for r in quasistatic if r.prediction.events]
         lines.append("quasistatic jobs are priced by the whole runs measured with their breaking rule and event "
                      f"tolerance ({QUASISTATIC.name}: the standard sample's events, {min(events)}-{max(events)} "

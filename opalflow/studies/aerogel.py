@@ -306,6 +306,12 @@ def _strength_at(f: float, runs: list[DensityRun]) -> DensityStrength | None:
         float(np.corrcoef(E, eps)[0, 1]) if len(rs) > 2 and np.std(E) and np.std(eps) else float("nan"), checks)
 
 
+def has_static_jobs(st) -> bool:
+    """Whether the density study solves each slab statically beside its loaded run (E from there): for a method
+    that is not linear or gives no strength; a linear strength method's first solve is the static one."""
+    return not METHODS[st.method].linear or not METHODS[st.method].strength
+
+
 def aerogel_density_jobs(spec: StudyWorkflow) -> list[Job]:
     """Each loop model x solid fraction x seed (``at``: model, solid fraction, seed, the slab's name): a static solve
     (``NAME_static``: E, energy by mode), a quasi-static run (``NAME``: E by the same first solve, and the strength;
@@ -322,7 +328,7 @@ def aerogel_density_jobs(spec: StudyWorkflow) -> list[Job]:
                           "aggregate.loops": model}      # (one model too: the series is what its label says)
                 name = f"{prefix}phi{label_number(f)}_s{s}"
                 at = (model, f, s, name)
-                if not METHODS[st.method].linear or not METHODS[st.method].strength:
+                if has_static_jobs(st):
                     jobs.append(Job(f"{name}_static", job_spec(spec, {**common, "compression.method": "static"}),
                                     at=at))
                 if METHODS[st.method].strength:
@@ -383,10 +389,14 @@ def _m_text(f: Fit) -> str:
 def aerogel_density_render(spec: StudyWorkflow, study: Density, out: Path) -> list[str]:
     st, ref = spec.study, study.literature
     method = next((r.loaded.method for r in study.runs if r.loaded), None)
-    _plot_density(study.models, out / "density.png")
+    static_jobs = has_static_jobs(st)
+    e_from = ("E from the static solver (the slab glued between its bottom layer and the wall, as the loaded run)"
+              if static_jobs else f"E from the {st.method} run's first load step (its secant; the static solver's E "
+              "where the run is linear)")
+    _plot_density(study.models, out / "density.png", "static" if static_jobs else "first load step")
     lines = [f"Solid fractions {', '.join(map(str, st.solid_fractions))} x seeds {', '.join(map(str, st.seeds))} x "
-             f"loop models {', '.join(st.loop_models)}: E from the static solver (the slab glued between its bottom "
-             "layer and the wall, as the loaded run)" + (f", strength from the {method} run" if method else "")
+             f"loop models {', '.join(st.loop_models)}: {e_from}" + (f", strength from the {method} run" if method
+                                                                      else "")
              + "; density = the slab's after the cut.", "",
              "| loop model | law | exponent | 95 % interval | prefactor | R^2 | E max/min between seeds | "
              "coordination | loops per 10 000 | energy: bending / twisting / shear / stretching | reference |",
@@ -455,15 +465,16 @@ def _plot_curves(spec: StudyWorkflow, study: Density, out: Path, path: Path) -> 
     save_figure(fig, path)
 
 
-def _plot_density(models: dict[str, DensitySeries], path: Path) -> None:
-    """E (and strength) against density, one colour per loop model, each with its power-law fit."""
+def _plot_density(models: dict[str, DensitySeries], path: Path, e_from: str = "static") -> None:
+    """E (and strength) against density, one colour per loop model, each with its power-law fit; ``e_from``: where
+    E comes from (the legend's)."""
     fig, ax = new_figure(figsize=(6.8, 4.6))
     for k, (model, m) in enumerate(models.items()):
         runs, fits = m.runs, m.fits
         rho = np.array([r.density_kg_m3 for r in runs])
         grid = np.geomspace(rho.min(), rho.max(), 50)
         f = fits["E"]
-        ax.loglog(rho, [r.E_kPa for r in runs], "o", color=f"C{k}", ms=4, label=f"E (static), {model}")
+        ax.loglog(rho, [r.E_kPa for r in runs], "o", color=f"C{k}", ms=4, label=f"E ({e_from}), {model}")
         ax.loglog(grid, f.prefactor * grid ** f.exponent, "-", color=f"C{k}", label=f"{model}: {_m_text(f)}")
         if "strength" in fits:
             broke = [r for r in runs if r.strength_kPa]
