@@ -87,6 +87,49 @@ def test_killed_sweep_completes_only_the_missing_jobs(tmp_path):
     assert len(list(root.glob("jobs/*/summary.json"))) == 3
 
 
+TERM_DRIVER = """
+import sys
+from opalflow.resources import WORKFLOWS
+from opalflow.registry import load_spec
+from opalflow.studies import sweep
+from opalflow.runs.executors import run_jobs
+from opalflow.runs.spec import ExecutorSpec
+LATTICE = {lattice!r}
+jobs = [sweep.Job(f"a{{a:g}}", load_spec(WORKFLOWS / "lattice_sc.toml", [*LATTICE, "compression.strain_max=0.5",
+                                                                       f"lattice.spacing_nm={{a}}"]))
+        for a in (20.0, 22.0)]
+if __name__ == "__main__":
+    run_jobs(jobs, sys.argv[1], ExecutorSpec(workers=2), say=lambda m: print(m, flush=True))
+"""
+
+
+def test_a_study_killed_stops_its_jobs(tmp_path):
+    """Was: a study's process killed (SIGTERM) left its local jobs running, one holding its folder's lock against
+    the next study; now its jobs are asked to stop and end with it."""
+    import time
+
+    from opalflow.runs.record import RunRecord
+
+    driver = tmp_path / "driver.py"
+    driver.write_text(TERM_DRIVER.format(lattice=LATTICE))
+    root = tmp_path / "study"
+    proc = subprocess.Popen([sys.executable, str(driver), str(root)], stdout=subprocess.DEVNULL)
+    pids, t0 = {}, time.time()
+    while len(pids) < 2 and time.time() - t0 < 120:          # both jobs' processes running
+        for rec_file in root.glob("jobs/*/run.json"):
+            rec = RunRecord.read_or_none(rec_file.parent)
+            if rec is not None and rec.state == "running" and rec.sessions and rec.sessions[-1].pid:
+                pids[rec_file.parent.name] = rec.sessions[-1].pid
+        time.sleep(0.05)
+    assert len(pids) == 2 and proc.poll() is None
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(timeout=60) != 0
+    for pid in pids.values():
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)
+    assert not list(root.glob("jobs/*/summary.json"))
+
+
 # ----------------------------------------------------------------------------- fits
 def test_power_and_exponential_fits_recover_their_laws():
     rng = np.random.default_rng(3)

@@ -17,8 +17,10 @@ import os
 import re
 import shlex
 import shutil
+import signal
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterator
 from multiprocessing.connection import wait
@@ -51,6 +53,10 @@ class LocalExecutor:
         # ProcessPoolExecutor it broke the pool, and the study with it)
         spawn = multiprocessing.get_context("spawn")
         waiting, running = list(folders), {}
+        main = threading.current_thread() is threading.main_thread()
+        # the study killed (SIGTERM: kill, a scheduler) stops its jobs too, as Ctrl-C does (measured: a study's
+        # process killed left its two jobs running, one holding its folder's lock against the next study)
+        before = signal.signal(signal.SIGTERM, _exit_on_term) if main else None
         try:
             while waiting or running:
                 while waiting and len(running) < workers:
@@ -62,8 +68,22 @@ class LocalExecutor:
                     proc.join()
                     yield folder, ended(folder, proc.exitcode)
         finally:
-            for proc, _ in running.values():          # the study stopped (Ctrl-C): its jobs with it
-                proc.terminate()
+            for proc, _ in running.values():          # the study stopped: its jobs asked to stop (a restart file
+                proc.terminate()                      # where their method writes one), then ended
+            for proc, _ in running.values():
+                proc.join(TERM_GRACE_S)
+                if proc.is_alive():
+                    proc.kill()
+            if main:
+                signal.signal(signal.SIGTERM, before)
+
+
+#: seconds a job has to stop after its study was stopped (SIGTERM), before it is killed
+TERM_GRACE_S = 30.0
+
+
+def _exit_on_term(signum, frame) -> None:
+    raise SystemExit(128 + signum)
 
 
 def ended(folder: str, exitcode: int) -> Outcome:
