@@ -274,11 +274,13 @@ def study(a) -> dict:
 
 def job_costs(out: Path) -> list[dict]:
     """Each finished job's size, wall time, events and peak memory (what ``plan`` prices the method's jobs by)."""
+    from opalflow.runs.jobs import job_record
+
     rows = []
     for p in sorted(out.glob("jobs/*/summary.json")):
-        s, rec = json.loads(p.read_text()), json.loads((p.parent / "run.json").read_text())
-        rows.append({"label": rec.get("label", p.parent.name), "n_bonds": s["n_bonds"], "wall_s": s["wall_s"],
-                     "events": s.get("quasistatic", {}).get("events", 0), "peak_MiB": rec.get("peak_rss_MiB")})
+        s, rec = json.loads(p.read_text()), job_record(p.parent)
+        rows.append({"label": rec.label or p.parent.name, "n_bonds": s["n_bonds"], "wall_s": s["wall_s"],
+                     "events": s.get("quasistatic", {}).get("events", 0), "peak_MiB": rec.peak_rss_MiB})
     return rows
 
 

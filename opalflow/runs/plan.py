@@ -383,7 +383,7 @@ def plan_lines(p: Plan) -> list[str]:
               f"--time={s['time_min']}  ([executor] type = \"slurm\", mem_gb, time_min)"]
     quasistatic = [r for r in p.jobs if r.facts.method == "quasistatic"]
     if any(r.prediction.priced_by == "nonlinear runs" for r in quasistatic):
-        spread = [r.wall_s for r in laws().nonlinear]
+        spread = [r.wall_s for r in nonlinear_runs()]
         lines.append(f"nonlinear quasi-static jobs are priced by the mean per bond of the {len(spread)} jobs of the "
                      f"aerogel strength study ({NONLINEAR.name}: {min(spread):.0f}-{max(spread):.0f} s a job, each "
                      "slab's own breaks), the longest job (SLURM's time) by the slowest")
