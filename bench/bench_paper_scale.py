@@ -2,21 +2,22 @@
 the whole quasi-static and static commands, wall time and peak memory against issue 56's targets, and where the
 time of a run goes.
 
-    python bench/bench_paper_scale.py runs [--repeat 3] [--only quasistatic static]
+    python bench/bench_paper_scale.py runs [--repeat 3] [--only quasistatic static] [--profile]
     python bench/bench_paper_scale.py profile RAW [--label after]     # a py-spy raw profile of one run, by phase
     python bench/bench_paper_scale.py kernels       # the solver's kernels on the paper's sample, and the bandwidth
 
 ``runs``: each command (:data:`COMMANDS`) ``--repeat`` times under ``/usr/bin/time -v``, the structure built in the
 run (``OPALFLOW_CACHE=off``), one at a time on an otherwise idle machine: wall, peak memory (its rusage), the
-strength or E, the run's own phase timings (summary.json); medians against :data:`TARGETS`.  ``profile``: a
-``py-spy record --idle --threads -f raw`` of one run (``py-spy`` is not a dependency: ``pip install py-spy``),
-the main thread's samples sorted into the phases of :data:`PHASES` (the first frame of the stack that names one),
-the kernel threads' samples beside them.  ``kernels``: on the paper's sample (its structure from the cache), the
-bond operator's product (all of K x, and the preconditioner's two blocks), one preconditioner call, the V-cycle and
-its finest level's sweeps and transfers, each the best of three on the process's threads; and this machine's memory
-bandwidth (numpy's copy of 1 GiB, a numba sum over it on one and two threads): the floor of a product is the
-bytes it must move (the bonds' arrays once, x read and the per-thread sums written) over the bandwidth.  Results:
-bench/results/paper_scale.json (``runs``, ``profiles``, ``kernels``).
+strength or E, the run's own phase timings (summary.json); medians against :data:`TARGETS`; ``--profile``: the first
+run of each command under ``py-spy`` too, its profile kept as ``profile`` below does (label ``after_NAME``).
+``profile``: a ``py-spy record --idle --threads -f raw`` of one run (``py-spy`` is not a dependency: ``pip install
+py-spy``), the main thread's samples sorted into the phases of :data:`PHASES` (the first frame of the stack that
+names one), the kernel threads' samples beside them. ``kernels``: on the paper's sample (its structure from the
+cache), the bond operator's product (all of K x, and the preconditioner's two blocks), one preconditioner call, the
+V-cycle and its finest level's sweeps and transfers, each the best of three on the process's threads; and this
+machine's memory bandwidth (numpy's copy of 1 GiB, a numba sum over it on one and two threads): the floor of a
+product is the bytes it must move (the bonds' arrays once, x read and the per-thread sums written) over the
+bandwidth. Results: bench/results/paper_scale.json (``runs``, ``profiles``, ``kernels``).
 """
 from __future__ import annotations
 
@@ -24,6 +25,7 @@ import argparse
 import json
 import os
 import platform
+import shutil
 import statistics
 import subprocess
 import sys
@@ -85,10 +87,13 @@ def _time_output(text: str) -> tuple[float, float]:
     return peak, wall
 
 
-def one_run(name: str, folder: Path) -> dict:
-    """The command ``name`` into ``folder`` under /usr/bin/time -v, its structure built in the run."""
+def one_run(name: str, folder: Path, raw: Path | None = None) -> dict:
+    """The command ``name`` into ``folder`` under /usr/bin/time -v, its structure built in the run (``raw``: and
+    under ``py-spy record --idle --threads``, its raw profile there)."""
     env = {**os.environ, "OPALFLOW_CACHE": "off", "PYTHONPATH": str(ROOT)}
-    cmd = ["/usr/bin/time", "-v", sys.executable, "-m", "opalflow", "run", *COMMANDS[name][:1], "--out",
+    spy = [shutil.which("py-spy") or str(Path(sys.executable).parent / "py-spy"), "record", "-r", "10", "--idle",
+           "--threads", "--nonblocking", "-f", "raw", "-o", str(raw), "--"] if raw else []
+    cmd = ["/usr/bin/time", "-v", *spy, sys.executable, "-m", "opalflow", "run", *COMMANDS[name][:1], "--out",
            str(folder), *COMMANDS[name][1:], "--quiet"]
     got = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True)
     if got.returncode:
@@ -104,13 +109,17 @@ def one_run(name: str, folder: Path) -> dict:
     return row
 
 
-def runs(names: list[str], repeat: int) -> dict:
+def runs(names: list[str], repeat: int, profiles: dict | None = None) -> dict:
+    """``repeat`` runs of each command (``profiles``: the first one's profile into it, by label)."""
     out = {}
     for name in names:
         rows = []
         for k in range(repeat):
             with tempfile.TemporaryDirectory(prefix=f"paper_{name}_") as tmp:
-                rows.append(one_run(name, Path(tmp) / "run"))
+                raw = Path(tmp) / "profile.txt" if profiles is not None and k == 0 else None
+                rows.append(one_run(name, Path(tmp) / "run", raw))
+                if raw:
+                    profiles[f"after_{name}"] = profile(raw)
             print(name, k + 1, rows[-1], flush=True)
         med = {key: statistics.median(r[key] for r in rows) for key in ("wall_s", "peak_GiB")}
         (wall_goal, wall_must), (mem_goal, mem_must) = TARGETS[name]["wall_s"], TARGETS[name]["peak_GiB"]
@@ -252,6 +261,7 @@ def main(argv=None) -> None:
     r = sub.add_parser("runs")
     r.add_argument("--repeat", type=int, default=3)
     r.add_argument("--only", nargs="+", default=list(COMMANDS), choices=list(COMMANDS))
+    r.add_argument("--profile", action="store_true", help="the first run of each under py-spy (pip install py-spy)")
     pr = sub.add_parser("profile")
     pr.add_argument("raw", type=Path)
     pr.add_argument("--label", default="after")
@@ -259,7 +269,7 @@ def main(argv=None) -> None:
     a = p.parse_args(argv)
     old = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
     if a.what == "runs":
-        old.setdefault("runs", {}).update(runs(a.only, a.repeat))
+        old.setdefault("runs", {}).update(runs(a.only, a.repeat, old.setdefault("profiles", {}) if a.profile else None))
         old["machine"] = machine()
     elif a.what == "kernels":
         old["kernels"] = kernels()
