@@ -94,9 +94,9 @@ def one_run(name: str, folder: Path, raw: Path | None = None) -> dict:
     spy = [shutil.which("py-spy") or str(Path(sys.executable).parent / "py-spy"), "record", "-r", "10", "--idle",
            "--threads", "--nonblocking", "-f", "raw", "-o", str(raw), "--"] if raw else []
     cmd = ["/usr/bin/time", "-v", *spy, sys.executable, "-m", "opalflow", "run", *COMMANDS[name][:1], "--out",
-           str(folder), *COMMANDS[name][1:], "--quiet"]
+           str(folder), *COMMANDS[name][1:]]
     got = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True)
-    if got.returncode:
+    if got.returncode or not (folder / "summary.json").exists():
         raise SystemExit(f"{name} failed:\n{got.stderr[-3000:]}")
     peak, wall = _time_output(got.stderr)
     s = json.loads((folder / "summary.json").read_text())
