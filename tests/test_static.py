@@ -434,3 +434,18 @@ def test_block_amg_preconditioner_is_symmetric_and_positive(threads):
     Mv, Mw = M(v), M(w)
     assert w @ Mv == pytest.approx(v @ Mw, rel=1e-5, abs=1e-7 * np.sqrt((Mv @ Mv) * (w @ w)))
     assert v @ Mv > 0 and w @ Mw > 0 and np.all(Mv[~free] == 0)
+
+
+def test_particle_stress_of_the_intact_bonds_is_that_of_their_network():
+    """particle_stress with ``alive`` (the quasi-static run's fracture pictures, no copy of the network) is
+    particle_stress over the network of the intact bonds alone, to the digit."""
+    from opalflow.bpm.static_run import particle_stress
+
+    _, sample, net = scene("opal_quick", SMALL_OPAL)
+    rng = np.random.default_rng(16)
+    u, theta = rng.normal(size=(net.n_particles, 3)), rng.normal(size=(net.n_particles, 3))
+    alive = rng.random(len(net.L)) > 0.3
+    volumes = sample.structure.particle_volumes()
+    got = particle_stress(net, u, theta, volumes, alive)
+    assert np.array_equal(got, particle_stress(net.part(alive), u, theta, volumes))
+    assert not np.array_equal(got, particle_stress(net, u, theta, volumes))

@@ -276,7 +276,7 @@ def _frames(net, data, res) -> list[fracture.Frame]:
         x = np.zeros((data.n_particles, 6)) if x is None else x
         return fracture.Snapshot(strain, data.positions + x[:, :3], data.diameters / 2,
                                  _broken_per_particle(net, alive),
-                                 particle_stress(net.part(alive), x[:, :3], x[:, 3:], volumes),
+                                 particle_stress(net, x[:, :3], x[:, 3:], volumes, alive),
                                  id=np.arange(1, data.n_particles + 1), type=data.types)
 
     p, last = res.peak, res.events[-1]
