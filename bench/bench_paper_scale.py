@@ -8,16 +8,17 @@ time of a run goes.
 
 ``runs``: each command (:data:`COMMANDS`) ``--repeat`` times under ``/usr/bin/time -v``, the structure built in the
 run (``OPALFLOW_CACHE=off``), one at a time on an otherwise idle machine: wall, peak memory (its rusage), the
-strength or E, the run's own phase timings (summary.json); medians against :data:`TARGETS`; ``--profile``: the first
-run of each command under ``py-spy`` too, its profile kept as ``profile`` below does (label ``after_NAME``).
+strength or E, the run's own phase timings (summary.json); medians against :data:`TARGETS`; ``--profile``: one run
+more of each command under ``py-spy`` (not timed: py-spy's sampling adds to its wall and hides its memory from
+/usr/bin/time), its profile kept as ``profile`` below does (label ``after_NAME``).
 ``profile``: a ``py-spy record --idle --threads -f raw`` of one run (``py-spy`` is not a dependency: ``pip install
 py-spy``), the main thread's samples sorted into the phases of :data:`PHASES` (the first frame of the stack that
-names one), the kernel threads' samples beside them. ``kernels``: on the paper's sample (its structure from the
-cache), the bond operator's product (all of K x, and the preconditioner's two blocks), one preconditioner call, the
-V-cycle and its finest level's sweeps and transfers, each the best of three on the process's threads; and this
-machine's memory bandwidth (numpy's copy of 1 GiB, a numba sum over it on one and two threads): the floor of a
-product is the bytes it must move (the bonds' arrays once, x read and the per-thread sums written) over the
-bandwidth. Results: bench/results/paper_scale.json (``runs``, ``profiles``, ``kernels``).
+names one), the kernel threads' samples beside them. ``kernels``: on the paper's sample (built here, no cache), the
+bond operator's product (all of K x, also on the particles in the builder's order, and the preconditioner's two
+blocks), one preconditioner call, the V-cycle and its finest level's sweeps and transfers, each the best of three on
+the process's threads; and this machine's memory bandwidth (numpy's copy of 1 GiB, a numba sum over it on one and
+two threads): the floor of a product is the bytes it must move (the bonds' arrays once, x read and the per-thread
+sums written) over the bandwidth. Results: bench/results/paper_scale.json (``runs``, ``profiles``, ``kernels``).
 """
 from __future__ import annotations
 
@@ -114,12 +115,13 @@ def runs(names: list[str], repeat: int, profiles: dict | None = None) -> dict:
     out = {}
     for name in names:
         rows = []
+        if profiles is not None:            # one run more, under py-spy: not among the timed ones
+            with tempfile.TemporaryDirectory(prefix=f"paper_{name}_") as tmp:
+                one_run(name, Path(tmp) / "run", Path(tmp) / "profile.txt")
+                profiles[f"after_{name}"] = profile(Path(tmp) / "profile.txt")
         for k in range(repeat):
             with tempfile.TemporaryDirectory(prefix=f"paper_{name}_") as tmp:
-                raw = Path(tmp) / "profile.txt" if profiles is not None and k == 0 else None
-                rows.append(one_run(name, Path(tmp) / "run", raw))
-                if raw:
-                    profiles[f"after_{name}"] = profile(raw)
+                rows.append(one_run(name, Path(tmp) / "run"))
             print(name, k + 1, rows[-1], flush=True)
         med = {key: statistics.median(r[key] for r in rows) for key in ("wall_s", "peak_GiB")}
         (wall_goal, wall_must), (mem_goal, mem_must) = TARGETS[name]["wall_s"], TARGETS[name]["peak_GiB"]
@@ -205,14 +207,21 @@ def kernels() -> dict:
     from opalflow.linalg.direct import kernel_threads
 
     spec = load_workflow(COMMANDS["quasistatic"][0], COMMANDS["quasistatic"][2::2])
-    sample = loaded_sample(spec, scene_of(spec).structure(spec))
-    net = stiffness_network(sample.structure, sample.coefficients)
+    built = scene_of(spec).build(spec)                       # the builder's order
     threads = kernel_threads()
+    x = np.random.default_rng(1).standard_normal(6 * built.n_particles)
+    plain = loaded_sample(spec, built)
+    plain_net = stiffness_network(plain.structure, plain.coefficients)
+    with threadpool_limits(limits=1):
+        builders_order_ms = round(1e3 * best(lambda: plain_net.matvec(x, threads)), 1)
+    plain = plain_net = None        # (freed before the ordered network is made)
+    sample = loaded_sample(spec, built.reordered(built.cell_order(2.0 * float(np.mean(built.diameters)))))
+    net = stiffness_network(sample.structure, sample.coefficients)
     alive = np.ones(len(net.L), bool)
     loaded = LoadedNetwork(net, LOADINGS[spec.compression.loading].supports(sample), sample.structure.positions,
                            alive, None, "block-amg", spec.compression.resolve_rtol)
-    x = np.random.default_rng(1).standard_normal(6 * net.n_particles)
-    out = {"threads": threads, "particles": net.n_particles, "bonds": len(net.L)}
+    out = {"threads": threads, "particles": net.n_particles, "bonds": len(net.L),
+           "product_all_builders_order_ms": builders_order_ms}
     with threadpool_limits(limits=1):
         for block in ("all", "ut", "t"):
             out[f"product_{block}_ms"] = round(1e3 * best(lambda: net.matvec(x, threads, alive, block)), 1)
