@@ -36,6 +36,8 @@ from collections import Counter
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "bench"))
+from bench_quasistatic import _time_output  # noqa: E402  (/usr/bin/time -v's peak memory and wall)
 RESULTS = ROOT / "bench" / "results" / "paper_scale.json"
 
 #: the paper-scale commands: the quasi-static run with the paper's rule (the setting of
@@ -76,18 +78,6 @@ def machine() -> dict:
             "python": platform.python_version(), "date": time.strftime("%Y-%m-%d %H:%M")}
 
 
-def _time_output(text: str) -> tuple[float, float]:
-    """(peak memory GiB, wall s) from ``/usr/bin/time -v``'s output."""
-    peak = wall = 0.0
-    for line in text.splitlines():
-        if "Maximum resident set size" in line:
-            peak = int(line.split(":")[1]) / 2**20
-        if "Elapsed (wall clock)" in line:
-            parts = [float(x) for x in line.split(": ")[-1].split(":")]
-            wall = sum(v * 60**k for k, v in enumerate(reversed(parts)))
-    return peak, wall
-
-
 def one_run(name: str, folder: Path, raw: Path | None = None) -> dict:
     """The command ``name`` into ``folder`` under /usr/bin/time -v, its structure built in the run (``raw``: and
     under ``py-spy record --idle --threads``, its raw profile there)."""
@@ -99,7 +89,10 @@ def one_run(name: str, folder: Path, raw: Path | None = None) -> dict:
     got = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True)
     if got.returncode or not (folder / "summary.json").exists():
         raise SystemExit(f"{name} failed:\n{got.stderr[-3000:]}")
-    peak, wall = _time_output(got.stderr)
+    with tempfile.NamedTemporaryFile("w", suffix=".txt") as f:     # (bench_quasistatic's reader takes a file)
+        f.write(got.stderr)
+        f.flush()
+        peak, wall = _time_output(f.name)
     s = json.loads((folder / "summary.json").read_text())
     row = {"wall_s": round(wall, 1), "peak_GiB": round(peak, 2), "youngs_modulus_GPa": s["youngs_modulus_GPa"],
            "solver_wall_s": s.get("wall_s"), "when": time.strftime("%Y-%m-%d %H:%M")}
