@@ -129,3 +129,42 @@ def test_open_sides_have_no_bonds_across(tmp_path):
     assert s.n_bonds < periodic.n_bonds and s.n_particles == periodic.n_particles
     from opalflow.bpm.deck import compression_deck
     assert "boundary        m m f" in compression_deck(spec, s).in_lmp
+
+
+def test_a_structure_reordered_is_the_same_structure(quick_structure):
+    """Structure.reordered: the same particles (positions, types, groups) in the new order, the same bonds between
+    the same particles (i < j, sorted, each with its type), nothing lost."""
+    s = quick_structure
+    order = s.cell_order(2.0 * float(np.mean(s.diameters)))
+    r = s.reordered(order)
+    assert sorted(order.tolist()) == list(range(s.n_particles)) and not np.array_equal(order, np.arange(s.n_particles))
+    assert np.array_equal(r.positions, s.positions[order]) and np.array_equal(r.types, s.types[order])
+    assert all(np.array_equal(r.groups[k], v[order]) for k, v in s.groups.items())
+    assert np.all(r.bonds[:, 0] < r.bonds[:, 1]) and np.all(np.diff(r.bonds[:, 0] * r.n_particles + r.bonds[:, 1]) > 0)
+
+    def pairs(x):           # each bond as its two particles' positions and its type, in any order
+        ends = np.sort(np.stack([x.positions[x.bonds[:, 0]], x.positions[x.bonds[:, 1]]], axis=1), axis=1)
+        rows = np.column_stack([ends.reshape(len(x.bonds), 6), x.bond_types])
+        return rows[np.lexsort(rows.T[::-1])]
+    assert np.array_equal(pairs(r), pairs(s))
+    # cell order: each particle's bonded neighbours lie nearer in memory than in the builder's order
+    assert np.mean(np.abs(np.diff(r.bonds, axis=1))) < np.mean(np.abs(np.diff(s.bonds, axis=1)))
+
+
+def test_a_large_build_is_put_in_cell_order_and_solves_the_same(monkeypatch, tmp_path):
+    """A scene's build of ORDER_MIN_PARTICLES or more comes in cell order (not a data file's: its ids kept), and
+    the static method gives the same modulus on it to rounding."""
+    from opalflow.api import run
+    from opalflow.bpm import scene as bpm_scene
+
+    monkeypatch.setenv("OPALFLOW_CACHE", "off")
+    plain = run("quickstart", tmp_path / "plain", set={"compression.method": "static"}, quiet=True)
+    monkeypatch.setattr(bpm_scene, "ORDER_MIN_PARTICLES", 1000)
+    ordered = run("quickstart", tmp_path / "ordered", set={"compression.method": "static"}, quiet=True)
+    assert ordered["n_bonds"] == plain["n_bonds"] and ordered["youngs_modulus_GPa"] == pytest.approx(
+        plain["youngs_modulus_GPa"], rel=1e-9)
+    from opalflow.lammps.datafile import read_data
+
+    a, b = read_data(tmp_path / "plain" / "data.lmp"), read_data(tmp_path / "ordered" / "data.lmp")
+    assert not np.array_equal(a.positions, b.positions)
+    assert np.array_equal(np.sort(a.positions, axis=0), np.sort(b.positions, axis=0))

@@ -264,8 +264,8 @@ def test_jax_path_runs_on_the_default_device():
 
 @pytest.mark.parametrize("bs,dtype", [(1, np.float64), (3, np.float32), (6, np.float64)])
 def test_own_gauss_seidel_sweeps_are_pyamgs(bs, dtype):
-    """The V-cycle's forward sweep, and its backward one as a forward sweep over the reversed copy, against
-    pyamg's block Gauss-Seidel (forward and backward) on a random block-sparse SPD matrix."""
+    """The V-cycle's forward and backward sweeps (one share of the rows: the sequential sweep) against pyamg's
+    block Gauss-Seidel (forward and backward) on a random block-sparse SPD matrix."""
     import scipy.sparse as sp
     from pyamg.relaxation.relaxation import block_gauss_seidel
 
@@ -305,6 +305,81 @@ def test_own_residual_is_scipys_on_any_number_of_threads(bs, dtype, monkeypatch)
     assert np.allclose(one, b - A @ x, **tol) and np.array_equal(one, two) and one.dtype == dtype
 
 
+def _spd_bsr(n: int, bs: int, seed: int):
+    import scipy.sparse as sp
+
+    M = sp.random(n * bs, n * bs, density=0.1, random_state=seed)
+    return (M @ M.T + 4 * sp.identity(n * bs)).tobsr(blocksize=(bs, bs))
+
+
+@pytest.mark.parametrize("bs", [3, 6])
+def test_hybrid_sweeps_are_each_shares_own_and_the_same_on_any_number_of_threads(bs, monkeypatch):
+    """Above PARTS_MIN_ROWS a sweep is hybrid: each share of the rows is a sequential Gauss-Seidel sweep of its own
+    block of A, the other shares' unknowns as the sweep found them (moved to the right-hand side); one thread and
+    two give the same digits; and the V-cycle built on such sweeps stays symmetric (backward the adjoint of
+    forward), as CG needs."""
+    from pyamg.relaxation.relaxation import block_gauss_seidel
+
+    from opalflow.linalg import multigrid
+
+    monkeypatch.setattr(multigrid, "PARTS_MIN_ROWS", 1)
+    monkeypatch.setattr(multigrid, "SWEEP_PARTS", 3)
+    rng = np.random.default_rng(8)
+    n = 30
+    A = _spd_bsr(n, bs, 9)
+    b, x0 = rng.random(n * bs), rng.random(n * bs)
+    at = multigrid._shares(n) * bs
+    assert len(at) == 4
+    for k, direction in enumerate(("forward", "backward")):
+        one, two = x0.copy(), x0.copy()
+        multigrid.smoothers(A, 1)[k](one, b)
+        multigrid.smoothers(A, 2)[k](two, b)
+        assert np.array_equal(one, two) and not np.allclose(one, x0)
+        for lo, hi in zip(at[:-1], at[1:]):
+            own = A.tocsr()[lo:hi, lo:hi].tobsr(blocksize=(bs, bs))
+            rest = x0.copy()
+            rest[lo:hi] = 0.0
+            ref = x0[lo:hi].copy()
+            block_gauss_seidel(own, ref, b[lo:hi] - (A @ rest)[lo:hi], iterations=1, sweep=direction, blocksize=bs)
+            assert np.allclose(one[lo:hi], ref, rtol=1e-12), (direction, lo)
+
+
+def test_transfers_are_p_and_its_transpose_on_any_number_of_threads(monkeypatch):
+    """The V-cycle's P e and P^T r (pyamg's R dropped) against scipy's products, one thread and two alike."""
+    import scipy.sparse as sp
+
+    from opalflow.linalg import multigrid
+
+    monkeypatch.setattr(multigrid, "PARTS_MIN_ROWS", 1)
+    P = sp.random(60 * 3, 7 * 6, density=0.2, random_state=10).tobsr(blocksize=(3, 6))
+    rng = np.random.default_rng(11)
+    r, e = rng.random(P.shape[0]), rng.random(P.shape[1])
+    (down1, up1), (down2, up2) = multigrid.transfers(P, 1), multigrid.transfers(P, 2)
+    assert np.allclose(down1(r), P.T @ r, rtol=1e-12) and np.allclose(up1(e), P @ e, rtol=1e-12)
+    assert np.array_equal(down1(r), down2(r)) and np.array_equal(up1(e), up2(e))
+
+
+def test_v_cycle_of_hybrid_sweeps_is_symmetric(monkeypatch):
+    """w . V(v) = v . V(w) and v . V(v) > 0 for the V-cycle whose sweeps are hybrid (several shares) and whose
+    restriction is P^T from P, on a 3D Laplacian of 3 x 3 blocks (a stiffness-like matrix: a hybrid sweep, Jacobi
+    between its shares, converges where the coupling across them is weak; the samples' shares are contiguous
+    slabs of particles): the preconditioner CG needs."""
+    import pyamg
+    import scipy.sparse as sp
+
+    from opalflow.linalg import multigrid
+
+    monkeypatch.setattr(multigrid, "PARTS_MIN_ROWS", 1)
+    A = sp.kron(pyamg.gallery.poisson((10, 10, 6), format="csr"), np.eye(3)).tobsr(blocksize=(3, 3))
+    B = np.kron(np.ones((600, 1)), np.eye(3))
+    ml = pyamg.smoothed_aggregation_solver(A, B=B, max_coarse=20, presmoother=None, postsmoother=None)
+    assert len(ml.levels) > 1
+    V = multigrid.v_cycle(ml, 2)
+    rng = np.random.default_rng(13)
+    v, w = rng.random(1800), rng.random(1800)
+    assert w @ V(v) == pytest.approx(v @ V(w), rel=1e-10) and v @ V(v) > 0
+
+
 def test_bond_operator_on_threads_is_the_operator(monkeypatch):
     """K x with the bonds in two threads' shares (each into a sum of its own) is K x on one, to rounding."""
     from opalflow.bpm import stiffness
@@ -315,6 +390,32 @@ def test_bond_operator_on_threads_is_the_operator(monkeypatch):
     monkeypatch.setattr(stiffness, "PARTS_MIN_BONDS", 1)
     two = net.matvec(x, 2)
     assert np.allclose(two, one, rtol=0, atol=1e-12 * np.abs(one).max()) and not np.array_equal(two, x * 0)
+
+
+def test_bond_operator_blocks_are_rows_of_the_product(monkeypatch):
+    """The bond operator's blocks (stiffness.BLOCKS): "ut" is K's translation rows of (0, theta), "t" its rotation rows
+    of x, each with the rest zero; a bond masked out by ``alive`` counts nowhere (the product of the network with
+    its stiffness zeroed), on one thread and on two."""
+    from dataclasses import replace
+
+    from opalflow.bpm import stiffness
+
+    _, _, net = scene("opal_quick", SMALL_OPAL)
+    x = np.random.default_rng(14).normal(size=(net.n_particles, 6))
+    alive = np.random.default_rng(15).random(len(net.L)) > 0.2
+    cut = replace(net, a_r=net.a_r * alive, a_s=net.a_s * alive, bend=net.bend * alive, twist=net.twist * alive)
+    rotations = x.copy()
+    rotations[:, :3] = 0.0
+    for threads, parts_min in ((1, stiffness.PARTS_MIN_BONDS), (2, 1)):
+        monkeypatch.setattr(stiffness, "PARTS_MIN_BONDS", parts_min)
+        full = cut.matvec(x.ravel()).reshape(-1, 6)
+        scale = np.abs(full).max()
+        ut = net.matvec(x.ravel(), threads, alive, "ut").reshape(-1, 6)
+        t = net.matvec(x.ravel(), threads, alive, "t").reshape(-1, 6)
+        assert np.allclose(ut[:, :3], cut.matvec(rotations.ravel()).reshape(-1, 6)[:, :3], rtol=0, atol=1e-12 * scale)
+        assert np.allclose(t[:, 3:], full[:, 3:], rtol=0, atol=1e-12 * scale)
+        assert not ut[:, 3:].any() and not t[:, :3].any() and np.abs(ut).max() > 1e-3 * scale
+        assert np.allclose(net.matvec(x.ravel(), threads, alive).reshape(-1, 6), full, rtol=0, atol=1e-12 * scale)
 
 
 @pytest.mark.parametrize("threads", [1, 2])
@@ -333,3 +434,18 @@ def test_block_amg_preconditioner_is_symmetric_and_positive(threads):
     Mv, Mw = M(v), M(w)
     assert w @ Mv == pytest.approx(v @ Mw, rel=1e-5, abs=1e-7 * np.sqrt((Mv @ Mv) * (w @ w)))
     assert v @ Mv > 0 and w @ Mw > 0 and np.all(Mv[~free] == 0)
+
+
+def test_particle_stress_of_the_intact_bonds_is_that_of_their_network():
+    """particle_stress with ``alive`` (the quasi-static run's fracture pictures, no copy of the network) is
+    particle_stress over the network of the intact bonds alone, to the digit."""
+    from opalflow.bpm.static_run import particle_stress
+
+    _, sample, net = scene("opal_quick", SMALL_OPAL)
+    rng = np.random.default_rng(16)
+    u, theta = rng.normal(size=(net.n_particles, 3)), rng.normal(size=(net.n_particles, 3))
+    alive = rng.random(len(net.L)) > 0.3
+    volumes = sample.structure.particle_volumes()
+    got = particle_stress(net, u, theta, volumes, alive)
+    assert np.array_equal(got, particle_stress(net.part(alive), u, theta, volumes))
+    assert not np.array_equal(got, particle_stress(net, u, theta, volumes))

@@ -71,7 +71,6 @@ Re-solves (measured in bench/bench_quasistatic.py, kept: ``auto``):
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -81,8 +80,8 @@ import numpy as np
 from opalflow.bpm.contacts import Contacts, joined
 from opalflow.bpm.loading import Supports
 from opalflow.bpm.spec import BREAKING_RULES, RESOLVERS
-from opalflow.bpm.static import (DIRECT_MAX_DOFS, block_amg_preconditioner, block_matrix, bond_blocks, loose_particles,
-                                  particle_amg)
+from opalflow.bpm.static import (DIRECT_MAX_DOFS, block_amg_preconditioner, block_matrix, bond_blocks, intact,
+                                  loose_particles, particle_amg)
 from opalflow.bpm.stiffness import BondNetwork
 from opalflow.jit import njit
 from opalflow.linalg.direct import Factor, kernel_threads
@@ -91,27 +90,31 @@ from opalflow.spec import InputError
 
 
 #: ``auto`` takes ``amg`` up to this many bonds, ~9 GiB (a bound of memory, where the static solver's
-#: AMG_MAX_BONDS is one of speed): a run with its 6 x 6 hierarchy (and the reversed copies of
-#: :func:`opalflow.linalg.multigrid.v_cycle`) peaked at 4.15 GiB at 1.81 M bonds (the paper's sample at d = 30 nm);
-#: at the paper's own 17.5 M bonds its K alone is 9.8 GiB (15.9 GiB while assembled), with the copy and the
-#: hierarchy past 20: ``block-amg`` above
+#: AMG_MAX_BONDS is one of speed): a run with its 6 x 6 hierarchy (and the reversed copies the V-cycle kept
+#: then) peaked at 4.15 GiB at 1.81 M bonds (the paper's sample at d = 30 nm); at the paper's own 17.5 M bonds its
+#: K alone is 9.8 GiB (15.9 GiB while assembled), with the hierarchy past 15: ``block-amg`` above
 RESOLVE_AMG_MAX_BONDS = 4_000_000
 
 
 @dataclass
 class Strengths:
     """Each bond's critical normal and shear force and bending and twisting torque (pN, pN nm), and the
-    breaking rule that weighs them (one of :data:`opalflow.bpm.spec.BREAKING_RULES`, module docstring)."""
+    breaking rule that weighs them (one of :data:`opalflow.bpm.spec.BREAKING_RULES`, module docstring).  With
+    ``index`` (M,) the four arrays are tables and bond b's values are at ``index[b]`` (a bond's strengths are
+    its type's: the paper's 17.5 M bonds hold a table of a few rows and the types they have, not four arrays
+    of 0.13 GiB each)."""
 
     fr_c: np.ndarray
     fs_c: np.ndarray
     tb_c: np.ndarray
     tt_c: np.ndarray
     rule: str = "lammps"
+    index: np.ndarray | None = None
 
     def part(self, bonds: np.ndarray) -> "Strengths":
-        """The strengths of ``bonds`` alone."""
-        return Strengths(self.fr_c[bonds], self.fs_c[bonds], self.tb_c[bonds], self.tt_c[bonds], self.rule)
+        """The strengths of ``bonds`` alone, one row a bond."""
+        at = bonds if self.index is None else self.index[bonds]
+        return Strengths(self.fr_c[at], self.fs_c[at], self.tb_c[at], self.tt_c[at], self.rule)
 
 
 def breaking_index(net: BondNetwork, x: np.ndarray, c: Strengths) -> np.ndarray:
@@ -163,21 +166,23 @@ def bond_checks(net: BondNetwork, x: np.ndarray, c: Strengths) -> np.ndarray:
     F = net.bond_forces(x[:, :3], x[:, 3:])
     checks = np.empty((len(CHECKS[c.rule]), len(net.L)))
     _bond_checks(net.i, net.j, net.n, net.bend, net.twist, F, np.ascontiguousarray(x[:, 3:]), c.fr_c, c.fs_c,
-                 c.tb_c, c.tt_c, _RULE_CODE[c.rule], checks)
+                 c.tb_c, c.tt_c, np.zeros(0, np.int32) if c.index is None else c.index, _RULE_CODE[c.rule], checks)
     return checks
 
 
 @njit(cache=True, nogil=True)
-def _bond_checks(i, j, n, bend, twist, F, theta, fr_c, fs_c, tb_c, tt_c, rule, out):
+def _bond_checks(i, j, n, bend, twist, F, theta, fr_c, fs_c, tb_c, tt_c, index, rule, out):
+    by_type = index.shape[0] > 0
     for b in range(out.shape[1]):
         p, q = i[b], j[b]
+        k = index[b] if by_type else b
         fr = n[b, 0] * F[b, 0] + n[b, 1] * F[b, 1] + n[b, 2] * F[b, 2]
         d0, d1, d2 = theta[p, 0] - theta[q, 0], theta[p, 1] - theta[q, 1], theta[p, 2] - theta[q, 2]
         tw = n[b, 0] * d0 + n[b, 1] * d1 + n[b, 2] * d2
         fs = math.sqrt((F[b, 0] - fr * n[b, 0]) ** 2 + (F[b, 1] - fr * n[b, 1]) ** 2 + (F[b, 2] - fr * n[b, 2]) ** 2)
         bt = math.sqrt((d0 - tw * n[b, 0]) ** 2 + (d1 - tw * n[b, 1]) ** 2 + (d2 - tw * n[b, 2]) ** 2)
-        r_n, r_b = fr / fr_c[b], bend[b] * bt / tb_c[b]
-        r_s, r_t = fs / fs_c[b], twist[b] * abs(tw) / tt_c[b]
+        r_n, r_b = fr / fr_c[k], bend[b] * bt / tb_c[k]
+        r_s, r_t = fs / fs_c[k], twist[b] * abs(tw) / tt_c[k]
         if rule == _DOSTA:
             out[0, b], out[1, b] = abs(r_n) + r_b, r_s + r_t
         elif rule == _MUSEN_2020:
@@ -341,8 +346,8 @@ class DirectResolver:
 
 
 class IterativeResolver:
-    """CG on the damaged network (the numba bond operator over a copy of the network whose broken bonds have
-    zero stiffness: nothing assembled for the product), warm-started from the last solution and
+    """CG on the damaged network (the numba bond operator over the network with its broken bonds masked out:
+    nothing assembled for the product, no copy of the network), warm-started from the last solution and
     preconditioned by the preconditioner ``name`` of the network at the start (:data:`PRECONDITIONERS`),
     prescribed dofs kept by an identity block; stops at an absolute residual of ``rtol`` |b|.  The product and
     the preconditioner's own kernels run on the process's thread budget
@@ -352,46 +357,43 @@ class IterativeResolver:
 
     def __init__(self, name: str, net: BondNetwork, alive: np.ndarray, free: np.ndarray, positions: np.ndarray,
                  rtol: float):
-        self.name, self.rtol, self.free, self.whole = name, rtol, free.copy(), net
-        self.net = dataclasses.replace(net, a_r=net.a_r * alive, a_s=net.a_s * alive, bend=net.bend * alive,
-                                       twist=net.twist * alive)
+        self.name, self.rtol, self.free, self.net = name, rtol, free.copy(), net
+        self.alive = alive.copy()           # (the preconditioner's products read it: changed in place)
         self.threads = kernel_threads()
-        self._precondition = PRECONDITIONERS[name](self.net, free, positions, self.threads)
+        self._precondition = PRECONDITIONERS[name](net, free, positions, self.threads, self.alive)
 
     def matvec(self, x: np.ndarray) -> np.ndarray:
-        return self.net.matvec(x, self.threads)
+        return self.net.matvec(x, self.threads, self.alive)
 
     def remove(self, bonds: np.ndarray, free: np.ndarray) -> None:
-        for coefficient in (self.net.a_r, self.net.a_s, self.net.bend, self.net.twist):
-            coefficient[bonds] = 0.0
+        self.alive[bonds] = False
         self.free = free.copy()
 
     def add(self, bonds: np.ndarray) -> None:
         """Put elements back (contacts that close)."""
-        for name in ("a_r", "a_s", "bend", "twist"):
-            getattr(self.net, name)[bonds] = getattr(self.whole, name)[bonds]
+        self.alive[bonds] = True
 
     def solve(self, b: np.ndarray, x0: np.ndarray) -> tuple[np.ndarray, int]:
         """CG under one BLAS thread (as the static method's iterative solvers: :func:`opalflow.linalg.direct.solver_threads`):
         BLAS's idle threads spin after numpy's dot products, on the cores the bond operator's threads need."""
         from threadpoolctl import threadpool_limits
 
-        m, held = self.free.astype(float), (~self.free).astype(float)
+        m = self.free.astype(float)
 
+        # the correction d solves K_ff d_f = r0_f with d zero on the prescribed dofs: r0 is zero there, and so are
+        # CG's residuals, directions and preconditioned residuals (masked), so its products need no mask on input
         def matvec(v):
-            out = self.matvec(m * v)
+            out = self.matvec(v)
             out *= m
-            out += held * v
             return out
 
         def precondition(r):
             z = self._precondition(r)
             z *= m
-            z += held * r
             return z
 
         x0 = np.where(self.free, x0, b)
-        r0 = b - matvec(x0)
+        r0 = np.where(self.free, b - self.matvec(m * x0), 0.0)
         scale = float(np.linalg.norm(b))
         if np.linalg.norm(r0) <= self.rtol * scale:
             return x0, 0
@@ -401,8 +403,10 @@ class IterativeResolver:
         return x0 + d, its
 
 
-#: the iterative re-solves' preconditioners (module docstring): (network, free dofs, positions, threads) -> v -> z
-PRECONDITIONERS = {"amg": lambda net, free, positions, threads: particle_amg(net, free, positions, threads)[1],
+#: the iterative re-solves' preconditioners (module docstring): (network, free dofs, positions, threads, the bonds
+#: intact) -> v -> z
+PRECONDITIONERS = {"amg": lambda net, free, positions, threads, alive: particle_amg(intact(net, alive), free,
+                                                                                   positions, threads)[1],
                    "block-amg": block_amg_preconditioner}
 
 
@@ -475,8 +479,8 @@ class Adjacency:
         ends = np.concatenate([net.i, net.j])
         order = np.argsort(ends, kind="stable")
         self.indptr = np.concatenate([[0], np.cumsum(np.bincount(ends, minlength=n))]).astype(np.int64)
-        self.neighbour = np.concatenate([net.j, net.i])[order].astype(np.int64)
-        self.bond = np.concatenate([np.arange(m), np.arange(m)])[order]
+        self.neighbour = np.concatenate([net.j, net.i])[order].astype(np.int32)
+        self.bond = (order % m).astype(np.int32)
         self._seen = np.zeros(n, bool)
         self._taken = np.zeros(m, bool)
 

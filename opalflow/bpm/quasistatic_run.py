@@ -32,7 +32,6 @@ from opalflow.bpm.nonlinear import solve_nonlinear_fracture
 from opalflow.bpm.report import network_inputs, plots_line, sample_lines, structure_cost
 from opalflow.bpm.result import CompressionResult, EventFacts
 from opalflow.bpm.static_run import network_run, particle_stress
-from opalflow.bpm.stiffness import per_bond
 from opalflow.runs.plan import CostFacts
 from opalflow.runs.record import finish
 from opalflow.progress import note
@@ -78,9 +77,10 @@ def load_state(out: Path) -> SavedState:
 
 
 def strengths_of(data, coefficients, rule: str = "lammps") -> Strengths:
-    """Each bond's critical forces and torques, from its type's bpm/rotational coefficients, and the
-    breaking rule (``bonds.breaking``)."""
-    return Strengths(*(per_bond(data, coefficients, k) for k in ("fr_c", "fs_c", "tb_c", "tt_c")), rule)
+    """Each bond's critical forces and torques, from its type's bpm/rotational coefficients (a table by bond
+    type, 1-based: row 0 unused), and the breaking rule (``bonds.breaking``)."""
+    tables = (np.array([np.nan] + [getattr(c, k) for c in coefficients]) for k in ("fr_c", "fs_c", "tb_c", "tt_c"))
+    return Strengths(*tables, rule, index=data.bond_types)
 
 
 def contacts_of(spec: BpmWorkflow, data) -> Contacts | None:
@@ -276,7 +276,7 @@ def _frames(net, data, res) -> list[fracture.Frame]:
         x = np.zeros((data.n_particles, 6)) if x is None else x
         return fracture.Snapshot(strain, data.positions + x[:, :3], data.diameters / 2,
                                  _broken_per_particle(net, alive),
-                                 particle_stress(net.part(alive), x[:, :3], x[:, 3:], volumes),
+                                 particle_stress(net, x[:, :3], x[:, 3:], volumes, alive),
                                  id=np.arange(1, data.n_particles + 1), type=data.types)
 
     p, last = res.peak, res.events[-1]

@@ -31,7 +31,7 @@ from __future__ import annotations
 import math
 import resource
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -611,7 +611,17 @@ def _prepare_block_amg(net, free, positions, threads=1):
     return solve, net.matvec
 
 
-def block_amg_preconditioner(net: BondNetwork, free: np.ndarray, positions: np.ndarray, threads: int = 1):
+def intact(net: BondNetwork, alive: np.ndarray | None) -> BondNetwork:
+    """``net`` with the bonds ``alive`` holds false at zero stiffness (a copy of its coefficients where any is;
+    ``net`` itself where none is, or ``alive`` is None)."""
+    if alive is None or alive.all():
+        return net
+    return replace(net, a_r=net.a_r * alive, a_s=net.a_s * alive, bend=net.bend * alive,
+                               twist=net.twist * alive)
+
+
+def block_amg_preconditioner(net: BondNetwork, free: np.ndarray, positions: np.ndarray, threads: int = 1,
+                             alive: np.ndarray | None = None):
     """v -> z: a symmetric block Gauss-Seidel sweep over the rotations, the translations and the rotations again,
     zero on prescribed dofs: the rotations by 3 x 3 block Jacobi (D_tt), the translations by one V-cycle of
     smoothed-aggregation AMG on K_uu (assembled as 3 x 3 blocks in float32, translations and rigid rotations as
@@ -625,26 +635,29 @@ def block_amg_preconditioner(net: BondNetwork, free: np.ndarray, positions: np.n
     needs, for a symmetric V(.)).  The two products cost two bond passes a call; against V-cycle and block
     Jacobi side by side (the translation-rotation coupling left out): d = 30 nm static solve 65 -> 38
     iterations, the same time on one thread; the quasi-static re-solves there (paper's rule, 105 events)
-    904 -> 464 iterations, events 195 -> 175 s."""
+    904 -> 464 iterations, events 195 -> 175 s.  ``alive`` (M,) bool: the bonds intact, read at every call (the
+    quasi-static re-solves break bonds in it; the V-cycle and the diagonal stay those of the network at the
+    start)."""
     n = net.n_particles
     mask = free.reshape(n, 6)
-    Kuu = block_matrix(net, mask[:, :3], part="translation", dtype=np.float32)[0]
+    start = intact(net, alive)
+    Kuu = block_matrix(start, mask[:, :3], part="translation", dtype=np.float32)[0]
     Kuu.sum_duplicates()
     B = rigid_body_modes(positions).reshape(n, 6, 6)[:, :3, :].reshape(3 * n, 6).astype(Kuu.dtype)
     vcycle = amg_preconditioner(Kuu, B, threads)
-    inv_rot = _jacobi_inverse(rotation_diagonal(net), mask[:, 3:].ravel())
+    inv_rot = _jacobi_inverse(rotation_diagonal(start), mask[:, 3:].ravel())
     maskf = free.astype(float).reshape(n, 6)
 
-    def K(z: np.ndarray) -> np.ndarray:
-        return net.matvec(z.ravel(), threads).reshape(n, 6)
+    def K(z: np.ndarray, block: str) -> np.ndarray:
+        return net.matvec(z.ravel(), threads, alive, block).reshape(n, 6)
 
     def precondition(r):
         r = np.asarray(r).reshape(n, 6)
         z = np.zeros((n, 6))
         z[:, 3:] = np.einsum("nij,nj->ni", inv_rot, r[:, 3:])
         z *= maskf
-        z[:, :3] = vcycle((r[:, :3] - K(z)[:, :3]).ravel().astype(Kuu.dtype)).reshape(n, 3)
+        z[:, :3] = vcycle((r[:, :3] - K(z, "ut")[:, :3]).ravel().astype(np.float32)).reshape(n, 3)
         z *= maskf
-        z[:, 3:] += np.einsum("nij,nj->ni", inv_rot, r[:, 3:] - K(z)[:, 3:])
+        z[:, 3:] += np.einsum("nij,nj->ni", inv_rot, r[:, 3:] - K(z, "t")[:, 3:])
         return (maskf * z).ravel()
     return precondition

@@ -53,6 +53,13 @@ ENERGY_CHUNK = 1 << 20
 PARTS_MIN_BONDS = 100_000
 #: an empty (0, 3) array: no per-bond stretch, no per-bond forces kept (the kernel's "none")
 _NO_ROWS = np.zeros((0, 3))
+#: an empty bool array: every bond counts (the kernel's "no mask")
+_NO_MASK = np.zeros(0, bool)
+#: the parts of K x that :meth:`BondNetwork.matvec` forms: all of it; the translations' rows from the rotations
+#: alone (K_ut theta: the first product of the block Gauss-Seidel preconditioner,
+#: opalflow.bpm.static.block_amg_preconditioner); the rotations' rows (K_tu u + K_tt theta: its second).  A part
+#: skips the work of the rest (the paper's 17.5 M bonds: bench/results/paper_scale.json, ``kernels``)
+BLOCKS = {"all": 0, "ut": 1, "t": 2}
 
 
 def bond_force(xp, n, L, a_r, a_s, du, st):
@@ -142,15 +149,22 @@ class BondNetwork:
         out = self._loads(np.hstack([u, theta]), _NO_ROWS if stretch is None else stretch)
         return -out[:, :3], -out[:, 3:]
 
-    def matvec(self, x: np.ndarray, threads: int = 1) -> np.ndarray:
+    def matvec(self, x: np.ndarray, threads: int = 1, alive: np.ndarray | None = None,
+               block: str = "all") -> np.ndarray:
         """The matrix times x = (u_1, theta_1, u_2, theta_2, ...) (6 per particle), over ``threads`` shares of the
-        bonds at once above :data:`PARTS_MIN_BONDS` (:meth:`_loads`)."""
-        return self._loads(np.reshape(x, (self.n_particles, 6)), _NO_ROWS, threads=threads).ravel()
+        bonds at once above :data:`PARTS_MIN_BONDS` (:meth:`_loads`); ``alive`` (M,) bool: the bonds it holds
+        false left out (broken: the quasi-static re-solves keep no copy of the network with them zeroed);
+        ``block`` (:data:`BLOCKS`): all of K x, or the rows of one block of K alone (the rest of the result 0)."""
+        return self._loads(np.reshape(x, (self.n_particles, 6)), _NO_ROWS, threads=threads,
+                           alive=_NO_MASK if alive is None else alive, block=BLOCKS[block]).ravel()
 
-    def _loads(self, x: np.ndarray, stretch: np.ndarray, force: np.ndarray = _NO_ROWS, threads: int = 1) -> np.ndarray:
-        """K x (N, 6) for x (N, 6) through :func:`_bond_loads` (each bond's F into ``force`` where it has rows).
-        With ``threads`` > 1 (and :data:`PARTS_MIN_BONDS` bonds) each thread takes a contiguous share of the
-        bonds into a sum of its own, added in share order (the same threads, the same digits)."""
+    def _loads(self, x: np.ndarray, stretch: np.ndarray, force: np.ndarray = _NO_ROWS, threads: int = 1,
+               alive: np.ndarray | None = None, block: int = 0) -> np.ndarray:
+        """K x (N, 6) for x (N, 6) through :func:`_bond_loads` (each bond's F into ``force`` where it has rows;
+        the bonds ``alive`` holds false, where it has rows, left out; ``block`` a value of :data:`BLOCKS`).  With
+        ``threads`` > 1 (and :data:`PARTS_MIN_BONDS` bonds) each thread takes a contiguous share of the bonds into
+        a sum of its own, added in share order (the same threads, the same digits)."""
+        alive = _NO_MASK if alive is None else alive
         n, m = self.n_particles, len(self.L)
         parts = threads if m >= PARTS_MIN_BONDS else 1
         x, stretch = np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(stretch, dtype=float)
@@ -161,7 +175,7 @@ class BondNetwork:
             b = slice(at[k], at[k + 1])
             _bond_loads(self.i[b], self.j[b], self.n[b], self.L[b], self.a_r[b], self.a_s[b], self.bend[b],
                         self.twist[b], x, stretch[b] if len(stretch) else stretch, outs[k],
-                        force[b] if len(force) else force)
+                        force[b] if len(force) else force, alive[b] if len(alive) else alive, block)
         in_parts(share, parts)
         for more in outs[1:]:
             outs[0] += more
@@ -169,32 +183,41 @@ class BondNetwork:
 
 
 @njit(cache=True, nogil=True)
-def _bond_loads(i, j, n, L, a_r, a_s, bend, twist, x, stretch, out, force):
+def _bond_loads(i, j, n, L, a_r, a_s, bend, twist, x, stretch, out, force, alive, block):
     """out += K x, (N, 6): each bond's F and Ts of the module docstring (du plus ``stretch`` where it has
     rows) and B dtheta, f_i -= F, f_j += F, tau_i += Ts - B dtheta, tau_j += Ts + B dtheta, negated; F also
-    into ``force`` (M, 3) where it has rows.  One pass over the bonds (the matrix-free product of the static
-    and quasi-static solvers: ~10x numpy's and JAX's gathers and scatters on a CPU)."""
+    into ``force`` (M, 3) where it has rows; the bonds ``alive`` holds false skipped where it has rows; ``block``
+    (:data:`BLOCKS`) 1: the translations' rows from the rotations alone, 2: the rotations' rows alone.  One pass
+    over the bonds (the matrix-free product of the static and quasi-static solvers: ~10x numpy's and JAX's
+    gathers and scatters on a CPU)."""
     with_stretch = stretch.shape[0] > 0
     keep = force.shape[0] > 0
+    masked = alive.shape[0] > 0
     du, st, dt = np.empty(3), np.empty(3), np.empty(3)
     for b in range(len(L)):
+        if masked and not alive[b]:
+            continue
         p, q = i[b], j[b]
         nx, ny, nz = n[b, 0], n[b, 1], n[b, 2]
+        half = 0.5 * a_s[b] * L[b]
+        for k in range(3):
+            st[k] = x[p, 3 + k] + x[q, 3 + k]
+        ns0, ns1, ns2 = ny * st[2] - nz * st[1], nz * st[0] - nx * st[2], nx * st[1] - ny * st[0]    # n x st
+        if block == 1:                       # K_ut theta: the shear force of the rotations alone
+            out[p, 0] += half * ns0
+            out[p, 1] += half * ns1
+            out[p, 2] += half * ns2
+            out[q, 0] -= half * ns0
+            out[q, 1] -= half * ns1
+            out[q, 2] -= half * ns2
+            continue
         for k in range(3):
             du[k] = x[p, k] - x[q, k] + (stretch[b, k] if with_stretch else 0.0)
-            st[k] = x[p, 3 + k] + x[q, 3 + k]
             dt[k] = x[p, 3 + k] - x[q, 3 + k]
-        half = 0.5 * a_s[b] * L[b]
         n_du = nx * du[0] + ny * du[1] + nz * du[2]
         n_st = nx * st[0] + ny * st[1] + nz * st[2]
         n_dt = nx * dt[0] + ny * dt[1] + nz * dt[2]
-        c = (a_r[b] - a_s[b]) * n_du
-        # n x st and n x du
-        ns0, ns1, ns2 = ny * st[2] - nz * st[1], nz * st[0] - nx * st[2], nx * st[1] - ny * st[0]
-        nd0, nd1, nd2 = ny * du[2] - nz * du[1], nz * du[0] - nx * du[2], nx * du[1] - ny * du[0]
-        F0 = c * nx + a_s[b] * du[0] + half * ns0
-        F1 = c * ny + a_s[b] * du[1] + half * ns1
-        F2 = c * nz + a_s[b] * du[2] + half * ns2
+        nd0, nd1, nd2 = ny * du[2] - nz * du[1], nz * du[0] - nx * du[2], nx * du[1] - ny * du[0]    # n x du
         h2 = 0.5 * half * L[b]
         T0 = half * nd0 - h2 * (st[0] - n_st * nx)
         T1 = half * nd1 - h2 * (st[1] - n_st * ny)
@@ -202,6 +225,18 @@ def _bond_loads(i, j, n, L, a_r, a_s, bend, twist, x, stretch, out, force):
         B0 = bend[b] * (dt[0] - n_dt * nx) + twist[b] * n_dt * nx
         B1 = bend[b] * (dt[1] - n_dt * ny) + twist[b] * n_dt * ny
         B2 = bend[b] * (dt[2] - n_dt * nz) + twist[b] * n_dt * nz
+        out[p, 3] -= T0 - B0
+        out[p, 4] -= T1 - B1
+        out[p, 5] -= T2 - B2
+        out[q, 3] -= T0 + B0
+        out[q, 4] -= T1 + B1
+        out[q, 5] -= T2 + B2
+        if block == 2:
+            continue
+        c = (a_r[b] - a_s[b]) * n_du
+        F0 = c * nx + a_s[b] * du[0] + half * ns0
+        F1 = c * ny + a_s[b] * du[1] + half * ns1
+        F2 = c * nz + a_s[b] * du[2] + half * ns2
         if keep:
             force[b, 0], force[b, 1], force[b, 2] = F0, F1, F2
         out[p, 0] += F0
@@ -210,12 +245,6 @@ def _bond_loads(i, j, n, L, a_r, a_s, bend, twist, x, stretch, out, force):
         out[q, 0] -= F0
         out[q, 1] -= F1
         out[q, 2] -= F2
-        out[p, 3] -= T0 - B0
-        out[p, 4] -= T1 - B1
-        out[p, 5] -= T2 - B2
-        out[q, 3] -= T0 + B0
-        out[q, 4] -= T1 + B1
-        out[q, 5] -= T2 + B2
 
 
 def _geometry(s: Structure, L0: np.ndarray | None):

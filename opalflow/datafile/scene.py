@@ -103,4 +103,4 @@ def read_scene(spec: DatafileWorkflow, progress=None) -> Structure:
     return s
 
 
-SCENE = Scene(build=read_scene, cached=False)     # reading the file is the build
+SCENE = Scene(build=read_scene, cached=False, ordered=False)     # reading the file is the build; its ids kept

@@ -48,17 +48,20 @@ def solver_threads(solver: str) -> int:
 _POOL: dict = {}
 
 
-def in_parts(work, parts: int) -> None:
-    """``work(k)`` for k = 0 .. ``parts`` - 1, at once on a pool of threads where ``parts`` > 1.  For numba kernels
-    that release the GIL (``nogil``), each on its own part of the data: the bond operator over its share of
-    the bonds, the V-cycle's products over their share of the rows (:mod:`opalflow.bpm.stiffness`,
-    :mod:`opalflow.linalg.multigrid`).  The caller chooses ``parts``: :func:`kernel_threads`."""
-    if parts <= 1:
-        work(0)
+def in_parts(work, parts: int, threads: int | None = None) -> None:
+    """``work(k)`` for k = 0 .. ``parts`` - 1, on ``threads`` threads at once (default: one a part) where both are
+    > 1, each thread taking parts in turn.  For numba kernels that release the GIL (``nogil``), each on its own
+    part of the data: the bond operator over its share of the bonds, the V-cycle's products and sweeps over their
+    share of the rows (:mod:`opalflow.bpm.stiffness`, :mod:`opalflow.linalg.multigrid`).  The caller chooses
+    ``parts`` and ``threads``: :func:`kernel_threads`."""
+    threads = parts if threads is None else min(threads, parts)
+    if threads <= 1:
+        for k in range(parts):
+            work(k)
         return
     from concurrent.futures import ThreadPoolExecutor
 
-    pool = _POOL.get(parts) or _POOL.setdefault(parts, ThreadPoolExecutor(parts, thread_name_prefix="opalflow"))
+    pool = _POOL.get(threads) or _POOL.setdefault(threads, ThreadPoolExecutor(threads, thread_name_prefix="opalflow"))
     for done in [pool.submit(work, k) for k in range(parts)]:
         done.result()
 

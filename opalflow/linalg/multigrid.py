@@ -11,6 +11,7 @@ import functools
 import numpy as np
 
 from opalflow.jit import njit
+from opalflow.linalg.direct import in_parts
 
 
 def amg_preconditioner(K, B, threads: int = 1):
@@ -24,36 +25,46 @@ def amg_preconditioner(K, B, threads: int = 1):
     9.0 -> 7.4 s).  pyamg starts its spectral-radius estimates from numpy's global random generator: it is
     seeded here (and restored after), so the same matrix gives the same hierarchy, and the same solve to
     the last digit, in any process (a local pool, a Dask worker, a SLURM task).  The sweeps are
-    :func:`v_cycle`'s own (pyamg sets up no smoother).  Returns b -> the V-cycle's approximation of K^-1 b
-    (its residuals on ``threads`` threads: :func:`residual`)."""
+    :func:`v_cycle`'s own (pyamg sets up no smoother).  Returns b -> the V-cycle's approximation of K^-1 b (its
+    kernels on ``threads`` threads)."""
+    return v_cycle(hierarchy(K, B), threads)
+
+
+def hierarchy(K, B):
+    """pyamg's smoothed-aggregation hierarchy of ``K`` with near-null space ``B``, as :func:`amg_preconditioner`
+    sets it up (no smoothers: :func:`v_cycle` brings its own)."""
     import pyamg
 
     state = np.random.get_state()
     np.random.seed(20240901)
     try:
-        ml = pyamg.smoothed_aggregation_solver(K, B=B, strength=("symmetric", {"theta": 0.0}), max_coarse=500,
-                                               smooth=("jacobi", {"omega": 4.0 / 3.0, "weighting": "local"}),
-                                               improve_candidates=None, presmoother=None, postsmoother=None)
-        return v_cycle(ml, threads)
+        return pyamg.smoothed_aggregation_solver(K, B=B, strength=("symmetric", {"theta": 0.0}), max_coarse=500,
+                                                 smooth=("jacobi", {"omega": 4.0 / 3.0, "weighting": "local"}),
+                                                 improve_candidates=None, presmoother=None, postsmoother=None)
     finally:
         np.random.set_state(state)
 
+
 def v_cycle(ml, threads: int = 1):
-    """b -> one V-cycle from x = 0 on pyamg's hierarchy ``ml`` (as MultilevelSolver.__solve: R, P and its
-    coarse solver), a forward block Gauss-Seidel sweep (:func:`gauss_seidel`) before the coarse correction and
-    a backward one after, run as a forward sweep over a copy of the level's matrix with its rows and columns
-    reversed (:func:`smoothers`: this CPU reads memory in descending order 2.4x slower; the copy doubles
-    the hierarchy's memory).  pyamg's own preconditioner (``aspreconditioner``) also forms the fine-level
-    residual before the cycle and after it, two products with the finest matrix that a preconditioner does
-    not need, and its block Gauss-Seidel loops over a block size it learns at run time.  Measured: block-amg's
+    """b -> one V-cycle from x = 0 on pyamg's hierarchy ``ml`` (as MultilevelSolver.__solve: P, its transpose and
+    the coarse solver), a forward block Gauss-Seidel sweep (:func:`smoothers`) before the coarse correction and a
+    backward one after.  pyamg's own preconditioner (``aspreconditioner``) also forms the fine-level residual
+    before the cycle and after it, two products with the finest matrix that a preconditioner does not need,
+    and its block Gauss-Seidel loops over a block size it learns at run time.  Measured: block-amg's
     preconditioner 41 -> 27 ms a call at 140 k dofs (own sweeps in single precision); amg's at the paper's
     sample at d = 45 nm (310 k dofs), the first 40 quasi-static events, 124 -> 65 ms a call for the same
-    405 CG iterations (pyamg's sweeps 115 ms forward and 210 backward a sweep at d = 30 nm, these 70 and 70).
-    Each level's residual b - A x is :func:`residual`'s, on ``threads`` threads."""
+    405 CG iterations.  Each level's residual b - A x (:func:`residual`), its sweeps and its transfers
+    (:func:`transfers`) run on ``threads`` threads; pyamg's restriction R, a copy of P^T, is dropped (P^T is
+    applied from P: the paper's sample, 0.45 GiB).  The paper's sample's V-cycle (4 levels, 4.9 M unknowns on
+    the finest) on two threads: 1 254 -> 699 ms a call (the sweeps above; its transfers 177 + 147 ms by scipy's
+    products on one thread, 79 + 50 here)."""
     levels = ml.levels
     bsr = [lv.A if lv.A.format == "bsr" else lv.A.tobsr(blocksize=(1, 1)) for lv in levels[:-1]]
-    sweeps = [smoothers(A) for A in bsr]
+    sweeps = [smoothers(A, threads) for A in bsr]
     residuals = [residual(A, threads) for A in bsr]
+    moves = [transfers(lv.P if lv.P.format == "bsr" else lv.P.tobsr(), threads) for lv in levels[:-1]]
+    for lv in levels[:-1]:
+        lv.R = None
 
     def cycle(lvl: int, b: np.ndarray) -> np.ndarray:
         A = levels[lvl].A
@@ -61,68 +72,84 @@ def v_cycle(ml, threads: int = 1):
             return np.asarray(ml.coarse_solver(A, b), b.dtype).reshape(b.shape)
         x = np.zeros_like(b)
         sweeps[lvl][0](x, b)
-        x += levels[lvl].P @ cycle(lvl + 1, levels[lvl].R @ residuals[lvl](x, b))
+        down, up = moves[lvl]
+        x += up(cycle(lvl + 1, down(residuals[lvl](x, b))))
         sweeps[lvl][1](x, b)
         return x
 
     return lambda b: cycle(0, np.ascontiguousarray(b))
 
-def smoothers(A):
-    """(forward, backward) for a BSR matrix ``A``: (x, b) -> one block Gauss-Seidel sweep over A in place, rows
-    in order (:func:`gauss_seidel`) or reversed (the kernel compiled for reversed order run over
-    :func:`_reversed`: it reads x and b where they are, block n - 1 - k for the copy's k; flipping the two
-    vectors before the sweep and x after cost 6 of the paper's 106 s of solve)."""
+
+#: the sweeps of :func:`smoothers` and the products of :func:`transfers` split a matrix's block rows into this many
+#: contiguous shares from :data:`PARTS_MIN_ROWS` block rows (a fixed number: the same digits on any number of
+#: threads; each thread takes shares in turn)
+SWEEP_PARTS = 8
+
+
+def _shares(rows: int) -> np.ndarray:
+    """The bounds of :data:`SWEEP_PARTS` contiguous shares of ``rows`` block rows (one share below
+    :data:`PARTS_MIN_ROWS`)."""
+    return np.linspace(0, rows, (SWEEP_PARTS if rows >= PARTS_MIN_ROWS else 1) + 1).astype(np.int64)
+
+
+def smoothers(A, threads: int = 1):
+    """(forward, backward) for a BSR matrix ``A``: (x, b) -> one block Gauss-Seidel sweep over A in place
+    (:func:`gauss_seidel`), rows in order or reversed.  Above :data:`PARTS_MIN_ROWS` block rows the sweep is
+    hybrid (the parallel Gauss-Seidel of hypre's BoomerAMG; Baker, Falgout, Kolev and Yang, SIAM J. Sci.
+    Comput. 33:2864, 2011): each of :data:`SWEEP_PARTS` shares of the rows is swept on its own, the other
+    shares' unknowns taken as the sweep found them, so the shares run on ``threads`` threads at once and
+    give the same digits on any number; the backward sweep is the forward one's adjoint, as CG needs.  One
+    share is the sequential sweep (pyamg's block_gauss_seidel).  Measured at the paper's sample (K_uu in float32,
+    1.6 M block rows, 36.6 M blocks; bench/results/paper_scale.json): forward and backward 326 and 314 ms
+    sequential (the backward one over a reversed copy of the matrix, 1.2 GiB there, now gone), 189 and 132 ms
+    hybrid on two threads."""
     from pyamg.util.utils import get_block_diag
 
     bs = A.blocksize[0]
     D = get_block_diag(A, bs, inv_flag=True).astype(A.dtype)
-    rev = _reversed(A)
-    D_rev = np.ascontiguousarray(D[::-1])
-    sweep, sweep_reversed = gauss_seidel(bs), gauss_seidel(bs, reversed_order=True)
+    at = _shares(len(A.indptr) - 1)
+    parts = len(at) - 1
 
-    def forward(x: np.ndarray, b: np.ndarray) -> None:
-        sweep(A.indptr, A.indices, A.data, D, x, b)
+    def run(x: np.ndarray, b: np.ndarray, backward: bool) -> None:
+        old = x.copy() if parts > 1 else x
+        sweep = gauss_seidel(bs, backward)
+        in_parts(lambda k: sweep(A.indptr, A.indices, A.data, D, x, old, b, at[k], at[k + 1]), parts, threads)
 
-    def backward(x: np.ndarray, b: np.ndarray) -> None:
-        sweep_reversed(rev.indptr, rev.indices, rev.data, D_rev, x, b)
+    return (lambda x, b: run(x, b, False)), (lambda x, b: run(x, b, True))
 
-    return forward, backward
-
-def _reversed(A):
-    """A with its block rows and columns in reverse order (P A P, P the block reversal): a backward sweep over A
-    is a forward one over it, which this CPU runs 2.4x faster (memory read in descending order)."""
-    import scipy.sparse as sp
-
-    n = A.shape[0] // A.blocksize[0]
-    counts = np.diff(A.indptr)[::-1]
-    indptr = np.concatenate([[0], np.cumsum(counts)]).astype(A.indptr.dtype)
-    # (every stored block in reverse order: the rows reversed, and within each row the columns)
-    return sp.bsr_matrix((np.ascontiguousarray(A.data[::-1]), (n - 1 - A.indices[::-1]).astype(A.indices.dtype),
-                          indptr), shape=A.shape)
 
 @functools.cache
-def gauss_seidel(bs: int, reversed_order: bool = False):
-    """One forward block Gauss-Seidel sweep over a BSR matrix of ``bs`` x ``bs`` blocks, compiled for that block
-    size (the loops over it unrolled: 6 x 6 blocks 70 ms a sweep at 3.8 M blocks where a block size known
-    only at run time takes 130 and pyamg's amg_core.block_gauss_seidel 110): ``sweep(indptr, indices, data,
-    Dinv, x, b)`` sets x_i = D_i^-1 (b_i - sum over j != i of A_ij x_j), rows in order.  ``reversed_order``:
-    the matrix is :func:`_reversed`'s copy of the one x and b belong to, its block k is their block n - 1 - k
-    (a backward sweep over the original)."""
+def gauss_seidel(bs: int, backward: bool = False):
+    """One block Gauss-Seidel sweep over block rows ``first`` .. ``last`` - 1 of a BSR matrix of ``bs`` x ``bs``
+    blocks, compiled for that block size and direction (the loops over the block unrolled: 6 x 6 blocks 70 ms a
+    sweep at 3.8 M blocks where a block size known only at run time takes 130 and pyamg's
+    amg_core.block_gauss_seidel 110): ``sweep(indptr, indices, data, Dinv, x, old, b, first, last)`` sets
+    x_i = D_i^-1 (b_i - sum over j != i of A_ij x_j), rows in order (``backward``: in reverse, each row's blocks
+    too), x_j read from ``old`` outside the share (the hybrid sweep of :func:`smoothers`; ``old`` is ``x`` for
+    a whole sweep)."""
 
     @njit(cache=True, nogil=True)
-    def sweep(indptr, indices, data, Dinv, x, b):
-        last = len(indptr) - 2
+    def sweep(indptr, indices, data, Dinv, x, old, b, first, last):
         r = np.empty(bs, data.dtype)
-        for row in range(len(indptr) - 1):
-            at = (last - row if reversed_order else row) * bs
+        for k in range(last - first):
+            row = last - 1 - k if backward else first + k
+            at = row * bs
             for a in range(bs):
                 r[a] = b[at + a]
-            for jj in range(indptr[row], indptr[row + 1]):
+            lo, hi = indptr[row], indptr[row + 1]
+            for kk in range(hi - lo):
+                jj = hi - 1 - kk if backward else lo + kk
                 col = indices[jj]
-                if col != row:
-                    xat = (last - col if reversed_order else col) * bs
+                xat = col * bs
+                if first <= col < last:
+                    if col != row:
+                        for c in range(bs):
+                            xc = x[xat + c]
+                            for a in range(bs):
+                                r[a] -= data[jj, a, c] * xc
+                else:
                     for c in range(bs):
-                        xc = x[xat + c]
+                        xc = old[xat + c]
                         for a in range(bs):
                             r[a] -= data[jj, a, c] * xc
             for a in range(bs):
@@ -134,6 +161,64 @@ def gauss_seidel(bs: int, reversed_order: bool = False):
     return sweep
 
 
+def transfers(P, threads: int = 1):
+    """(r -> P^T r, e -> P e) for pyamg's prolongation ``P`` (BSR), both on ``threads`` threads
+    (:func:`_transfer_kernels`): P e by shares of P's block rows; P^T r by the same shares, each into a coarse
+    vector of its own, added in share order (the same digits on any number of threads)."""
+    br, bc = P.blocksize
+    rows, coarse = len(P.indptr) - 1, P.shape[1]
+    at = _shares(rows)
+    parts = len(at) - 1
+    forward, transposed = _transfer_kernels(br, bc)
+
+    def down(r: np.ndarray) -> np.ndarray:
+        outs = np.zeros((parts, coarse), r.dtype)
+        in_parts(lambda k: transposed(P.indptr, P.indices, P.data, r, outs[k], at[k], at[k + 1]), parts, threads)
+        return outs.sum(axis=0) if parts > 1 else outs[0]
+
+    def up(e: np.ndarray) -> np.ndarray:
+        out = np.empty(P.shape[0], e.dtype)
+        in_parts(lambda k: forward(P.indptr, P.indices, P.data, e, out, at[k], at[k + 1]), parts, threads)
+        return out
+
+    return down, up
+
+
+@functools.cache
+def _transfer_kernels(br: int, bc: int):
+    """(P e, P^T r) over block rows ``first`` .. ``last`` - 1 of a BSR matrix of ``br`` x ``bc`` blocks: the first
+    writes those rows of ``out``, the second adds their part of P^T r into ``out`` (the coarse vector)."""
+
+    @njit(cache=True, nogil=True)
+    def forward(indptr, indices, data, e, out, first, last):
+        acc = np.empty(br, out.dtype)
+        for row in range(first, last):
+            for a in range(br):
+                acc[a] = 0.0
+            for jj in range(indptr[row], indptr[row + 1]):
+                at = indices[jj] * bc
+                for c in range(bc):
+                    ec = e[at + c]
+                    for a in range(br):
+                        acc[a] += data[jj, a, c] * ec
+            for a in range(br):
+                out[row * br + a] = acc[a]
+
+    @njit(cache=True, nogil=True)
+    def transposed(indptr, indices, data, r, out, first, last):
+        for row in range(first, last):
+            at = row * br
+            for jj in range(indptr[row], indptr[row + 1]):
+                to = indices[jj] * bc
+                for c in range(bc):
+                    acc = 0.0
+                    for a in range(br):
+                        acc += data[jj, a, c] * r[at + a]
+                    out[to + c] += acc
+
+    return forward, transposed
+
+
 #: :func:`residual` runs on threads from this many block rows (the paper's sample's K_uu: 1.6 M)
 PARTS_MIN_ROWS = 20_000
 
@@ -142,8 +227,6 @@ def residual(A, threads: int = 1):
     """(x, b) -> b - A x for a BSR matrix ``A`` (:func:`_residual`: its block size compiled in), its block rows
     in ``threads`` contiguous shares at once (:func:`opalflow.linalg.direct.in_parts`; each row is one thread's,
     so any number of threads gives the same digits) from :data:`PARTS_MIN_ROWS` block rows."""
-    from opalflow.linalg.direct import in_parts
-
     rows = len(A.indptr) - 1
     parts = threads if rows >= PARTS_MIN_ROWS else 1
     at = np.linspace(0, rows, parts + 1).astype(np.int64)
