@@ -25,9 +25,9 @@ NOT_BUILT_FROM = ("name", "description", "compression", "contacts")
 #: the cache's size bound (GiB): the least recently used structures go first
 CACHE_MAX_GIB = float(os.environ.get("OPALFLOW_CACHE_MAX_GIB", "4"))
 #: a built structure of this many particles or more is put in cell order (:meth:`Scene.structure`): the bond
-#: operator's product over the paper's sample (1.6 M particles, 17.5 M bonds) 522 -> 277 ms on two threads, the
-#: V-cycle's sweeps alike (bench/results/paper_scale.json); smaller ones keep the builder's order, their particles'
-#: arrays (48 bytes a particle) within this CPU's 4 MiB L2 cache
+#: operator's product over the paper's sample (1.6 M particles, 17.5 M bonds) 260 -> 173 ms on two threads
+#: (bench/results/paper_scale.json ``kernels``; 522 -> 277 ms in a probe with another run beside it); smaller ones
+#: keep the builder's order, their particles' arrays (48 bytes a particle) within this CPU's 4 MiB L2 cache
 ORDER_MIN_PARTICLES = 80_000
 
 
