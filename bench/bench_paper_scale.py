@@ -10,7 +10,7 @@ time of a run goes.
 run (``OPALFLOW_CACHE=off``), one at a time on an otherwise idle machine: wall, peak memory (its rusage), the
 strength or E, the run's own phase timings (summary.json); medians against :data:`TARGETS`; ``--profile``: one run
 more of each command under ``py-spy`` (not timed: py-spy's sampling adds to its wall and hides its memory from
-/usr/bin/time), its profile kept as ``profile`` below does (label ``after_NAME``).
+/usr/bin/time), its profile sorted as ``profile`` sorts one (label ``after_NAME``).
 ``profile``: a ``py-spy record --idle --threads -f raw`` of one run (``py-spy`` is not a dependency: ``pip install
 py-spy``), the main thread's samples sorted into the phases of :data:`PHASES` (the first frame of the stack that
 names one), the kernel threads' samples beside them. ``kernels``: on the paper's sample (built here, no cache), the
@@ -118,7 +118,7 @@ def runs(names: list[str], repeat: int, profiles: dict | None = None) -> dict:
             print(name, k + 1, rows[-1], flush=True)
         med = {key: statistics.median(r[key] for r in rows) for key in ("wall_s", "peak_GiB")}
         (wall_goal, wall_must), (mem_goal, mem_must) = TARGETS[name]["wall_s"], TARGETS[name]["peak_GiB"]
-        out[name] = {"command": "python -m opalflow run " + " ".join(COMMANDS[name]).replace("--set", "--set"),
+        out[name] = {"command": "python -m opalflow run " + " ".join(COMMANDS[name]),
                      "runs": rows, "median_wall_s": med["wall_s"], "median_peak_GiB": med["peak_GiB"],
                      "targets": TARGETS[name],
                      "wall_goal_met": med["wall_s"] <= wall_goal, "wall_must_met": med["wall_s"] <= wall_must,
