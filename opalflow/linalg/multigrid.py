@@ -53,15 +53,14 @@ def v_cycle(ml, threads: int = 1):
     and its block Gauss-Seidel loops over a block size it learns at run time.  Measured: block-amg's
     preconditioner 41 -> 27 ms a call at 140 k dofs (own sweeps in single precision); amg's at the paper's
     sample at d = 45 nm (310 k dofs), the first 40 quasi-static events, 124 -> 65 ms a call for the same
-    405 CG iterations.  Each level's residual b - A x (:func:`residual`), its sweeps and its transfers
-    (:func:`transfers`) run on ``threads`` threads; pyamg's restriction R, a copy of P^T, is dropped (P^T is
-    applied from P: the paper's sample, 0.45 GiB).  The paper's sample's V-cycle (4 levels, 4.9 M unknowns on
+    405 CG iterations.  Each level's sweeps, the first with its residual (the matrix read once), and its
+    transfers (:func:`transfers`) run on ``threads`` threads; pyamg's restriction R, a copy of P^T, is dropped
+    (P^T is applied from P: the paper's sample, 0.45 GiB).  The paper's sample's V-cycle (4 levels, 4.9 M unknowns on
     the finest) on two threads: 1 254 -> 699 ms a call (the sweeps above; its transfers 177 + 147 ms by scipy's
     products on one thread, 79 + 50 here)."""
     levels = ml.levels
     bsr = [lv.A if lv.A.format == "bsr" else lv.A.tobsr(blocksize=(1, 1)) for lv in levels[:-1]]
     sweeps = [smoothers(A, threads) for A in bsr]
-    residuals = [residual(A, threads) for A in bsr]
     moves = [transfers(lv.P if lv.P.format == "bsr" else lv.P.tobsr(), threads) for lv in levels[:-1]]
     for lv in levels[:-1]:
         lv.R = None
@@ -70,17 +69,19 @@ def v_cycle(ml, threads: int = 1):
         A = levels[lvl].A
         if lvl == len(levels) - 1:
             return np.asarray(ml.coarse_solver(A, b), b.dtype).reshape(b.shape)
-        x = np.zeros_like(b)
-        sweeps[lvl][0](x, b)
+        x, r = sweeps[lvl][0](b)
         down, up = moves[lvl]
-        x += up(cycle(lvl + 1, down(residuals[lvl](x, b))))
+        x += up(cycle(lvl + 1, down(r)))
         sweeps[lvl][1](x, b)
         return x
 
     return lambda b: cycle(0, np.ascontiguousarray(b))
 
 
-#: the sweeps of :func:`smoothers` and the products of :func:`transfers` split a matrix's block rows into this many
+#: the sweeps of :func:`smoothers` and the products of :func:`transfers` run on threads
+#: from this many block rows (the paper's sample's K_uu: 1.6 M) ...
+PARTS_MIN_ROWS = 20_000
+#: ... and split a matrix's block rows into this many
 #: contiguous shares from :data:`PARTS_MIN_ROWS` block rows (a fixed number: the same digits on any number of
 #: threads; each thread takes shares in turn)
 SWEEP_PARTS = 8
@@ -93,52 +94,103 @@ def _shares(rows: int) -> np.ndarray:
 
 
 def smoothers(A, threads: int = 1):
-    """(forward, backward) for a BSR matrix ``A``: (x, b) -> one block Gauss-Seidel sweep over A in place
-    (:func:`gauss_seidel`), rows in order or reversed.  Above :data:`PARTS_MIN_ROWS` block rows the sweep is
-    hybrid (the parallel Gauss-Seidel of hypre's BoomerAMG; Baker, Falgout, Kolev and Yang, SIAM J. Sci.
-    Comput. 33:2864, 2011): each of :data:`SWEEP_PARTS` shares of the rows is swept on its own, the other
-    shares' unknowns taken as the sweep found them, so the shares run on ``threads`` threads at once and
-    give the same digits on any number; the backward sweep is the forward one's adjoint, as CG needs.  One
-    share is the sequential sweep (pyamg's block_gauss_seidel).  Measured at the paper's sample (K_uu in float32,
-    1.6 M block rows, 36.6 M blocks; bench/results/paper_scale.json): forward and backward 326 and 314 ms
-    sequential (the backward one over a reversed copy of the matrix, 1.2 GiB there, now gone), 189 and 132 ms
-    hybrid on two threads."""
+    """(first, backward) for a BSR matrix ``A``: ``first`` b -> (x, b - A x), one forward block Gauss-Seidel sweep
+    from x = 0 and its residual, ``backward`` (x, b) -> one backward sweep over A in place, rows and each row's
+    blocks reversed (:func:`_sweeps`).  Above :data:`PARTS_MIN_ROWS` block rows a sweep is hybrid (the parallel
+    Gauss-Seidel of hypre's BoomerAMG; Baker, Falgout, Kolev and Yang, SIAM J. Sci. Comput. 33:2864, 2011):
+    each of :data:`SWEEP_PARTS` shares of the rows is swept on its own, the other shares' unknowns taken as the
+    sweep found them, so the shares run on ``threads`` threads at once and give the same digits on any number;
+    the backward sweep is the forward one's adjoint, as CG needs.  One share is the sequential sweep (pyamg's
+    block_gauss_seidel).  From x = 0 the forward sweep needs only each share's blocks left of the diagonal, and
+    since each row then solved its own equation with the blocks it used, b - A x is minus the other blocks times
+    x: the matrix read once for the V-cycle's pre-smoothing and its residual instead of twice (the residual
+    the same to the rounding).  Measured at the paper's sample (K_uu in float32, 1.6 M block rows, 36.6 M
+    blocks; bench/results/paper_scale.json): forward and backward 326 and 314 ms sequential (the backward one
+    over a reversed copy of the matrix, 1.2 GiB there, now gone), 189 and 132 ms hybrid on two threads; the
+    forward sweep and the residual 224 + 227 ms, one pass 160 ms."""
     from pyamg.util.utils import get_block_diag
 
     bs = A.blocksize[0]
     D = get_block_diag(A, bs, inv_flag=True).astype(A.dtype)
     at = _shares(len(A.indptr) - 1)
     parts = len(at) - 1
+    lower, rest, backward = _sweeps(bs)
+    matrix = A.indptr, A.indices, A.data
 
-    def run(x: np.ndarray, b: np.ndarray, backward: bool) -> None:
+    def first(b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        x, r = np.empty_like(b), np.empty_like(b)
+        in_parts(lambda k: lower(*matrix, D, x, b, at[k], at[k + 1]), parts, threads)
+        in_parts(lambda k: rest(*matrix, x, r, at[k], at[k + 1]), parts, threads)
+        return x, r
+
+    def back(x: np.ndarray, b: np.ndarray) -> None:
         old = x.copy() if parts > 1 else x
-        sweep = gauss_seidel(bs, backward)
-        in_parts(lambda k: sweep(A.indptr, A.indices, A.data, D, x, old, b, at[k], at[k + 1]), parts, threads)
+        in_parts(lambda k: backward(*matrix, D, x, old, b, at[k], at[k + 1]), parts, threads)
 
-    return (lambda x, b: run(x, b, False)), (lambda x, b: run(x, b, True))
+    return first, back
 
 
 @functools.cache
-def gauss_seidel(bs: int, backward: bool = False):
-    """One block Gauss-Seidel sweep over block rows ``first`` .. ``last`` - 1 of a BSR matrix of ``bs`` x ``bs``
-    blocks, compiled for that block size and direction (the loops over the block unrolled: 6 x 6 blocks 70 ms a
-    sweep at 3.8 M blocks where a block size known only at run time takes 130 and pyamg's
-    amg_core.block_gauss_seidel 110): ``sweep(indptr, indices, data, Dinv, x, old, b, first, last)`` sets
-    x_i = D_i^-1 (b_i - sum over j != i of A_ij x_j), rows in order (``backward``: in reverse, each row's blocks
-    too), x_j read from ``old`` outside the share (the hybrid sweep of :func:`smoothers`; ``old`` is ``x`` for
-    a whole sweep)."""
+def _sweeps(bs: int):
+    """The block Gauss-Seidel kernels of :func:`smoothers` over block rows ``first`` .. ``last`` - 1 of a BSR
+    matrix of ``bs`` x ``bs`` blocks, compiled for that block size (the loops over the block unrolled: 6 x 6
+    blocks 70 ms a sweep at 3.8 M blocks where a block size known only at run time takes 130 and pyamg's
+    amg_core.block_gauss_seidel 110), x_i = D_i^-1 (b_i - sum over j != i of A_ij x_j):
+    ``lower(indptr, indices, data, Dinv, x, b, first, last)`` the forward sweep from x = 0 (the share's blocks
+    left of the diagonal; x written), ``rest(indptr, indices, data, x, r, first, last)`` r = -(the blocks
+    ``lower`` left out) x, after every share's ``lower``, and ``backward(indptr, indices, data, Dinv, x, old, b,
+    first, last)`` the backward sweep from x, rows and blocks in reverse, x_j read from ``old`` outside the share
+    (``old`` is ``x`` for a whole sweep)."""
 
     @njit(cache=True, nogil=True)
-    def sweep(indptr, indices, data, Dinv, x, old, b, first, last):
+    def lower(indptr, indices, data, Dinv, x, b, first, last):
+        r = np.empty(bs, data.dtype)
+        for row in range(first, last):
+            at = row * bs
+            for a in range(bs):
+                r[a] = b[at + a]
+            for jj in range(indptr[row], indptr[row + 1]):
+                col = indices[jj]
+                if first <= col < row:
+                    xat = col * bs
+                    for c in range(bs):
+                        xc = x[xat + c]
+                        for a in range(bs):
+                            r[a] -= data[jj, a, c] * xc
+            for a in range(bs):
+                acc = 0.0
+                for c in range(bs):
+                    acc += Dinv[row, a, c] * r[c]
+                x[at + a] = acc
+
+    @njit(cache=True, nogil=True)
+    def rest(indptr, indices, data, x, r, first, last):
+        acc = np.empty(bs, data.dtype)
+        for row in range(first, last):
+            for a in range(bs):
+                acc[a] = 0.0
+            for jj in range(indptr[row], indptr[row + 1]):
+                col = indices[jj]
+                if col < first or col > row:
+                    xat = col * bs
+                    for c in range(bs):
+                        xc = x[xat + c]
+                        for a in range(bs):
+                            acc[a] -= data[jj, a, c] * xc
+            for a in range(bs):
+                r[row * bs + a] = acc[a]
+
+    @njit(cache=True, nogil=True)
+    def backward(indptr, indices, data, Dinv, x, old, b, first, last):
         r = np.empty(bs, data.dtype)
         for k in range(last - first):
-            row = last - 1 - k if backward else first + k
+            row = last - 1 - k
             at = row * bs
             for a in range(bs):
                 r[a] = b[at + a]
             lo, hi = indptr[row], indptr[row + 1]
             for kk in range(hi - lo):
-                jj = hi - 1 - kk if backward else lo + kk
+                jj = hi - 1 - kk
                 col = indices[jj]
                 xat = col * bs
                 if first <= col < last:
@@ -158,7 +210,7 @@ def gauss_seidel(bs: int, backward: bool = False):
                     acc += Dinv[row, a, c] * r[c]
                 x[at + a] = acc
 
-    return sweep
+    return lower, rest, backward
 
 
 def transfers(P, threads: int = 1):
@@ -217,47 +269,3 @@ def _transfer_kernels(br: int, bc: int):
                     out[to + c] += acc
 
     return forward, transposed
-
-
-#: :func:`residual` runs on threads from this many block rows (the paper's sample's K_uu: 1.6 M)
-PARTS_MIN_ROWS = 20_000
-
-
-def residual(A, threads: int = 1):
-    """(x, b) -> b - A x for a BSR matrix ``A`` (:func:`_residual`: its block size compiled in), its block rows
-    in ``threads`` contiguous shares at once (:func:`opalflow.linalg.direct.in_parts`; each row is one thread's,
-    so any number of threads gives the same digits) from :data:`PARTS_MIN_ROWS` block rows."""
-    rows = len(A.indptr) - 1
-    parts = threads if rows >= PARTS_MIN_ROWS else 1
-    at = np.linspace(0, rows, parts + 1).astype(np.int64)
-    kernel = _residual(A.blocksize[0])
-
-    def of(x: np.ndarray, b: np.ndarray) -> np.ndarray:
-        r = np.empty_like(b)
-        in_parts(lambda k: kernel(A.indptr, A.indices, A.data, x, b, r, at[k], at[k + 1]), parts)
-        return r
-    return of
-
-
-@functools.cache
-def _residual(bs: int):
-    """r = b - A x on block rows ``first`` .. ``last`` - 1 of a BSR matrix of ``bs`` x ``bs`` blocks (scipy's
-    ``b - A @ x``, in one pass and without its temporaries)."""
-
-    @njit(cache=True, nogil=True)
-    def kernel(indptr, indices, data, x, b, r, first, last):
-        acc = np.empty(bs, data.dtype)
-        for row in range(first, last):
-            at = row * bs
-            for a in range(bs):
-                acc[a] = b[at + a]
-            for jj in range(indptr[row], indptr[row + 1]):
-                xat = indices[jj] * bs
-                for c in range(bs):
-                    xc = x[xat + c]
-                    for a in range(bs):
-                        acc[a] -= data[jj, a, c] * xc
-            for a in range(bs):
-                r[at + a] = acc[a]
-
-    return kernel
