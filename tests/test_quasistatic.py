@@ -474,6 +474,25 @@ def test_local_step_keeps_the_internal_force_and_relaxes_its_patch():
 
 
 
+def test_the_loose_particles_are_those_of_the_connected_components():
+    """Adjacency.reached (the event loop's loose particles: no copy of the network) against the definition by the
+    connected components of the intact bonds (opalflow.bpm.static.loose_particles), with a cluster cut off."""
+    from opalflow.bpm.loading import LOADINGS
+    from opalflow.bpm.quasistatic import Adjacency
+    from opalflow.bpm.static import loose_particles
+    from tests.test_static import scene
+
+    spec, sample, net = scene("quickstart")
+    anchored = LOADINGS[spec.compression.loading].supports(sample).anchored
+    alive = np.ones(len(net.L), bool)
+    middle = np.median(sample.structure.positions[:, 2])
+    z = sample.structure.positions[:, 2]
+    alive[(z[net.i] < middle) != (z[net.j] < middle)] = False          # the upper half cut off
+    loose = ~Adjacency(net).reached(alive, anchored)
+    assert np.array_equal(loose, loose_particles(net.part(alive), anchored))
+    assert 0 < loose.sum() < net.n_particles and not loose[anchored].any()
+
+
 def test_a_search_round_the_broken_bonds_tells_whether_anything_came_loose():
     """Adjacency.still_joined, which spares the event loop the connected components of the whole network:
     true where every broken bond's ends still meet (the components unchanged), false where a particle lost its
