@@ -82,9 +82,9 @@ from opalflow.bpm.loading import Supports
 from opalflow.bpm.spec import BREAKING_RULES, RESOLVERS
 from opalflow.bpm.static import (DIRECT_MAX_DOFS, block_amg_preconditioner, block_matrix, bond_blocks, intact,
                                   particle_amg)
-from opalflow.bpm.stiffness import BondNetwork
+from opalflow.bpm.stiffness import PARTS_MIN_BONDS, BondNetwork
 from opalflow.jit import njit
-from opalflow.linalg.direct import Factor, kernel_threads
+from opalflow.linalg.direct import Factor, in_parts, kernel_threads
 from opalflow.linalg.krylov import Stop, pcg
 from opalflow.spec import InputError
 
@@ -166,12 +166,23 @@ def bond_checks(net: BondNetwork, x: np.ndarray, c: Strengths) -> np.ndarray:
 
 
 def _checks_of(net: BondNetwork, x: np.ndarray, c: Strengths, fold: int) -> np.ndarray:
-    """:func:`_bond_checks` for x (N, 6): every check (``fold`` 0), or one row, their sum (1) or their largest (2)."""
-    F = net.bond_forces(x[:, :3], x[:, 3:])
-    checks = np.empty((1 if fold else len(CHECKS[c.rule]), len(net.L)))
-    _bond_checks(net.i, net.j, net.n, net.bend, net.twist, F, np.ascontiguousarray(x[:, 3:]), c.fr_c, c.fs_c,
-                 c.tb_c, c.tt_c, np.zeros(0, np.int32) if c.index is None else c.index, _RULE_CODE[c.rule], fold,
-                 checks)
+    """:func:`_bond_checks` for x (N, 6): every check (``fold`` 0), or one row, their sum (1) or their largest (2);
+    the bond forces and the checks on the process's threads, each a share of the bonds (from
+    :data:`opalflow.bpm.stiffness.PARTS_MIN_BONDS`; each bond's checks its own: the same digits)."""
+    m = len(net.L)
+    threads = kernel_threads() if m >= PARTS_MIN_BONDS else 1
+    F = net.bond_forces(x[:, :3], x[:, 3:], threads=threads)
+    checks = np.empty((1 if fold else len(CHECKS[c.rule]), m))
+    theta = np.ascontiguousarray(x[:, 3:])
+    at = np.linspace(0, m, threads + 1).astype(np.int64)
+
+    def share(k: int) -> None:
+        b = slice(at[k], at[k + 1])
+        strengths = (c.fr_c, c.fs_c, c.tb_c, c.tt_c, c.index[b]) if c.index is not None else (
+            c.fr_c[b], c.fs_c[b], c.tb_c[b], c.tt_c[b], np.zeros(0, np.int32))
+        _bond_checks(net.i[b], net.j[b], net.n[b], net.bend[b], net.twist[b], F[b], theta, *strengths,
+                     _RULE_CODE[c.rule], fold, checks[:, b])
+    in_parts(share, threads)
     return checks
 
 
