@@ -239,7 +239,7 @@ def _v_cycle(net, loaded, positions, threads: int) -> dict:
     Kuu = block_matrix(net, loaded.free.reshape(n, 6)[:, :3], part="translation", dtype=np.float32)[0]
     Kuu.sum_duplicates()
     B = rigid_body_modes(positions).reshape(n, 6, 6)[:, :3, :].reshape(3 * n, 6).astype(np.float32)
-    ml = multigrid.hierarchy(Kuu, B)
+    ml = multigrid.hierarchy(Kuu, B, threads)
     b = np.random.default_rng(2).standard_normal(3 * n).astype(np.float32)
     first, backward = multigrid.smoothers(ml.levels[0].A, threads)
     x = first(b)[0]

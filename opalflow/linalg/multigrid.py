@@ -1,5 +1,5 @@
-"""Smoothed-aggregation algebraic multigrid as a preconditioner: pyamg's hierarchy, opalflow's own V-cycle and
-block Gauss-Seidel sweeps (numba, the block size compiled in).
+"""Smoothed-aggregation algebraic multigrid as a preconditioner: the hierarchy from pyamg's pieces with opalflow's
+own smoothing of the prolongation, V-cycle and block Gauss-Seidel sweeps (numba, the block size compiled in).
 
 Used by the static method's ``amg`` and ``block-amg`` solvers and the quasi-static method's AMG re-solves
 (:mod:`opalflow.bpm.static`, :mod:`opalflow.bpm.quasistatic`); it takes a BSR matrix and its near-null space.
@@ -15,34 +15,160 @@ from opalflow.linalg.direct import in_parts
 
 
 def amg_preconditioner(K, B, threads: int = 1):
-    """One V-cycle of the smoothed-aggregation AMG of ``K`` (BSR) with near-null space ``B`` (pyamg; Jacobi-smoothed
-    prolongation, omega 4/3 over a row-sum (Gershgorin) bound of the spectral radius instead of pyamg's
-    Lanczos estimate: at 1.1 M dofs block-amg's set-up 11.6 -> 10.1 s for 46 iterations instead of 45; the
-    rigid-body modes taken as they are: pyamg's default of improving them by four Gauss-Seidel sweeps each
+    """One V-cycle of the smoothed-aggregation AMG of ``K`` (BSR) with near-null space ``B`` (:func:`hierarchy`;
+    Jacobi-smoothed prolongation, omega 4/3 over a row-sum (Gershgorin) bound of the spectral radius instead of
+    pyamg's Lanczos estimate: at 1.1 M dofs block-amg's set-up 11.6 -> 10.1 s for 46 iterations instead of 45;
+    the rigid-body modes taken as they are: pyamg's default of improving them by four Gauss-Seidel sweeps each
     costs 40 % of the set-up and saves no iteration; one forward Gauss-Seidel sweep before and one
     backward after the coarse correction (a symmetric V-cycle, as CG needs) instead of two symmetric ones:
     10-40 % more iterations at half the cost each; measured at 140 k dofs, amg 5.3 -> 4.7 s, block-amg
-    9.0 -> 7.4 s).  pyamg starts its spectral-radius estimates from numpy's global random generator: it is
-    seeded here (and restored after), so the same matrix gives the same hierarchy, and the same solve to
-    the last digit, in any process (a local pool, a Dask worker, a SLURM task).  The sweeps are
-    :func:`v_cycle`'s own (pyamg sets up no smoother).  Returns b -> the V-cycle's approximation of K^-1 b (its
-    kernels on ``threads`` threads)."""
-    return v_cycle(hierarchy(K, B), threads)
+    9.0 -> 7.4 s).  The sweeps are :func:`v_cycle`'s own.  Returns b -> the V-cycle's approximation of K^-1 b
+    (its kernels on ``threads`` threads)."""
+    return v_cycle(hierarchy(K, B, threads), threads)
 
 
-def hierarchy(K, B):
-    """pyamg's smoothed-aggregation hierarchy of ``K`` with near-null space ``B``, as :func:`amg_preconditioner`
-    sets it up (no smoothers: :func:`v_cycle` brings its own)."""
-    import pyamg
+#: the hierarchy's levels at most, and its coarsest level's block rows at most (solved by pyamg's pseudo-inverse)
+MAX_LEVELS, MAX_COARSE = 10, 500
+#: the prolongation's Jacobi weight (over each row's Gershgorin bound)
+OMEGA = 4.0 / 3.0
 
-    state = np.random.get_state()
-    np.random.seed(20240901)
-    try:
-        return pyamg.smoothed_aggregation_solver(K, B=B, strength=("symmetric", {"theta": 0.0}), max_coarse=500,
-                                                 smooth=("jacobi", {"omega": 4.0 / 3.0, "weighting": "local"}),
-                                                 improve_candidates=None, presmoother=None, postsmoother=None)
-    finally:
-        np.random.set_state(state)
+
+def hierarchy(K, B, threads: int = 1):
+    """The smoothed-aggregation hierarchy of ``K`` (BSR) with near-null space ``B`` (N, k), as pyamg's
+    ``smoothed_aggregation_solver(K, B, strength=("symmetric", {"theta": 0.0}), max_coarse=500,
+    smooth=("jacobi", {"omega": 4/3, "weighting": "local"}), improve_candidates=None)`` builds it (Vanek, Mandel
+    and Brezina, Computing 56:179, 1996; pyamg's strength of connection, aggregation, tentative prolongator
+    and coarse solver), but for the prolongation: smoothed here (:func:`smoothed_prolongation`) without the
+    two scaled copies of the finest matrix that pyamg's ``jacobi_prolongation_smoother`` holds at once (the
+    paper's sample: 2.7 GiB, its set-up's peak), on ``threads`` threads; and no restriction R kept (the
+    V-cycle applies P^T from P).  A pyamg ``MultilevelSolver`` without smoothers (:func:`v_cycle` brings its
+    own).  The same matrix gives the same hierarchy to the last digit in any process (no random start)."""
+    from pyamg.aggregation.aggregate import standard_aggregation
+    from pyamg.aggregation.tentative import fit_candidates
+    from pyamg.multilevel import MultilevelSolver
+    from pyamg.strength import symmetric_strength_of_connection
+
+    levels = [MultilevelSolver.Level()]
+    levels[0].A, levels[0].B = K, np.asarray(B, K.dtype)
+    while len(levels) < MAX_LEVELS and levels[-1].A.shape[0] // levels[-1].A.blocksize[0] > MAX_COARSE:
+        A = levels[-1].A
+        aggregates = standard_aggregation(symmetric_strength_of_connection(A, theta=0.0))[0]
+        T, coarse_B = fit_candidates(aggregates, levels[-1].B)
+        del aggregates
+        P = smoothed_prolongation(A, T, threads)
+        del T
+        levels[-1].P = P
+        levels.append(MultilevelSolver.Level())
+        levels[-1].A = (P.T @ A @ P).tobsr(blocksize=(P.blocksize[1],) * 2)
+        levels[-1].B = coarse_B
+    return MultilevelSolver(levels)
+
+
+def smoothed_prolongation(A, T, threads: int = 1):
+    """P = T - omega D^-1 A T (Jacobi smoothing of the tentative prolongator T, BSR of bs x k blocks, one a row at
+    most), D the diagonal of each row's sum of |A_ij| (pyamg's ``jacobi_prolongation_smoother`` with
+    ``weighting="local"``, :data:`OMEGA`): each block row of P in one pass over the same row of A
+    (:func:`_prolongation_rows`), its columns the aggregates of the row's neighbours, sorted; computed in
+    double precision and stored in A's.  No copy of A (pyamg scales two: D^-1 A and omega D^-1 A)."""
+    import scipy.sparse as sp
+
+    bs, k = A.blocksize[0], T.blocksize[1]
+    rows, coarse = A.shape[0] // bs, T.shape[1] // k
+    at = _shares(rows)
+    parts = len(at) - 1
+    count, fill = _prolongation_rows(bs, k)
+    tags = np.full((parts, coarse), -1, np.int64)
+    sizes = np.zeros(rows, np.int64)
+    in_parts(lambda s: count(A.indptr, A.indices, T.indptr, T.indices, tags[s], sizes, at[s], at[s + 1]), parts,
+             threads)
+    indptr = np.zeros(rows + 1, np.int64)
+    np.cumsum(sizes, out=indptr[1:])
+    indices = np.empty(indptr[-1], A.indices.dtype)
+    data = np.empty((indptr[-1], bs, k), A.dtype)
+    tags[:] = -1
+    widest = int(sizes.max(initial=1))
+    in_parts(lambda s: fill(A.indptr, A.indices, A.data, T.indptr, T.indices, T.data, OMEGA, tags[s],
+                            np.empty((widest, bs, k)), indptr, indices, data, at[s], at[s + 1]), parts, threads)
+    return sp.bsr_matrix((data, indices, indptr.astype(A.indptr.dtype)), shape=(A.shape[0], T.shape[1]))
+
+
+@functools.cache
+def _prolongation_rows(bs: int, k: int):
+    """(count, fill) over block rows ``first`` .. ``last`` - 1 for :func:`smoothed_prolongation`, compiled for bs x
+    bs blocks of A and bs x k of T: ``count`` each row's aggregates (its own and its neighbours'), ``fill`` its
+    blocks; ``tag`` (coarse,) scratch of the share, -1 on entry and left so by ``fill`` (a row marks the
+    aggregates it has seen, -2 in ``fill``, then their slot in its row)."""
+
+    @njit(cache=True, nogil=True)
+    def count(Aptr, Aind, Tptr, Tind, tag, sizes, first, last):
+        for row in range(first, last):
+            n = 0
+            a = Tind[Tptr[row]] if Tptr[row + 1] > Tptr[row] else -1
+            if a >= 0:
+                tag[a] = row
+                n += 1
+            for jj in range(Aptr[row], Aptr[row + 1]):
+                j = Aind[jj]
+                a = Tind[Tptr[j]] if Tptr[j + 1] > Tptr[j] else -1
+                if a >= 0 and tag[a] != row:
+                    tag[a] = row
+                    n += 1
+            sizes[row] = n
+
+    @njit(cache=True, nogil=True)
+    def fill(Aptr, Aind, Adata, Tptr, Tind, Tdata, omega, tag, acc, Pptr, Pind, Pdata, first, last):
+        d = np.empty(bs)
+        for row in range(first, last):
+            start, n = Pptr[row], Pptr[row + 1] - Pptr[row]
+            m = 0
+            own = Tind[Tptr[row]] if Tptr[row + 1] > Tptr[row] else -1
+            if own >= 0:
+                tag[own] = -2
+                Pind[start] = own
+                m = 1
+            for jj in range(Aptr[row], Aptr[row + 1]):
+                j = Aind[jj]
+                a = Tind[Tptr[j]] if Tptr[j + 1] > Tptr[j] else -1
+                if a >= 0 and tag[a] == -1:
+                    tag[a] = -2
+                    Pind[start + m] = a
+                    m += 1
+            cols = Pind[start:start + n]
+            cols.sort()
+            for s in range(n):
+                tag[cols[s]] = s
+                for a in range(bs):
+                    for c in range(k):
+                        acc[s, a, c] = 0.0
+            for a in range(bs):
+                d[a] = 0.0
+            for jj in range(Aptr[row], Aptr[row + 1]):
+                for a in range(bs):
+                    for b in range(bs):
+                        d[a] += abs(Adata[jj, a, b])
+                j = Aind[jj]
+                if Tptr[j + 1] == Tptr[j]:
+                    continue
+                s, tb = tag[Tind[Tptr[j]]], Tptr[j]
+                for a in range(bs):
+                    for b in range(bs):
+                        ab = Adata[jj, a, b]
+                        for c in range(k):
+                            acc[s, a, c] += ab * Tdata[tb, b, c]
+            for a in range(bs):
+                w = -omega / d[a] if d[a] != 0.0 else 0.0
+                for s in range(n):
+                    for c in range(k):
+                        Pdata[start + s, a, c] = w * acc[s, a, c]
+            if own >= 0:
+                s, tb = tag[own], Tptr[row]
+                for a in range(bs):
+                    for c in range(k):
+                        Pdata[start + s, a, c] += Tdata[tb, a, c]
+            for s in range(n):
+                tag[cols[s]] = -1
+
+    return count, fill
 
 
 def v_cycle(ml, threads: int = 1):
