@@ -361,6 +361,12 @@ def test_hierarchy_is_pyamgs_without_its_copies(dtype, monkeypatch):
         assert abs(got - want).max() <= tol * abs(want).max()
     for a, b in zip(one.levels, two.levels):
         assert (a.A != b.A).nnz == 0
+    P = one.levels[0].P
+    whole = (P.T @ A @ P).tobsr(blocksize=(6, 6))
+    monkeypatch.setattr(multigrid, "SWEEP_PARTS", 5)           # (slabs: the rows in shares)
+    slabs = multigrid.galerkin(A, P)
+    assert slabs.blocksize == (6, 6) and slabs.has_canonical_format
+    assert abs(slabs - whole).max() <= tol * abs(whole).max()
 
 
 def test_transfers_are_p_and_its_transpose_on_any_number_of_threads(monkeypatch):
