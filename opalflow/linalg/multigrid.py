@@ -41,8 +41,9 @@ def hierarchy(K, B, threads: int = 1):
     and coarse solver), but for the prolongation: smoothed here (:func:`smoothed_prolongation`) without the
     two scaled copies of the finest matrix that pyamg's ``jacobi_prolongation_smoother`` holds at once (the
     paper's sample: 2.7 GiB, its set-up's peak), on ``threads`` threads, and the coarse matrix by slabs
-    (:func:`galerkin`); no restriction R kept (the V-cycle applies P^T from P).  A pyamg ``MultilevelSolver`` without smoothers (:func:`v_cycle` brings its
-    own).  The same matrix gives the same hierarchy to the last digit in any process (no random start)."""
+    (:func:`galerkin`); no restriction R kept (the V-cycle applies P^T from P).  A pyamg ``MultilevelSolver``
+    without smoothers (:func:`v_cycle` brings its own).  The same matrix gives the same hierarchy to the last
+    digit in any process (no random start)."""
     from pyamg.aggregation.aggregate import standard_aggregation
     from pyamg.aggregation.tentative import fit_candidates
     from pyamg.multilevel import MultilevelSolver
