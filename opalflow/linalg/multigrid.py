@@ -58,7 +58,7 @@ def hierarchy(K, B, threads: int = 1):
         del aggregates
         P = smoothed_prolongation(A, T, threads)
         del T
-        levels[-1].P = P
+        levels[-1].P, levels[-1].R = P, None         # (None: pyamg's solver would make R = P^T, a copy of P)
         levels.append(MultilevelSolver.Level())
         levels[-1].A = galerkin(A, P)
         levels[-1].B = coarse_B
@@ -195,24 +195,22 @@ def _prolongation_rows(bs: int, k: int):
 
 
 def v_cycle(ml, threads: int = 1):
-    """b -> one V-cycle from x = 0 on pyamg's hierarchy ``ml`` (as MultilevelSolver.__solve: P, its transpose and
-    the coarse solver), a forward block Gauss-Seidel sweep (:func:`smoothers`) before the coarse correction and a
+    """b -> one V-cycle from x = 0 on the hierarchy ``ml`` (:func:`hierarchy`, or any pyamg ``MultilevelSolver``;
+    as MultilevelSolver.__solve: P, its transpose and the coarse solver), a forward block Gauss-Seidel sweep (:func:`smoothers`) before the coarse correction and a
     backward one after.  pyamg's own preconditioner (``aspreconditioner``) also forms the fine-level residual
     before the cycle and after it, two products with the finest matrix that a preconditioner does not need,
     and its block Gauss-Seidel loops over a block size it learns at run time.  Measured: block-amg's
     preconditioner 41 -> 27 ms a call at 140 k dofs (own sweeps in single precision); amg's at the paper's
     sample at d = 45 nm (310 k dofs), the first 40 quasi-static events, 124 -> 65 ms a call for the same
     405 CG iterations.  Each level's sweeps, the first with its residual (the matrix read once), and its
-    transfers (:func:`transfers`) run on ``threads`` threads; pyamg's restriction R, a copy of P^T, is dropped
-    (P^T is applied from P: the paper's sample, 0.45 GiB).  The paper's sample's V-cycle (4 levels, 4.9 M unknowns on
-    the finest) on two threads: 1 254 -> 699 ms a call (the sweeps above; its transfers 177 + 147 ms by scipy's
+    transfers (:func:`transfers`) run on ``threads`` threads; P^T is applied from P (pyamg's restriction R, a copy
+    of P^T: the paper's sample, 0.45 GiB).  The paper's sample's V-cycle (4 levels, 4.9 M unknowns on the
+    finest) on two threads: 1 254 -> 699 ms a call (the sweeps above; its transfers 177 + 147 ms by scipy's
     products on one thread, 79 + 50 here)."""
     levels = ml.levels
     bsr = [lv.A if lv.A.format == "bsr" else lv.A.tobsr(blocksize=(1, 1)) for lv in levels[:-1]]
     sweeps = [smoothers(A, threads) for A in bsr]
     moves = [transfers(lv.P if lv.P.format == "bsr" else lv.P.tobsr(), threads) for lv in levels[:-1]]
-    for lv in levels[:-1]:
-        lv.R = None
 
     def cycle(lvl: int, b: np.ndarray) -> np.ndarray:
         A = levels[lvl].A
@@ -260,16 +258,18 @@ def smoothers(A, threads: int = 1):
     from pyamg.util.utils import get_block_diag
 
     bs = A.blocksize[0]
+    A.sort_indices()
     D = get_block_diag(A, bs, inv_flag=True).astype(A.dtype)
     at = _shares(len(A.indptr) - 1)
     parts = len(at) - 1
     lower, rest, backward = _sweeps(bs)
     matrix = A.indptr, A.indices, A.data
+    split = _diagonal_split(A.indptr, A.indices)
 
     def first(b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         x, r = np.empty_like(b), np.empty_like(b)
-        in_parts(lambda k: lower(*matrix, D, x, b, at[k], at[k + 1]), parts, threads)
-        in_parts(lambda k: rest(*matrix, x, r, at[k], at[k + 1]), parts, threads)
+        in_parts(lambda k: lower(*matrix, split, D, x, b, at[k], at[k + 1]), parts, threads)
+        in_parts(lambda k: rest(*matrix, split, x, r, at[k], at[k + 1]), parts, threads)
         return x, r
 
     def back(x: np.ndarray, b: np.ndarray) -> None:
@@ -279,33 +279,48 @@ def smoothers(A, threads: int = 1):
     return first, back
 
 
+@njit(cache=True)
+def _diagonal_split(indptr, indices):
+    """Each block row's first position whose column is not left of the diagonal (columns sorted)."""
+    rows = len(indptr) - 1
+    split = np.empty(rows, np.int64)
+    for row in range(rows):
+        jj = indptr[row]
+        while jj < indptr[row + 1] and indices[jj] < row:
+            jj += 1
+        split[row] = jj
+    return split
+
+
 @functools.cache
 def _sweeps(bs: int):
     """The block Gauss-Seidel kernels of :func:`smoothers` over block rows ``first`` .. ``last`` - 1 of a BSR
     matrix of ``bs`` x ``bs`` blocks, compiled for that block size (the loops over the block unrolled: 6 x 6
     blocks 70 ms a sweep at 3.8 M blocks where a block size known only at run time takes 130 and pyamg's
     amg_core.block_gauss_seidel 110), x_i = D_i^-1 (b_i - sum over j != i of A_ij x_j):
-    ``lower(indptr, indices, data, Dinv, x, b, first, last)`` the forward sweep from x = 0 (the share's blocks
-    left of the diagonal; x written), ``rest(indptr, indices, data, x, r, first, last)`` r = -(the blocks
-    ``lower`` left out) x, after every share's ``lower``, and ``backward(indptr, indices, data, Dinv, x, old, b,
-    first, last)`` the backward sweep from x, rows and blocks in reverse, x_j read from ``old`` outside the share
+    ``lower(indptr, indices, data, split, Dinv, x, b, first, last)`` the forward sweep from x = 0 (the share's
+    blocks left of the diagonal, up to ``split``: :func:`_diagonal_split`; x written), ``rest(indptr, indices,
+    data, split, x, r, first, last)`` r = -(the blocks ``lower`` left out) x, after every share's ``lower``
+    (each a loop over its own blocks, no test per block: columns sorted), and ``backward(indptr, indices, data,
+    Dinv, x, old, b, first, last)`` the backward sweep from x, rows and blocks in reverse, x_j read from ``old`` outside the share
     (``old`` is ``x`` for a whole sweep)."""
 
     @njit(cache=True, nogil=True)
-    def lower(indptr, indices, data, Dinv, x, b, first, last):
+    def lower(indptr, indices, data, split, Dinv, x, b, first, last):
         r = np.empty(bs, data.dtype)
         for row in range(first, last):
             at = row * bs
             for a in range(bs):
                 r[a] = b[at + a]
-            for jj in range(indptr[row], indptr[row + 1]):
-                col = indices[jj]
-                if first <= col < row:
-                    xat = col * bs
-                    for c in range(bs):
-                        xc = x[xat + c]
-                        for a in range(bs):
-                            r[a] -= data[jj, a, c] * xc
+            jj = indptr[row]
+            while jj < split[row] and indices[jj] < first:          # (columns sorted: the share's from here)
+                jj += 1
+            for jj in range(jj, split[row]):
+                xat = indices[jj] * bs
+                for c in range(bs):
+                    xc = x[xat + c]
+                    for a in range(bs):
+                        r[a] -= data[jj, a, c] * xc
             for a in range(bs):
                 acc = 0.0
                 for c in range(bs):
@@ -313,15 +328,19 @@ def _sweeps(bs: int):
                 x[at + a] = acc
 
     @njit(cache=True, nogil=True)
-    def rest(indptr, indices, data, x, r, first, last):
+    def rest(indptr, indices, data, split, x, r, first, last):
         acc = np.empty(bs, data.dtype)
         for row in range(first, last):
             for a in range(bs):
                 acc[a] = 0.0
-            for jj in range(indptr[row], indptr[row + 1]):
-                col = indices[jj]
-                if col < first or col > row:
-                    xat = col * bs
+            lo, hi, mid = indptr[row], indptr[row + 1], split[row]
+            stop = lo                                   # the blocks left of the share, then right of the diagonal
+            while stop < mid and indices[stop] < first:
+                stop += 1
+            start = mid + 1 if mid < hi and indices[mid] == row else mid
+            for part in range(2):
+                for jj in range(lo if part == 0 else start, stop if part == 0 else hi):
+                    xat = indices[jj] * bs
                     for c in range(bs):
                         xc = x[xat + c]
                         for a in range(bs):
