@@ -369,6 +369,33 @@ def test_hierarchy_is_pyamgs_without_its_copies(dtype, monkeypatch):
     assert abs(slabs - whole).max() <= tol * abs(whole).max()
 
 
+def test_fused_cg_vectors_are_numpys_expressions(monkeypatch):
+    """pcg's fused vector work (large numpy vectors: opalflow.linalg.krylov._Vectors, by shares on threads)
+    against its numpy expressions on a random SPD system with a Jacobi preconditioner: the same iterations and
+    solution to the rounding, one thread and two to the digit, the right-hand side left as it was."""
+    import scipy.sparse as sp
+
+    from opalflow.linalg import krylov
+
+    n = 3000
+    M = sp.random(n, n, density=0.002, random_state=3)
+    K = (M @ M.T + sp.identity(n)).tocsr()
+    b = np.random.default_rng(4).normal(size=n)
+    d = 1.0 / K.diagonal()
+
+    def solve(threads):
+        kept = b.copy()
+        x, its = krylov.pcg(lambda v: K @ v, lambda r: d * r, b, Stop(1e-10), lambda k, r: None, threads=threads)
+        assert np.array_equal(b, kept)
+        return x, its
+
+    plain = solve(1)
+    monkeypatch.setattr(krylov, "VECTOR_MIN", 100)
+    one, two = solve(1), solve(2)
+    assert one[1] == plain[1] > 10 and np.linalg.norm(one[0] - plain[0]) <= 1e-8 * np.linalg.norm(plain[0])
+    assert np.array_equal(one[0], two[0]) and np.linalg.norm(K @ one[0] - b) <= 1e-9 * np.linalg.norm(b)
+
+
 def test_transfers_are_p_and_its_transpose_on_any_number_of_threads(monkeypatch):
     """The V-cycle's P e and P^T r (pyamg's R dropped) against scipy's products, one thread and two alike."""
     import scipy.sparse as sp

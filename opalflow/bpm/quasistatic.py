@@ -425,7 +425,7 @@ class IterativeResolver:
             return x0, 0
         with threadpool_limits(limits=1):
             d, its = pcg(matvec, precondition, r0, Stop(self.rtol * scale / float(np.linalg.norm(r0))),
-                         lambda k, r: None)
+                         lambda k, r: None, threads=self.threads)
         return x0 + d, its
 
 

@@ -315,7 +315,7 @@ def _prepare_direct(net, free, positions, threads=1):
 def _prepare_amg(net, free, positions, threads=1):
     """K assembled (:func:`particle_amg`'s), one V-cycle of its AMG per CG iteration."""
     K, vcycle = particle_amg(net, free, positions, threads)
-    return (lambda b, stop, progress: pcg(lambda v: K @ v, vcycle, b, stop, progress)), net.matvec
+    return (lambda b, stop, progress: pcg(lambda v: K @ v, vcycle, b, stop, progress, threads=threads)), net.matvec
 
 
 def particle_amg(net: BondNetwork, free: np.ndarray, positions: np.ndarray, threads: int = 1):
@@ -588,7 +588,7 @@ def _prepare_cg(net, free, positions, threads=1, use_jax=False):
     precondition(probe)
 
     def solve(b, stop, progress):
-        x, iterations = pcg(matvec, precondition, array(b), stop, progress, dot=dot)
+        x, iterations = pcg(matvec, precondition, array(b), stop, progress, dot=dot, threads=threads)
         return np.asarray(x), iterations
     return solve, net.matvec
 
@@ -607,7 +607,7 @@ def _prepare_block_amg(net, free, positions, threads=1):
     precondition(np.zeros(free.size))
 
     def solve(b, stop, progress):
-        return pcg(matvec, precondition, np.asarray(b), stop, progress)
+        return pcg(matvec, precondition, np.asarray(b), stop, progress, threads=threads)
     return solve, net.matvec
 
 
