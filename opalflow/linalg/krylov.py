@@ -92,8 +92,8 @@ class _Vectors:
     expressions make two temporaries and read them back) and by :data:`VECTOR_SHARES` shares on ``threads``
     threads, the shares' partial sums added in order: x += alpha p and r -= alpha Ap with r . r in one pass
     (:meth:`step`), p = z + beta p in place (:meth:`direction`), dot products (:meth:`dot`).  Measured at the
-    paper's sample (9.7 M unknowns, two threads): ~180 ms of vector work an iteration by numpy's expressions
-    and BLAS's dot on one thread, ~40 ms fused."""
+    paper's sample (9.7 M unknowns, two threads; bench/results/paper_scale.json ``kernels``): an iteration's
+    vector work 123 ms by numpy's expressions and BLAS's dot on one thread, 39 ms fused."""
 
     def __init__(self, n: int, threads: int):
         self.at = np.linspace(0, n, VECTOR_SHARES + 1).astype(np.int64)

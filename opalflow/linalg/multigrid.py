@@ -205,8 +205,8 @@ def v_cycle(ml, threads: int = 1):
     405 CG iterations.  Each level's sweeps, the first with its residual (the matrix read once), and its
     transfers (:func:`transfers`) run on ``threads`` threads; P^T is applied from P (pyamg's restriction R, a copy
     of P^T: the paper's sample, 0.45 GiB).  The paper's sample's V-cycle (4 levels, 4.9 M unknowns on the
-    finest) on two threads: 1 254 -> 699 ms a call (the sweeps above; its transfers 177 + 147 ms by scipy's
-    products on one thread, 79 + 50 here)."""
+    finest) on two threads: 1 254 -> 592 ms a call (the sweeps above; its transfers 177 + 147 ms by scipy's
+    products on one thread, 93 + 61 here; bench/results/paper_scale.json ``kernels``)."""
     levels = ml.levels
     bsr = [lv.A if lv.A.format == "bsr" else lv.A.tobsr(blocksize=(1, 1)) for lv in levels[:-1]]
     sweeps = [smoothers(A, threads) for A in bsr]
@@ -254,7 +254,7 @@ def smoothers(A, threads: int = 1):
     the same to the rounding).  Measured at the paper's sample (K_uu in float32, 1.6 M block rows, 36.6 M
     blocks; bench/results/paper_scale.json): forward and backward 326 and 314 ms sequential (the backward one
     over a reversed copy of the matrix, 1.2 GiB there, now gone), 189 and 132 ms hybrid on two threads; the
-    forward sweep and the residual 224 + 227 ms, one pass 160 ms."""
+    forward sweep and the residual 224 + 227 ms, 215 ms in one pass."""
     from pyamg.util.utils import get_block_diag
 
     bs = A.blocksize[0]
