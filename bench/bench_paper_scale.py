@@ -15,7 +15,8 @@ more of each command under ``py-spy`` (not timed: py-spy's sampling adds to its 
 py-spy``), the main thread's samples sorted into the phases of :data:`PHASES` (the first frame of the stack that
 names one), the kernel threads' samples beside them. ``kernels``: on the paper's sample (built here, no cache), the
 bond operator's product (all of K x, also on the particles in the builder's order, and the preconditioner's two
-blocks), one preconditioner call, the V-cycle and its finest level's sweeps and transfers, each the best of three on
+blocks), one preconditioner call, CG's vector work of an iteration (numpy's expressions, the fused passes), the AMG
+hierarchy's set-up, the V-cycle and its finest level's sweeps and transfers, each the best of three on
 the process's threads; and this machine's memory bandwidth (numpy's copy of 1 GiB, a numba sum over it on one and
 two threads): the floor of a product is the bytes it must move (the bonds' arrays once, x read and the per-thread
 sums written) over the bandwidth. Results: bench/results/paper_scale.json (``runs``, ``profiles``, ``kernels``).
@@ -224,7 +225,34 @@ def kernels() -> dict:
     out["bandwidth"] = bandwidth()
     out["product_floor_ms"] = round(1e3 * moved / (out["bandwidth"]["read_2_threads_GB_s"] * 1e9), 1)
     out["product_over_floor"] = round(out["product_all_ms"] / out["product_floor_ms"], 1)
-    return {**out, **_v_cycle(net, loaded, sample.structure.positions, threads)}
+    return {**out, **_cg_vectors(x, threads), **_v_cycle(net, loaded, sample.structure.positions, threads)}
+
+
+def _cg_vectors(x, threads: int) -> dict:
+    """One CG iteration's vector work on vectors of the paper's sample: numpy's expressions and BLAS's dot (one
+    thread, as the solves run it) against the fused passes (opalflow.linalg.krylov._Vectors)."""
+    import numpy as np
+    from threadpoolctl import threadpool_limits
+
+    from opalflow.linalg.krylov import _Vectors
+
+    rng = np.random.default_rng(3)
+    xs, r, p, Ap, z = (rng.standard_normal(x.size) for _ in range(5))
+    fused = _Vectors(x.size, threads)
+
+    def plain():
+        a = np.dot(r, z) / np.dot(p, Ap)
+        x1, r1 = xs + a * p, r - a * Ap
+        return np.dot(r1, r1), np.dot(r1, z), z + 0.5 * p, x1
+
+    def joined():
+        a = fused.dot(r, z) / fused.dot(p, Ap)
+        fused.step(xs, r, p, Ap, a * 1e-12)            # (in place: kept near the start)
+        fused.dot(r, z)
+        fused.direction(p, z, 0.5)
+
+    with threadpool_limits(limits=1):
+        return {"cg_vectors_numpy_ms": round(1e3 * best(plain), 1), "cg_vectors_fused_ms": round(1e3 * best(joined), 1)}
 
 
 def _v_cycle(net, loaded, positions, threads: int) -> dict:
@@ -239,19 +267,19 @@ def _v_cycle(net, loaded, positions, threads: int) -> dict:
     Kuu = block_matrix(net, loaded.free.reshape(n, 6)[:, :3], part="translation", dtype=np.float32)[0]
     Kuu.sum_duplicates()
     B = rigid_body_modes(positions).reshape(n, 6, 6)[:, :3, :].reshape(3 * n, 6).astype(np.float32)
-    ml = multigrid.hierarchy(Kuu, B)
+    started = time.perf_counter()
+    ml = multigrid.hierarchy(Kuu, B, threads)
+    hierarchy_s = round(time.perf_counter() - started, 1)
     b = np.random.default_rng(2).standard_normal(3 * n).astype(np.float32)
-    x = np.zeros_like(b)
-    forward, backward = multigrid.smoothers(ml.levels[0].A, threads)
+    first, backward = multigrid.smoothers(ml.levels[0].A, threads)
+    x = first(b)[0]
     down, up = multigrid.transfers(ml.levels[0].P, threads)
-    residual = multigrid.residual(Kuu, threads)
     coarse = down(b)
     cycle = multigrid.v_cycle(ml, threads)
     with threadpool_limits(limits=1):
-        return {"levels": len(ml.levels), "finest_blocks": int(Kuu.nnz // 9),
-                "sweep_forward_ms": round(1e3 * best(lambda: forward(x, b)), 1),
+        return {"hierarchy_s": hierarchy_s, "levels": len(ml.levels), "finest_blocks": int(Kuu.nnz // 9),
+                "sweep_forward_and_residual_ms": round(1e3 * best(lambda: first(b)), 1),
                 "sweep_backward_ms": round(1e3 * best(lambda: backward(x, b)), 1),
-                "residual_ms": round(1e3 * best(lambda: residual(x, b)), 1),
                 "restriction_ms": round(1e3 * best(lambda: down(b)), 1),
                 "prolongation_ms": round(1e3 * best(lambda: up(coarse)), 1),
                 "v_cycle_ms": round(1e3 * best(lambda: cycle(b)), 1)}

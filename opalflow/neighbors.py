@@ -31,6 +31,17 @@ def pairs_within(x: np.ndarray, r: float, box: np.ndarray, periodic) -> np.ndarr
     return pairs[order]
 
 
+def neighbour_counts(x: np.ndarray, centres: np.ndarray, radii: np.ndarray, box: np.ndarray, periodic) -> np.ndarray:
+    """For each of ``radii``: the pairs (a particle of the ``centres`` mask, any other particle) closer than it,
+    counted by scipy's dual-tree ``count_neighbors`` (no list of pairs: g(r) of the paper's sample took 20 M
+    pairs, 1 GiB and ~10 s that way), the same wrapping as :func:`pairs_within`."""
+    periodic = np.asarray(periodic, dtype=bool)
+    size = np.where(periodic, box, 2 * (np.ptp(x, axis=0) + float(np.max(radii))) + 1.0)
+    y = np.where(periodic, np.mod(x, size), x - x.min(axis=0))
+    y = np.where(y >= size, y - size, y)
+    return kdtree(y[centres], boxsize=size).count_neighbors(kdtree(y, boxsize=size), radii, cumulative=True)
+
+
 def separations(x: np.ndarray, pairs: np.ndarray, box: np.ndarray, periodic) -> np.ndarray:
     """Minimum-image vectors x[j] - x[i] for each pair (i, j)."""
     d = x[pairs[:, 1]] - x[pairs[:, 0]]

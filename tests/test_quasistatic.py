@@ -153,6 +153,31 @@ def test_breaking_rules_weigh_the_bond_loads_as_written():
     assert bond_checks(net, x, Strengths(*c, "musen_crit2")).shape == (4, m)
 
 
+def test_breaking_indices_on_threads_are_the_same(monkeypatch):
+    """breaking_index with its bonds in two threads' shares (the paper's 17.5 M bonds), per-bond strengths and
+    strengths by type, each rule folded and unfolded: the same digits as on one thread."""
+    from opalflow.bpm import quasistatic, stiffness
+    from opalflow.bpm.quasistatic import CHECKS, Strengths, bond_checks, breaking_index
+    from tests.test_static import scene
+
+    _, _, net = scene("quickstart")
+    rng = np.random.default_rng(4)
+    x = rng.normal(scale=1e-2, size=(net.n_particles, 6))
+    m = len(net.L)
+    per_bond = [rng.uniform(0.5, 2.0, m) * k for k in (1e3, 1e3, 1e4, 1e4)]
+    index = rng.integers(0, 3, m).astype(np.int32)
+    tables = [rng.uniform(0.5, 2.0, 3) * k for k in (1e3, 1e3, 1e4, 1e4)]
+    cases = [Strengths(*per_bond, rule) for rule in CHECKS] + [Strengths(*tables, rule, index) for rule in CHECKS]
+    one = [(breaking_index(net, x, c), bond_checks(net, x, c)) for c in cases]
+    for module in (quasistatic, stiffness):
+        monkeypatch.setattr(module, "PARTS_MIN_BONDS", 1)
+    monkeypatch.setattr(stiffness, "NUMPY_MAX_BONDS", 1)
+    monkeypatch.setattr(quasistatic, "kernel_threads", lambda: 2)
+    for c, (index_one, checks_one) in zip(cases, one):
+        assert np.array_equal(breaking_index(net, x, c), index_one) and np.array_equal(bond_checks(net, x, c),
+                                                                                       checks_one), c.rule
+
+
 def test_contacts_press_in_compression_and_open_in_tension(tmp_path):
     """The simple-cubic lattice with its nearest-neighbour bonds left out (bonds.min_length_factor; the sqrt(2) a
     and sqrt(3) a bonds hold it) has touching unbonded neighbours.  Compressed under periodic sides (uniaxial
@@ -472,6 +497,25 @@ def test_local_step_keeps_the_internal_force_and_relaxes_its_patch():
     assert np.abs(force[patch & free]).max() < 1e-9 * np.abs(force).max()
     assert np.abs(force[~patch & free]).max() > 1e-3 * np.abs(force).max()      # (the rest untouched)
 
+
+
+def test_the_loose_particles_are_those_of_the_connected_components():
+    """Adjacency.reached (the event loop's loose particles: no copy of the network) against the definition by the
+    connected components of the intact bonds (opalflow.bpm.static.loose_particles), with a cluster cut off."""
+    from opalflow.bpm.loading import LOADINGS
+    from opalflow.bpm.quasistatic import Adjacency
+    from opalflow.bpm.static import loose_particles
+    from tests.test_static import scene
+
+    spec, sample, net = scene("quickstart")
+    anchored = LOADINGS[spec.compression.loading].supports(sample).anchored
+    alive = np.ones(len(net.L), bool)
+    middle = np.median(sample.structure.positions[:, 2])
+    z = sample.structure.positions[:, 2]
+    alive[(z[net.i] < middle) != (z[net.j] < middle)] = False          # the upper half cut off
+    loose = ~Adjacency(net).reached(alive, anchored)
+    assert np.array_equal(loose, loose_particles(net.part(alive), anchored))
+    assert 0 < loose.sum() < net.n_particles and not loose[anchored].any()
 
 
 def test_a_search_round_the_broken_bonds_tells_whether_anything_came_loose():

@@ -264,60 +264,44 @@ def test_jax_path_runs_on_the_default_device():
 
 @pytest.mark.parametrize("bs,dtype", [(1, np.float64), (3, np.float32), (6, np.float64)])
 def test_own_gauss_seidel_sweeps_are_pyamgs(bs, dtype):
-    """The V-cycle's forward and backward sweeps (one share of the rows: the sequential sweep) against pyamg's
-    block Gauss-Seidel (forward and backward) on a random block-sparse SPD matrix."""
-    import scipy.sparse as sp
+    """The V-cycle's sweeps (one share of the rows: the sequential sweep), forward from x = 0 and backward from
+    any x, against pyamg's block Gauss-Seidel on a random block-sparse SPD matrix; the forward sweep's residual
+    b - A x (the matrix read once: the blocks the sweep did not use) against scipy's product."""
     from pyamg.relaxation.relaxation import block_gauss_seidel
 
     from opalflow.linalg.multigrid import smoothers
 
     rng = np.random.default_rng(3)
     n = 40
-    M = sp.random(n * bs, n * bs, density=0.15, random_state=4)
-    A = (M @ M.T + 4 * sp.identity(n * bs)).tobsr(blocksize=(bs, bs)).astype(dtype)
+    A = _spd_bsr(n, bs, 4, 0.15).astype(dtype)
     b = rng.random(n * bs).astype(dtype)
-    for direction, sweep in zip(("forward", "backward"), smoothers(A)):
-        x0 = rng.random(n * bs).astype(dtype)
-        ref = x0.copy()
-        block_gauss_seidel(A, ref, b, iterations=1, sweep=direction, blocksize=bs)
-        x = x0.copy()
-        sweep(x, b)
-        tol = dict(rtol=1e-4, atol=1e-5) if dtype == np.float32 else dict(rtol=1e-12)
-        assert np.allclose(x, ref, **tol), direction
-        assert not np.allclose(x, x0)
+    first, backward = smoothers(A)
+    tol = dict(rtol=1e-4, atol=1e-5) if dtype == np.float32 else dict(rtol=1e-12, atol=1e-12)
+    x, r = first(b)
+    ref = np.zeros_like(b)
+    block_gauss_seidel(A, ref, b, iterations=1, sweep="forward", blocksize=bs)
+    assert np.allclose(x, ref, **tol) and np.allclose(r, b - A @ x, **tol) and r.dtype == dtype
+    assert np.abs(r).max() > 0.05 * np.abs(b).max()          # (not the zero of an exact solve)
+    x0 = rng.random(n * bs).astype(dtype)
+    ref, x = x0.copy(), x0.copy()
+    block_gauss_seidel(A, ref, b, iterations=1, sweep="backward", blocksize=bs)
+    backward(x, b)
+    assert np.allclose(x, ref, **tol) and not np.allclose(x, x0)
 
 
-@pytest.mark.parametrize("bs,dtype", [(1, np.float64), (3, np.float32), (6, np.float64)])
-def test_own_residual_is_scipys_on_any_number_of_threads(bs, dtype, monkeypatch):
-    """The V-cycle's residual b - A x (opalflow.linalg.multigrid.residual) against scipy's product, its block rows
-    in one share and in two threads' shares: each row is one thread's, so the digits are the same."""
+def _spd_bsr(n: int, bs: int, seed: int, density: float = 0.1):
     import scipy.sparse as sp
 
-    from opalflow.linalg import multigrid
-
-    monkeypatch.setattr(multigrid, "PARTS_MIN_ROWS", 1)
-    rng = np.random.default_rng(5)
-    n = 50
-    A = sp.random(n * bs, n * bs, density=0.2, random_state=6).tobsr(blocksize=(bs, bs)).astype(dtype)
-    x, b = rng.random(n * bs).astype(dtype), rng.random(n * bs).astype(dtype)
-    one, two = multigrid.residual(A, 1)(x, b), multigrid.residual(A, 2)(x, b)
-    tol = dict(rtol=1e-5, atol=1e-5) if dtype == np.float32 else dict(rtol=1e-12, atol=1e-12)
-    assert np.allclose(one, b - A @ x, **tol) and np.array_equal(one, two) and one.dtype == dtype
-
-
-def _spd_bsr(n: int, bs: int, seed: int):
-    import scipy.sparse as sp
-
-    M = sp.random(n * bs, n * bs, density=0.1, random_state=seed)
+    M = sp.random(n * bs, n * bs, density=density, random_state=seed)
     return (M @ M.T + 4 * sp.identity(n * bs)).tobsr(blocksize=(bs, bs))
 
 
 @pytest.mark.parametrize("bs", [3, 6])
 def test_hybrid_sweeps_are_each_shares_own_and_the_same_on_any_number_of_threads(bs, monkeypatch):
     """Above PARTS_MIN_ROWS a sweep is hybrid: each share of the rows is a sequential Gauss-Seidel sweep of its own
-    block of A, the other shares' unknowns as the sweep found them (moved to the right-hand side); one thread and
-    two give the same digits; and the V-cycle built on such sweeps stays symmetric (backward the adjoint of
-    forward), as CG needs."""
+    block of A, the other shares' unknowns as the sweep found them (moved to the right-hand side: zero for the
+    forward sweep from x = 0); one thread and two give the same digits, the forward sweep's residual too (b - A x
+    to the rounding, from the blocks the sweep did not use)."""
     from pyamg.relaxation.relaxation import block_gauss_seidel
 
     from opalflow.linalg import multigrid
@@ -330,18 +314,86 @@ def test_hybrid_sweeps_are_each_shares_own_and_the_same_on_any_number_of_threads
     b, x0 = rng.random(n * bs), rng.random(n * bs)
     at = multigrid._shares(n) * bs
     assert len(at) == 4
-    for k, direction in enumerate(("forward", "backward")):
-        one, two = x0.copy(), x0.copy()
-        multigrid.smoothers(A, 1)[k](one, b)
-        multigrid.smoothers(A, 2)[k](two, b)
-        assert np.array_equal(one, two) and not np.allclose(one, x0)
+    (one, r1), (two, r2) = multigrid.smoothers(A, 1)[0](b), multigrid.smoothers(A, 2)[0](b)
+    assert np.array_equal(one, two) and np.array_equal(r1, r2)
+    assert np.allclose(r1, b - A @ one, rtol=0, atol=1e-12) and np.abs(r1).max() > 0.05
+    back1, back2 = x0.copy(), x0.copy()
+    multigrid.smoothers(A, 1)[1](back1, b)
+    multigrid.smoothers(A, 2)[1](back2, b)
+    assert np.array_equal(back1, back2) and not np.allclose(back1, x0)
+    for x, start, direction in ((one, np.zeros_like(x0), "forward"), (back1, x0, "backward")):
         for lo, hi in zip(at[:-1], at[1:]):
             own = A.tocsr()[lo:hi, lo:hi].tobsr(blocksize=(bs, bs))
-            rest = x0.copy()
+            rest = start.copy()
             rest[lo:hi] = 0.0
-            ref = x0[lo:hi].copy()
+            ref = start[lo:hi].copy()
             block_gauss_seidel(own, ref, b[lo:hi] - (A @ rest)[lo:hi], iterations=1, sweep=direction, blocksize=bs)
-            assert np.allclose(one[lo:hi], ref, rtol=1e-12), (direction, lo)
+            assert np.allclose(x[lo:hi], ref, rtol=1e-12), (direction, lo)
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_hierarchy_is_pyamgs_without_its_copies(dtype, monkeypatch):
+    """The hierarchy (opalflow.linalg.multigrid.hierarchy: the prolongation smoothed in one pass over A, no
+    scaled copies of it) against pyamg's smoothed_aggregation_solver with the same options, on a 3D Laplacian
+    of 3 x 3 blocks with rigid-body modes: the finest P and the first coarse matrix to the rounding, as many
+    levels; one thread and two (hybrid shares) give the same digits.  (Deeper levels may aggregate otherwise:
+    pyamg's aggregation follows the order of a row's columns, which its products leave unsorted.)"""
+    import pyamg
+    import scipy.sparse as sp
+
+    from opalflow.bpm.static import rigid_body_modes
+    from opalflow.linalg import multigrid
+
+    monkeypatch.setattr(multigrid, "PARTS_MIN_ROWS", 1)
+    A = sp.kron(pyamg.gallery.poisson((14, 12, 10), format="csr"), np.eye(3) + 0.1).tobsr(blocksize=(3, 3))
+    A = A.astype(dtype)
+    grid = np.stack(np.meshgrid(np.arange(14), np.arange(12), np.arange(10), indexing="ij"), -1).reshape(-1, 3)
+    B = rigid_body_modes(grid.astype(float)).reshape(-1, 6, 6)[:, :3, :].reshape(-1, 6).astype(dtype)
+    ref = pyamg.smoothed_aggregation_solver(A, B=B, strength=("symmetric", {"theta": 0.0}), max_coarse=100,
+                                            smooth=("jacobi", {"omega": 4.0 / 3.0, "weighting": "local"}),
+                                            improve_candidates=None, presmoother=None, postsmoother=None)
+    monkeypatch.setattr(multigrid, "MAX_COARSE", 100)
+    one, two = multigrid.hierarchy(A, B, 1), multigrid.hierarchy(A, B, 2)
+    assert len(one.levels) == len(ref.levels) >= 3
+    tol = 1e-5 if dtype == np.float32 else 1e-12
+    for got, want in ((one.levels[0].P, ref.levels[0].P), (one.levels[1].A, ref.levels[1].A)):
+        assert got.dtype == dtype and got.blocksize == want.blocksize
+        assert abs(got - want).max() <= tol * abs(want).max()
+    for a, b in zip(one.levels, two.levels):
+        assert (a.A != b.A).nnz == 0
+    P = one.levels[0].P
+    whole = (P.T @ A @ P).tobsr(blocksize=(6, 6))
+    monkeypatch.setattr(multigrid, "SWEEP_PARTS", 5)           # (slabs: the rows in shares)
+    slabs = multigrid.galerkin(A, P)
+    assert slabs.blocksize == (6, 6) and slabs.has_canonical_format
+    assert abs(slabs - whole).max() <= tol * abs(whole).max()
+
+
+def test_fused_cg_vectors_are_numpys_expressions(monkeypatch):
+    """pcg's fused vector work (large numpy vectors: opalflow.linalg.krylov._Vectors, by shares on threads)
+    against its numpy expressions on a random SPD system with a Jacobi preconditioner: the same iterations and
+    solution to the rounding, one thread and two to the digit, the right-hand side left as it was."""
+    import scipy.sparse as sp
+
+    from opalflow.linalg import krylov
+
+    n = 3000
+    M = sp.random(n, n, density=0.002, random_state=3)
+    K = (M @ M.T + sp.identity(n)).tocsr()
+    b = np.random.default_rng(4).normal(size=n)
+    d = 1.0 / K.diagonal()
+
+    def solve(threads):
+        kept = b.copy()
+        x, its = krylov.pcg(lambda v: K @ v, lambda r: d * r, b, Stop(1e-10), lambda k, r: None, threads=threads)
+        assert np.array_equal(b, kept)
+        return x, its
+
+    plain = solve(1)
+    monkeypatch.setattr(krylov, "VECTOR_MIN", 100)
+    one, two = solve(1), solve(2)
+    assert one[1] == plain[1] > 10 and np.linalg.norm(one[0] - plain[0]) <= 1e-8 * np.linalg.norm(plain[0])
+    assert np.array_equal(one[0], two[0]) and np.linalg.norm(K @ one[0] - b) <= 1e-9 * np.linalg.norm(b)
 
 
 def test_transfers_are_p_and_its_transpose_on_any_number_of_threads(monkeypatch):

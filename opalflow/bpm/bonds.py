@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from opalflow.materials import BondCoefficients
-from opalflow.neighbors import pairs_within, separations
+from opalflow.neighbors import neighbour_counts, pairs_within, separations
 
 
 class BondModel:
@@ -108,16 +108,13 @@ def network_statistics(positions: np.ndarray, diameters: np.ndarray, box: np.nda
     periodic = np.asarray(periodic, bool)
     lo, hi = positions.min(axis=0), positions.max(axis=0)
     inner = np.all(periodic | ((positions >= lo + reach) & (positions <= hi - reach)), axis=1)
-    pairs = pairs_within(positions, reach, box, periodic)
-    sep = separations(positions, pairs, box, periodic)
-    r = np.sqrt(np.einsum("ij,ij->i", sep, sep))
     density = solid_fraction / (np.pi / 6 * np.mean(diameters**3))
+    radii = np.array([at * f for at in (d, np.sqrt(3) * d) for f in (1 - SHELL, 1 + SHELL)])
+    within = neighbour_counts(positions, inner, radii, box, periodic)
     g = []
-    for at in (d, np.sqrt(3) * d):
-        shell = (r >= at * (1 - SHELL)) & (r < at * (1 + SHELL))
-        counted = int(np.count_nonzero(shell & inner[pairs[:, 0]]) + np.count_nonzero(shell & inner[pairs[:, 1]]))
+    for k, at in enumerate((d, np.sqrt(3) * d)):
         ideal = inner.sum() * density * 4 / 3 * np.pi * at**3 * ((1 + SHELL) ** 3 - (1 - SHELL) ** 3)
-        g.append(counted / ideal if ideal > 0 else float("nan"))
+        g.append(int(within[2 * k + 1] - within[2 * k]) / ideal if ideal > 0 else float("nan"))
     return NetworkStatistics(len(bonds) / max(n, 1), near, *g)
 
 

@@ -81,10 +81,10 @@ from opalflow.bpm.contacts import Contacts, joined
 from opalflow.bpm.loading import Supports
 from opalflow.bpm.spec import BREAKING_RULES, RESOLVERS
 from opalflow.bpm.static import (DIRECT_MAX_DOFS, block_amg_preconditioner, block_matrix, bond_blocks, intact,
-                                  loose_particles, particle_amg)
-from opalflow.bpm.stiffness import BondNetwork
+                                  particle_amg)
+from opalflow.bpm.stiffness import PARTS_MIN_BONDS, BondNetwork
 from opalflow.jit import njit
-from opalflow.linalg.direct import Factor, kernel_threads
+from opalflow.linalg.direct import Factor, in_parts, kernel_threads
 from opalflow.linalg.krylov import Stop, pcg
 from opalflow.spec import InputError
 
@@ -122,9 +122,8 @@ def breaking_index(net: BondNetwork, x: np.ndarray, c: Strengths) -> np.ndarray:
     displacements and rotations x (N, 6) (module docstring): the bond forces from the numba operator
     (:meth:`BondNetwork.bond_forces`), the rest in one numba pass (:func:`_bond_checks`; at 1.8 M bonds
     0.08 s where numpy's gathers and norms took 0.7, once an event): LAMMPS's B is the sum of its two checks,
-    every other rule's index the largest of its checks."""
-    checks = bond_checks(net, x, c)
-    return checks.sum(axis=0) if c.rule == "lammps" else checks.max(axis=0)
+    every other rule's index the largest of its checks (folded in the pass: no table of every bond's checks)."""
+    return _checks_of(net, x, c, 1 if c.rule == "lammps" else 2)[0]
 
 
 #: the checks of each breaking rule (:func:`bond_checks`, rows in this order; a broken bond's check is the largest
@@ -163,16 +162,34 @@ def bond_checks(net: BondNetwork, x: np.ndarray, c: Strengths) -> np.ndarray:
       maxTorque2 >= tau``, maxStress1 the signed normal stress).
 
     Every check is positively homogeneous in x, as the events of :func:`solve_fracture` need."""
-    F = net.bond_forces(x[:, :3], x[:, 3:])
-    checks = np.empty((len(CHECKS[c.rule]), len(net.L)))
-    _bond_checks(net.i, net.j, net.n, net.bend, net.twist, F, np.ascontiguousarray(x[:, 3:]), c.fr_c, c.fs_c,
-                 c.tb_c, c.tt_c, np.zeros(0, np.int32) if c.index is None else c.index, _RULE_CODE[c.rule], checks)
+    return _checks_of(net, x, c, 0)
+
+
+def _checks_of(net: BondNetwork, x: np.ndarray, c: Strengths, fold: int) -> np.ndarray:
+    """:func:`_bond_checks` for x (N, 6): every check (``fold`` 0), or one row, their sum (1) or their largest (2);
+    the bond forces and the checks on the process's threads, each a share of the bonds (from
+    :data:`opalflow.bpm.stiffness.PARTS_MIN_BONDS`; each bond's checks its own: the same digits)."""
+    m = len(net.L)
+    threads = kernel_threads() if m >= PARTS_MIN_BONDS else 1
+    F = net.bond_forces(x[:, :3], x[:, 3:], threads=threads)
+    checks = np.empty((1 if fold else len(CHECKS[c.rule]), m))
+    theta = np.ascontiguousarray(x[:, 3:])
+    at = np.linspace(0, m, threads + 1).astype(np.int64)
+
+    def share(k: int) -> None:
+        b = slice(at[k], at[k + 1])
+        strengths = (c.fr_c, c.fs_c, c.tb_c, c.tt_c, c.index[b]) if c.index is not None else (
+            c.fr_c[b], c.fs_c[b], c.tb_c[b], c.tt_c[b], np.zeros(0, np.int32))
+        _bond_checks(net.i[b], net.j[b], net.n[b], net.bend[b], net.twist[b], F[b], theta, *strengths,
+                     _RULE_CODE[c.rule], fold, checks[:, b])
+    in_parts(share, threads)
     return checks
 
 
 @njit(cache=True, nogil=True)
-def _bond_checks(i, j, n, bend, twist, F, theta, fr_c, fs_c, tb_c, tt_c, index, rule, out):
+def _bond_checks(i, j, n, bend, twist, F, theta, fr_c, fs_c, tb_c, tt_c, index, rule, fold, out):
     by_type = index.shape[0] > 0
+    got = np.empty(4)
     for b in range(out.shape[1]):
         p, q = i[b], j[b]
         k = index[b] if by_type else b
@@ -183,14 +200,23 @@ def _bond_checks(i, j, n, bend, twist, F, theta, fr_c, fs_c, tb_c, tt_c, index, 
         bt = math.sqrt((d0 - tw * n[b, 0]) ** 2 + (d1 - tw * n[b, 1]) ** 2 + (d2 - tw * n[b, 2]) ** 2)
         r_n, r_b = fr / fr_c[k], bend[b] * bt / tb_c[k]
         r_s, r_t = fs / fs_c[k], twist[b] * abs(tw) / tt_c[k]
+        count = 2
         if rule == _DOSTA:
-            out[0, b], out[1, b] = abs(r_n) + r_b, r_s + r_t
+            got[0], got[1] = abs(r_n) + r_b, r_s + r_t
         elif rule == _MUSEN_2020:
-            out[0, b], out[1, b] = abs(r_b - r_n) if fr > 0.0 else 0.0, abs(r_t - r_s)
+            got[0], got[1] = abs(r_b - r_n) if fr > 0.0 else 0.0, abs(r_t - r_s)
         elif rule == _MUSEN_CRIT2:
-            out[0, b], out[1, b], out[2, b], out[3, b] = r_n, r_b if fr > 0.0 else 0.0, r_s, r_t
+            got[0], got[1], got[2], got[3] = r_n, r_b if fr > 0.0 else 0.0, r_s, r_t
+            count = 4
         else:                                           # lammps, musen
-            out[0, b], out[1, b] = r_n + r_b, r_s + r_t
+            got[0], got[1] = r_n + r_b, r_s + r_t
+        if fold == 0:
+            for c in range(count):
+                out[c, b] = got[c]
+        elif fold == 1:
+            out[0, b] = got[:count].sum()
+        else:
+            out[0, b] = got[:count].max()
 
 
 class StiffnessMatrix:
@@ -399,7 +425,7 @@ class IterativeResolver:
             return x0, 0
         with threadpool_limits(limits=1):
             d, its = pcg(matvec, precondition, r0, Stop(self.rtol * scale / float(np.linalg.norm(r0))),
-                         lambda k, r: None)
+                         lambda k, r: None, threads=self.threads)
         return x0 + d, its
 
 
@@ -495,6 +521,34 @@ class Adjacency:
         network took 160 ms, the paper's sample at d = 30 nm, 1.8 M bonds, a loaded machine)."""
         return _still_joined(self.indptr, self.neighbour, self.bond, alive, i.astype(np.int64), j.astype(np.int64),
                              limit, self._seen)
+
+    def reached(self, alive: np.ndarray, start: np.ndarray) -> np.ndarray:
+        """(N,) bool: the particles an intact bond path joins to one of ``start`` (N,) bool, those included (a
+        search from them, where the connected components of a copy of the network's intact bonds held 1.3 GiB
+        more at the paper's sample)."""
+        return _reached(self.indptr, self.neighbour, self.bond, alive, np.flatnonzero(start))
+
+
+@njit(cache=True, nogil=True)
+def _reached(indptr, neighbour, bond, alive, start):
+    seen = np.zeros(len(indptr) - 1, np.bool_)
+    stack = np.empty(len(indptr) - 1, np.int64)
+    top = 0
+    for s in start:
+        if not seen[s]:
+            seen[s] = True
+            stack[top] = s
+            top += 1
+    while top > 0:
+        top -= 1
+        p = stack[top]
+        for e in range(indptr[p], indptr[p + 1]):
+            q = neighbour[e]
+            if alive[bond[e]] and not seen[q]:
+                seen[q] = True
+                stack[top] = q
+                top += 1
+    return seen
 
 
 @njit(cache=True, nogil=True)
@@ -652,8 +706,7 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
     events = list(state.events) if state else []
     alive = _intact(m, events)
     loaded = LoadedNetwork(net, supports, positions, alive, contacts, resolver, rtol)
-    adjacency = Adjacency(net)
-    settle = LocalSettle(net, adjacency) if local_rtol > 0 else None
+    settle = LocalSettle(net, loaded.adjacency) if local_rtol > 0 else None
     setup = time.perf_counter() - t0
 
     x, force, stress_unit, its, b_norm = loaded.solve(loaded.x_p.copy())
@@ -682,7 +735,7 @@ def solve_fracture(net: BondNetwork, strengths: Strengths, positions: np.ndarray
             broken = np.flatnonzero(B >= worst / (1.0 + tolerance))
             checks = _checks(net, x, strengths, broken)
             x, force, stress_unit, its, b_norm, touched, settled = _after_break(
-                loaded, settle, adjacency, broken, x, force, b_norm, local_rtol)
+                loaded, settle, broken, x, force, b_norm, local_rtol)
             B[broken] = -np.inf
             events.append(Event(strain, stress, strain * stress_unit, broken.tolist(), its, settled, checks,
                                 int(loaded.engaged.sum())))
@@ -712,14 +765,14 @@ def _next_event(B: np.ndarray, strain_max: float) -> tuple[float, float, str]:
     return worst, strain, f"the network holds to strain_max = {strain_max:g}" if strain > strain_max else ""
 
 
-def _after_break(loaded: LoadedNetwork, settle, adjacency, broken: np.ndarray, x: np.ndarray, force: np.ndarray,
+def _after_break(loaded: LoadedNetwork, settle, broken: np.ndarray, x: np.ndarray, force: np.ndarray,
                  b_norm: float, local_rtol: float) -> tuple:
     """The ``broken`` bonds gone: the local step settles the event where it leaves a residual below ``local_rtol``
     |b| (and no particle came loose), else the network is re-solved.  Returns x, force, stress per unit strain,
     iterations, |b|, the bonds the local step touched (None after a re-solve) and whether it settled."""
     if settle:
         settle.release(x, force, broken)
-    came_loose = loaded.break_bonds(broken, adjacency)
+    came_loose = loaded.break_bonds(broken)
     touched = settle(x, force, broken, loaded.alive, loaded.free) if settle and not came_loose else None
     if touched is not None and np.linalg.norm(force[loaded.free]) <= local_rtol * b_norm:
         return x, force, loaded.stress(force), 0, b_norm, touched, True
@@ -809,6 +862,7 @@ class LoadedNetwork:
                  contacts: Contacts | None, resolver: str, rtol: float):
         self.net, self.supports, self.contacts, self.alive = net, supports, contacts, alive
         self.n, self.m = net.n_particles, len(net.L)
+        self.adjacency = Adjacency(net)
         self.constrain(self.loose_of(alive))
         if resolver == "auto":
             resolver = ("direct" if self.free.sum() <= DIRECT_MAX_DOFS
@@ -818,7 +872,8 @@ class LoadedNetwork:
         self.solver = _resolver(resolver, whole, np.concatenate([alive, self.engaged]), self.free, positions, rtol)
 
     def loose_of(self, alive: np.ndarray) -> np.ndarray:
-        return loose_particles(self.net.part(alive), self.supports.anchored)
+        """The particles no intact bond path joins to an anchored one (:meth:`Adjacency.reached`)."""
+        return ~self.adjacency.reached(alive, self.supports.anchored)
 
     def constrain(self, loose: np.ndarray) -> None:
         """Hold the ``loose`` particles still: the free dofs and the prescribed displacements at unit strain."""
@@ -829,11 +884,11 @@ class LoadedNetwork:
     def stress(self, force: np.ndarray) -> float:
         return self.held.stress(force)      # per unit strain, > 0
 
-    def break_bonds(self, broken: np.ndarray, adjacency: "Adjacency") -> bool:
+    def break_bonds(self, broken: np.ndarray) -> bool:
         """Take the ``broken`` bonds out (of ``alive`` and the re-solver); True when particles came loose."""
         self.alive[broken] = False
         came_loose = False
-        if not adjacency.still_joined(self.alive, self.net.i[broken], self.net.j[broken]):
+        if not self.adjacency.still_joined(self.alive, self.net.i[broken], self.net.j[broken]):
             new_loose = self.loose_of(self.alive)
             came_loose = bool(np.any(new_loose & ~self.loose))
             if came_loose:

@@ -81,7 +81,7 @@ def network_run(spec: BpmWorkflow, s, out: Path, t0: float, *, launcher: str, re
     timings["sample"] = build_s - timings["structure"]
     data = sample.structure
     t = time.perf_counter()
-    net = stiffness_network(data, sample.coefficients)
+    net = stiffness_network(data, sample.coefficients, sample.bond_lengths)     # (L the sample's: no copy)
     loose = loose_particles(net, LOADINGS[c.loading].supports(sample).anchored)
     timings["network"] = time.perf_counter() - t
     if loose.any() and not c.drop_loose:     # refused before anything is written

@@ -93,17 +93,19 @@ class BondNetwork:
     bend: np.ndarray
     twist: np.ndarray
 
-    def bond_forces(self, u: np.ndarray, theta: np.ndarray, stretch: np.ndarray | None = None) -> np.ndarray:
+    def bond_forces(self, u: np.ndarray, theta: np.ndarray, stretch: np.ndarray | None = None,
+                    threads: int = 1) -> np.ndarray:
         """The force F of each bond (M, 3), LAMMPS's ``force1on2``: -F on particle i, +F on j.  ``stretch``
         (M, 3) adds to each bond's u_i - u_j (a macroscopic strain through the periodic images).  Up to
         NUMPY_MAX_BONDS bonds numpy's gathers and cross product of the module docstring's F (a small sample's
         static run then never imports numba: 0.5 s of its 1.2); above, the numba pass of :func:`_bond_loads`
-        (0.05 s at 1.8 M bonds where numpy's took 0.2).  The two agree (tests/test_stiffness.py)."""
+        (0.05 s at 1.8 M bonds where numpy's took 0.2), on ``threads`` threads.  The two agree
+        (tests/test_stiffness.py)."""
         if len(self.L) <= NUMPY_MAX_BONDS:
             du = u[self.i] - u[self.j] + (0.0 if stretch is None else stretch)
             return bond_force(np, self.n, self.L, self.a_r, self.a_s, du, theta[self.i] + theta[self.j])
         F = np.empty((len(self.L), 3))
-        self._loads(np.hstack([u, theta]), _NO_ROWS if stretch is None else stretch, F)
+        self._loads(np.hstack([u, theta]), _NO_ROWS if stretch is None else stretch, F, threads)
         return F
 
     def energy_parts(self, u: np.ndarray, theta: np.ndarray, stretch: np.ndarray | None = None) -> dict[str, float]:
@@ -248,8 +250,9 @@ def _bond_loads(i, j, n, L, a_r, a_s, bend, twist, x, stretch, out, force, alive
 
 
 def _geometry(s: Structure, L0: np.ndarray | None):
-    i = np.minimum(s.bonds[:, 0], s.bonds[:, 1])
-    j = np.maximum(s.bonds[:, 0], s.bonds[:, 1])
+    """(i, j, n, L) of ``s``'s bonds, i < j; i and j contiguous (views of the structure's bond columns, strided,
+    slowed the bond operator's products by a fifth at the paper's sample)."""
+    i, j = np.minimum(s.bonds[:, 0], s.bonds[:, 1]), np.maximum(s.bonds[:, 0], s.bonds[:, 1])
     d = s.minimum_image(s.positions[i] - s.positions[j])
     L = np.linalg.norm(d, axis=1) if L0 is None else L0
     return i, j, d / np.linalg.norm(d, axis=1)[:, None], L
