@@ -213,10 +213,11 @@ def _bond_checks(i, j, n, bend, twist, F, theta, fr_c, fs_c, tb_c, tt_c, index, 
         if fold == 0:
             for c in range(count):
                 out[c, b] = got[c]
-        elif fold == 1:
-            out[0, b] = got[:count].sum()
-        else:
-            out[0, b] = got[:count].max()
+        else:       # (a loop: a slice's sum or max costs ~30 ns a bond in numba, 0.5 s a pass at d = 15 nm)
+            v = got[0]
+            for c in range(1, count):
+                v = v + got[c] if fold == 1 else max(v, got[c])
+            out[0, b] = v
 
 
 class StiffnessMatrix:

@@ -250,8 +250,8 @@ def _bond_loads(i, j, n, L, a_r, a_s, bend, twist, x, stretch, out, force, alive
 
 
 def _geometry(s: Structure, L0: np.ndarray | None):
-    """(i, j, n, L) of ``s``'s bonds, i < j; i and j contiguous (views of the structure's bond columns, strided,
-    slowed the bond operator's products by a fifth at the paper's sample)."""
+    """(i, j, n, L) of ``s``'s bonds, i < j (i and j contiguous copies, not views of the structure's bond
+    columns: the bond operator's kernels read them with a unit stride)."""
     i, j = np.minimum(s.bonds[:, 0], s.bonds[:, 1]), np.maximum(s.bonds[:, 0], s.bonds[:, 1])
     d = s.minimum_image(s.positions[i] - s.positions[j])
     L = np.linalg.norm(d, axis=1) if L0 is None else L0

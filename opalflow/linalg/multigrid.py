@@ -196,10 +196,11 @@ def _prolongation_rows(bs: int, k: int):
 
 def v_cycle(ml, threads: int = 1):
     """b -> one V-cycle from x = 0 on the hierarchy ``ml`` (:func:`hierarchy`, or any pyamg ``MultilevelSolver``;
-    as MultilevelSolver.__solve: P, its transpose and the coarse solver), a forward block Gauss-Seidel sweep (:func:`smoothers`) before the coarse correction and a
-    backward one after.  pyamg's own preconditioner (``aspreconditioner``) also forms the fine-level residual
-    before the cycle and after it, two products with the finest matrix that a preconditioner does not need,
-    and its block Gauss-Seidel loops over a block size it learns at run time.  Measured: block-amg's
+    as MultilevelSolver.__solve: P, its transpose and the coarse solver), a forward block Gauss-Seidel sweep
+    (:func:`smoothers`) before the coarse correction and a backward one after.  pyamg's own preconditioner
+    (``aspreconditioner``) also forms the fine-level residual before the cycle and after it, two products with
+    the finest matrix that a preconditioner does not need, and its block Gauss-Seidel loops over a block size
+    it learns at run time.  Measured: block-amg's
     preconditioner 41 -> 27 ms a call at 140 k dofs (own sweeps in single precision); amg's at the paper's
     sample at d = 45 nm (310 k dofs), the first 40 quasi-static events, 124 -> 65 ms a call for the same
     405 CG iterations.  Each level's sweeps, the first with its residual (the matrix read once), and its
@@ -302,8 +303,8 @@ def _sweeps(bs: int):
     blocks left of the diagonal, up to ``split``: :func:`_diagonal_split`; x written), ``rest(indptr, indices,
     data, split, x, r, first, last)`` r = -(the blocks ``lower`` left out) x, after every share's ``lower``
     (each a loop over its own blocks, no test per block: columns sorted), and ``backward(indptr, indices, data,
-    Dinv, x, old, b, first, last)`` the backward sweep from x, rows and blocks in reverse, x_j read from ``old`` outside the share
-    (``old`` is ``x`` for a whole sweep)."""
+    Dinv, x, old, b, first, last)`` the backward sweep from x, rows and blocks in reverse, x_j read from ``old``
+    outside the share (``old`` is ``x`` for a whole sweep)."""
 
     @njit(cache=True, nogil=True)
     def lower(indptr, indices, data, split, Dinv, x, b, first, last):
