@@ -13,17 +13,8 @@ def kdtree(points: np.ndarray, boxsize=None):
 
 
 def pairs_within(x: np.ndarray, r: float, box: np.ndarray, periodic) -> np.ndarray:
-    """All pairs (i < j) closer than r, sorted by (i, j), as an (M, 2) int64 array.
-
-    ``x`` lies in [0, box) along periodic directions.  cKDTree wraps every direction
-    when given ``boxsize``; a non-periodic direction gets a box more than twice as
-    long as the data plus r, so nothing wraps across it.
-    """
-    periodic = np.asarray(periodic, dtype=bool)
-    lo = x.min(axis=0)
-    size = np.where(periodic, box, 2 * (np.ptp(x, axis=0) + r) + 1.0)
-    y = np.where(periodic, np.mod(x, size), x - lo)
-    y = np.where(y >= size, y - size, y)  # np.mod can return size itself for tiny negatives
+    """All pairs (i < j) closer than r, sorted by (i, j), as an (M, 2) int64 array (:func:`_wrapped`)."""
+    y, size = _wrapped(x, r, box, periodic)
     tree = kdtree(y, boxsize=size)
     pairs = tree.query_pairs(r, output_type="ndarray").astype(np.int64)
     pairs.sort(axis=1)
@@ -34,12 +25,19 @@ def pairs_within(x: np.ndarray, r: float, box: np.ndarray, periodic) -> np.ndarr
 def neighbour_counts(x: np.ndarray, centres: np.ndarray, radii: np.ndarray, box: np.ndarray, periodic) -> np.ndarray:
     """For each of ``radii``: the pairs (a particle of the ``centres`` mask, any other particle) closer than it,
     counted by scipy's dual-tree ``count_neighbors`` (no list of pairs: g(r) of the paper's sample took 20 M
-    pairs, 1 GiB and ~10 s that way), the same wrapping as :func:`pairs_within`."""
-    periodic = np.asarray(periodic, dtype=bool)
-    size = np.where(periodic, box, 2 * (np.ptp(x, axis=0) + float(np.max(radii))) + 1.0)
-    y = np.where(periodic, np.mod(x, size), x - x.min(axis=0))
-    y = np.where(y >= size, y - size, y)
+    pairs, 1 GiB and ~10 s that way), wrapped as :func:`pairs_within` wraps."""
+    y, size = _wrapped(x, float(np.max(radii)), box, periodic)
     return kdtree(y[centres], boxsize=size).count_neighbors(kdtree(y, boxsize=size), radii, cumulative=True)
+
+
+def _wrapped(x: np.ndarray, r: float, box: np.ndarray, periodic) -> tuple[np.ndarray, np.ndarray]:
+    """(points, box size) for a cKDTree searched to distance ``r``.  ``x`` lies in [0, box) along periodic
+    directions.  cKDTree wraps every direction when given ``boxsize``; a non-periodic direction gets a box more
+    than twice as long as the data plus r, so nothing wraps across it."""
+    periodic = np.asarray(periodic, dtype=bool)
+    size = np.where(periodic, box, 2 * (np.ptp(x, axis=0) + r) + 1.0)
+    y = np.where(periodic, np.mod(x, size), x - x.min(axis=0))
+    return np.where(y >= size, y - size, y), size  # (np.mod can return size itself for tiny negatives)
 
 
 def separations(x: np.ndarray, pairs: np.ndarray, box: np.ndarray, periodic) -> np.ndarray:
