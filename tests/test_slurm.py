@@ -5,6 +5,7 @@ inside a job.  Skipped, with the reason, only where that SLURM cannot start (not
 import json
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -14,7 +15,10 @@ import pytest
 
 import opalflow
 from opalflow.resources import ROOT
+from opalflow.runs.executors import SlurmExecutor
+from opalflow.runs.jobs import STOP_NOTE, spec_hash
 from opalflow.runs.record import RunRecord
+from opalflow.runs.spec import ExecutorSpec
 
 SCRIPT = ROOT / "scripts" / "local-slurm.sh"
 LATTICE_DYNAMIC = ["compression.strain_max=0.004", "compression.snapshot_strains=[]", "lattice.cells_z=8"]
@@ -134,6 +138,29 @@ def test_time_limit_requeues_from_the_restart_to_the_same_numbers(slurm, tmp_pat
     for key in ("youngs_modulus_GPa", "strength_MPa", "strain_at_peak"):
         assert s[key] == pytest.approx(whole[key], rel=1e-4), key
     assert f"SLURM requeues: {record.requeues}" in (tmp_path / "limited" / "report.md").read_text()
+
+
+def test_a_time_limit_warning_while_python_starts_requeues_the_job(slurm, tmp_path):
+    """SLURM's USR1 can come before the job's Python has its handler (CI under load: the task died of USR1's
+    default action and its folder stayed pending).  The array's script run by bash, the signal sent 0.3 s after
+    it starts: the job still writes a restart file and settles requeued, and leaves no note behind."""
+    spec = opalflow.load_workflow("quickstart", set=["compression.strain_max=0.015", "compression.snapshot_strains=[]"])
+    folder = tmp_path / "jobs" / "quickstart"
+    folder.mkdir(parents=True)
+    RunRecord.job(spec, spec.name, spec_hash(spec)).write(folder)
+    listing = tmp_path / "jobs.txt"
+    listing.write_text(f"{folder}\n")
+    script = tmp_path / "array.sh"
+    script.write_text(SlurmExecutor(ExecutorSpec(type="slurm")).script(tmp_path, listing, 1))
+    env = {k: v for k, v in os.environ.items() if not k.startswith("SLURM_")} | {"SLURM_ARRAY_TASK_ID": "0"}
+    task = subprocess.Popen(["bash", str(script)], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    time.sleep(0.3)
+    task.send_signal(signal.SIGUSR1)
+    said, _ = task.communicate(timeout=300)
+    record = RunRecord.read(folder)
+    assert task.returncode == 0 and record.state == "requeued", said[-2000:]
+    assert record.sessions[-1].last_step > 0 and list(folder.glob("**/restart.*.bin")), said[-2000:]
+    assert not (folder / STOP_NOTE).exists()
 
 
 def test_mpi_ranks_inside_a_slurm_job(slurm, tmp_path):

@@ -26,7 +26,7 @@ from collections.abc import Callable, Iterator
 from multiprocessing.connection import wait
 from pathlib import Path
 
-from opalflow.runs.jobs import Outcome, job_record, outcome, run_job, settle
+from opalflow.runs.jobs import STOP_NOTE, Outcome, job_record, outcome, run_job, settle
 from opalflow.runs.spec import ExecutorSpec
 from opalflow.spec import InputError
 
@@ -176,8 +176,17 @@ class SlurmExecutor:
                   "# before its time limit writes a restart file and requeues itself (scontrol requeue)",
                   "set -euo pipefail",
                   f'folder=$(sed -n "$((SLURM_ARRAY_TASK_ID + 1))p" {shlex.quote(str(listing))})',
-                  f'exec {shlex.quote(sys.executable)} -m opalflow job "$folder" --np {self.np} '
-                  f'--threads {s.cpus_per_rank}', ""]
+                  "# SLURM's USR1 may come while Python is still starting (its default would kill the job): the job",
+                  "# starts with USR1 ignored, this shell notes the signal in the folder and passes it on, and the job",
+                  "# reads the note once its own handler is in place",
+                  f'rm -f "$folder/{STOP_NOTE}"',
+                  "trap '' USR1",
+                  f'{shlex.quote(sys.executable)} -m opalflow job "$folder" --np {self.np} '
+                  f'--threads {s.cpus_per_rank} &',
+                  "job=$!",
+                  f"""trap 'touch "$folder/{STOP_NOTE}"; kill -USR1 "$job" 2> /dev/null || true' USR1""",
+                  'while true; do wait "$job" && exit 0 || rc=$?; kill -0 "$job" 2> /dev/null || exit "$rc"; done',
+                  ""]
         return "\n".join(lines)
 
     def run(self, folders: list[str], say: Callable[[str], None]) -> Iterator[Collected]:
@@ -199,9 +208,9 @@ class SlurmExecutor:
         with open(root / "slurm" / "arrays.txt", "a") as f:      # for status and for scancel by hand
             f.write(f"{array} {len(folders)} {script.name}\n")
         say(f"slurm: submitted array {array} ({len(folders)} tasks) with {script}")
-        yield from self._wait(array, folders, say)
+        yield from self._wait(array, folders, say, root / "slurm")
 
-    def _wait(self, array: str, folders: list[str], say) -> Iterator[Collected]:
+    def _wait(self, array: str, folders: list[str], say, outputs: Path) -> Iterator[Collected]:
         left = {str(Path(f).resolve()): k for k, f in enumerate(folders)}
         missing: dict[str, int] = {}
         said: dict[str, float] = {}             # the session after which each requeued task was announced
@@ -240,8 +249,14 @@ class SlurmExecutor:
                         got = outcome(f)
                         got.state, got.error = "failed", (f"SLURM task {array}_{k} ended without a result (cancelled, "
                                                           f"killed or out of time; {got.error}); a rerun continues it")
+                        got.log_tail = got.log_tail or _tail(outputs / f"{array}_{k}.out")
                         yield f, got
             time.sleep(self.spec.poll_s)
+
+
+def _tail(path: Path, lines: int = 15) -> str:
+    """The last lines of a task's SLURM output (what it said before it ended), if it wrote one."""
+    return "\n".join(path.read_text(errors="replace").splitlines()[-lines:]) if path.exists() else ""
 
 
 def _slurm(cmd: list[str]) -> subprocess.CompletedProcess:

@@ -27,6 +27,11 @@ from opalflow.spec import WorkflowSpec
 from opalflow.store import RECORD, json_text
 
 
+#: a job folder's note that SLURM's USR1 came (the array's script writes it: the signal may come before the job's
+#: handler is in place, and the job reads the note then)
+STOP_NOTE = "stop-requested"
+
+
 def spec_hash(spec: WorkflowSpec) -> str:
     """SHA-256 of the spec's canonical JSON (keys sorted): equal specs, equal jobs."""
     return spec_digest(spec.to_dict())
@@ -119,13 +124,17 @@ def log_tail(folder: Path, lines: int = 15) -> str:
     return "\n".join(logs[-1].read_text(errors="replace").splitlines()[-lines:])
 
 
-def _stop_on_signals() -> None:
-    """SIGUSR1 (SLURM's warning before the time limit) and SIGTERM: write a restart and stop."""
+def _stop_on_signals(folder: Path) -> None:
+    """SIGUSR1 (SLURM's warning before the time limit) and SIGTERM: write a restart and stop; a USR1 that came
+    before this handler (the folder's :data:`STOP_NOTE`, written by the SLURM array's script) counts too."""
     from opalflow.lammps.engine import request_stop
 
     if threading.current_thread() is threading.main_thread():
         for sig in (signal.SIGUSR1, signal.SIGTERM):
             signal.signal(sig, request_stop)
+    if (folder / STOP_NOTE).exists():
+        (folder / STOP_NOTE).unlink()
+        request_stop(signal.SIGUSR1)
 
 
 def run_job(folder: str, np_: int = 1, threads: int = 1) -> Outcome:
@@ -136,12 +145,17 @@ def run_job(folder: str, np_: int = 1, threads: int = 1) -> Outcome:
     BLAS and OpenMP run ``threads`` threads in the job (threadpoolctl), whatever the executor's process
     inherited: the same sums in the same order, so a job gives the same numbers to the last digit on a
     local pool, a Dask worker or a SLURM node, and jobs side by side do not oversubscribe the cores."""
+    folder = Path(folder).resolve()
+    _stop_on_signals(folder)
     import scipy.linalg  # noqa: F401 - load every BLAS/OpenMP library first: threadpoolctl limits the loaded ones
     import scipy.sparse.linalg  # noqa: F401
     from threadpoolctl import threadpool_limits
 
-    with threadpool_limits(limits=threads):
-        return _run_job(Path(folder).resolve(), np_)
+    try:
+        with threadpool_limits(limits=threads):
+            return _run_job(folder, np_)
+    finally:                                     # a USR1 the handler took may have left its note too
+        (folder / STOP_NOTE).unlink(missing_ok=True)
 
 
 def _run_job(folder: Path, np_: int) -> Outcome:
@@ -161,7 +175,6 @@ def _run_job(folder: Path, np_: int) -> Outcome:
             last[0] = time.time()                # step counter writes progress.json itself)
             note(folder, msg)
 
-    _stop_on_signals()
     try:
         if rec is None:
             raise RuntimeError(f"{folder} holds no job (no readable {RECORD}): run its study again")
