@@ -163,10 +163,10 @@ def test_a_new_track_installed_as_a_plugin_runs_through_python_m_opalflow(toytra
 
 
 def test_architecture_doc_names_what_exists():
-    """docs/architecture.md: every opalflow path it names exists, and every package is described."""
+    """docs/reference/architecture.md: every opalflow path it names exists, and every package is described."""
     import re
 
-    doc = (PACKAGE.parent / "docs" / "architecture.md").read_text()
+    doc = (PACKAGE.parent / "docs" / "reference" / "architecture.md").read_text()
     named = set(re.findall(r"`(opalflow/[A-Za-z0-9_/.]*)", doc))
     assert len(named) > 10
     missing = [n for n in named if not (PACKAGE.parent / n.split("<")[0]).exists() and "<" not in n]
@@ -205,7 +205,7 @@ def test_module_level_names_are_unique():
 def test_the_docs_name_the_run_record_schema_the_code_writes():
     from opalflow.runs.record import SCHEMA
 
-    assert f"`schema` {SCHEMA})" in (PACKAGE.parent / "docs" / "usage.md").read_text()
+    assert f"`schema` {SCHEMA})" in (PACKAGE.parent / "docs" / "reference" / "usage.md").read_text()
 
 
 def test_a_run_folders_files_are_named_in_one_module():

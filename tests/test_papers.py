@@ -1,11 +1,11 @@
-"""docs/papers.md: every number opalflow reports beside a paper's comes from the stored result its row names,
+"""docs/validation/papers.md: every number opalflow reports beside a paper's comes from the stored result its row names,
 and the error shown is opalflow's against the paper's."""
 import json
 import re
 
 from opalflow.resources import ROOT
 
-PAGE = ROOT / "docs" / "papers.md"
+PAGE = ROOT / "docs" / "validation" / "papers.md"
 
 
 def _lookup(data, path: str):

@@ -1,6 +1,6 @@
 """Sphinx extension: the command-line and workflow reference pages, generated at every build from
 ``opalflow.cli.parser()`` and the spec classes of ``opalflow.registry`` (a new option or spec field appears
-without editing a page).  Written to ``docs/reference/`` (git-ignored) when the builder starts."""
+without editing a page).  Written to ``docs/reference/generated/`` (git-ignored) when the builder starts."""
 from __future__ import annotations
 
 import argparse
@@ -10,7 +10,7 @@ import re
 import typing
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parents[1] / "reference"
+HERE = Path(__file__).resolve().parents[1] / "reference" / "generated"
 
 
 def _cell(text) -> str:
@@ -116,7 +116,7 @@ def workflows_page() -> str:
 
 
 def write_pages(app=None) -> None:
-    HERE.mkdir(exist_ok=True)
+    HERE.mkdir(parents=True, exist_ok=True)
     for name, text in (("cli.md", cli_page()), ("workflows.md", workflows_page())):
         path = HERE / name
         if not path.exists() or path.read_text() != text + "\n":

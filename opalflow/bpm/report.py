@@ -84,7 +84,7 @@ def why(key: str, error: float, diameter_nm: float) -> str:
                 "(data/reference/resolution.toml)")
     if key == "youngs_modulus_GPa":
         return ("the plate-strain modulus holds the Hertz settling of the plate on the rough top and the loading "
-                "rate (docs/static.md)")
+                "rate (docs/validation/static.md)")
     return ""
 
 

@@ -98,7 +98,8 @@ class CompressionSpec:
     """Uniaxial compression by a rigid plate moving down at constant speed."""
 
     strain_max: float = 0.04         # the plate stops at this strain (of the sample's height)
-    plate_speed_m_s: float = 2.0     # dynamic: the plate's speed (the paper's; slower changes E little: docs/opals.md)
+    #: dynamic: the plate's speed (the paper's; slower changes E little: docs/validation/opals.md)
+    plate_speed_m_s: float = 2.0
     timestep_s: float = 0.0          # dynamic: LAMMPS's time step (0: timestep_safety x the estimated stability limit)
     timestep_safety: float = 0.8     # dynamic: the fraction of the estimated limit taken when timestep_s is 0
     #: dynamic: viscous damping of the moving particles, a fraction of critical for the fundamental mode
