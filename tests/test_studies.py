@@ -130,6 +130,31 @@ def test_a_study_killed_stops_its_jobs(tmp_path):
     assert not list(root.glob("jobs/*/summary.json"))
 
 
+def test_a_study_of_one_worker_stops_with_its_job(tmp_path):
+    """Was: with executor.workers = 1 (the jobs in the study's own process) SIGTERM stopped the running job and
+    the study went on with the next one, to "too few jobs finished" and exit 0.  Now the study stops with the
+    job: exit 143, the line that says how to go on, the stopped job resumable and the next one not started."""
+    import time
+
+    from opalflow.runs.record import RunRecord
+
+    out = tmp_path / "study"
+    cmd = [sys.executable, "-m", "opalflow", "run", "porosity", "--out", str(out), "--set", "study.base=opal_quick",
+           "--set", "study.porosities=[0.3, 0.4]", "--set", "study.seeds=[1]", "--set", "executor.workers=1",
+           "--set", 'study.set=["pores.porosity_tolerance=0.1","compression.strain_max=0.01",'
+                    '"compression.snapshot_strains=[]"]']
+    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True)
+    t0 = time.time()
+    while not list(out.glob("jobs/*/progress.json")) and time.time() - t0 < 120:    # the first job's LAMMPS runs
+        time.sleep(0.1)
+    proc.send_signal(signal.SIGTERM)
+    err = proc.communicate(timeout=120)[1]
+    assert proc.returncode == 143, err[-2000:]
+    assert err.strip().splitlines()[-1].startswith("terminated (SIGTERM)"), err[-2000:]
+    states = sorted(RunRecord.read(p.parent).state for p in out.glob("jobs/*/run.json"))
+    assert states == ["pending", "requeued"], states
+
+
 # ----------------------------------------------------------------------------- fits
 def test_power_and_exponential_fits_recover_their_laws():
     rng = np.random.default_rng(3)

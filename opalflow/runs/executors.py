@@ -46,7 +46,10 @@ class LocalExecutor:
         workers = max(1, min(self.workers, len(folders)))
         if workers == 1:
             for f in folders:
-                yield f, run_job(f, self.np, self.threads)
+                got = run_job(f, self.np, self.threads)
+                yield f, got
+                if got.stopped:
+                    _stop_study(got.stopped)
             return
         # a fresh spawned process per job: its peak memory is its own (its record), nothing leaks to the next
         # job, and a process that dies (killed, out of memory) fails its job alone, the others run on (in a
@@ -84,6 +87,15 @@ TERM_GRACE_S = 30.0
 
 def _exit_on_term(signum, frame) -> None:
     raise SystemExit(128 + signum)
+
+
+def _stop_study(why: str) -> None:
+    """A job of this process stopped by Ctrl-C or a signal: the study stops with it, as a process pool's jobs stop
+    with theirs (was: the signal stopped one job and the study went on with the next).  Ctrl-C goes on as
+    KeyboardInterrupt; any other signal as SIGTERM, to the handler the study's process had before the job."""
+    if why == "SIGINT":
+        raise KeyboardInterrupt
+    signal.raise_signal(signal.SIGTERM)
 
 
 def ended(folder: str, exitcode: int) -> Outcome:
