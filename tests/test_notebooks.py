@@ -10,8 +10,8 @@ NOTEBOOKS = sorted((ROOT / "docs" / "notebooks").glob("*.ipynb"))
 
 
 def test_every_notebook_is_on_the_notebooks_page():
-    page = (ROOT / "docs" / "notebooks.md").read_text()
-    assert NOTEBOOKS and all(f"<notebooks/{p.name}>" in page for p in NOTEBOOKS)
+    page = (ROOT / "docs" / "tutorials" / "notebooks.md").read_text()
+    assert NOTEBOOKS and all(f"<../notebooks/{p.name}>" in page for p in NOTEBOOKS)
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
