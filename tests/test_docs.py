@@ -79,7 +79,7 @@ def test_the_site_is_in_its_six_parts_and_every_page_is_in_one():
 def test_teaching_pages_are_short_and_light_on_numbers():
     """Tutorials, how-to guides and explanation teach: at most 1 500 words a page and 4 numbers per 100 words
     (the measurements live in validation and benchmarks)."""
-    heavy = {p.name: docstats.weight(p) for p in docstats.pages(*docstats.TEACHING)}
+    heavy = {p.relative_to(ROOT / "docs").as_posix(): docstats.weight(p) for p in docstats.pages(*docstats.TEACHING)}
     assert len(heavy) >= 15
     assert not {k: v for k, v in heavy.items() if v[0] > docstats.MAX_WORDS
                 or v[2] > docstats.MAX_NUMBERS_PER_100_WORDS}
