@@ -37,8 +37,8 @@ def record(folder: Path) -> dict:
                      "sessions": len(rec["sessions"]), "peak_rss_GiB": rec["peak_rss_MiB"] / 1024})
     study = folder / "summary.json"
     fits = json.loads(study.read_text()).get("fits") if study.exists() else None
-    return {"command": "python -m opalflow run porosity_strength --out DIR --set study.paper_scale=true "
-                       "--set executor.workers=1 --set executor.cpus_per_rank=2; python bench/bench_porosity_paper.py DIR",
+    return {"command": "python -m opalflow run porosity_strength --out DIR --set study.paper_scale=true --set "
+                       "executor.workers=1 --set executor.cpus_per_rank=2; python bench/bench_porosity_paper.py DIR",
             "machine": {"cpus": os.cpu_count(), "date": datetime.date.today().isoformat()},
             "jobs_finished": len(jobs), "jobs": jobs, "fits": fits}
 
