@@ -26,7 +26,7 @@ from collections.abc import Callable, Iterator
 from multiprocessing.connection import wait
 from pathlib import Path
 
-from opalflow.runs.jobs import STOP_NOTE, Outcome, job_record, outcome, run_job, settle
+from opalflow.runs.jobs import STOP_NOTE, Outcome, file_tail, job_record, outcome, run_job, settle
 from opalflow.runs.spec import ExecutorSpec
 from opalflow.spec import InputError
 
@@ -261,14 +261,9 @@ class SlurmExecutor:
                         got = outcome(f)
                         got.state, got.error = "failed", (f"SLURM task {array}_{k} ended without a result (cancelled, "
                                                           f"killed or out of time; {got.error}); a rerun continues it")
-                        got.log_tail = got.log_tail or _tail(outputs / f"{array}_{k}.out")
+                        got.log_tail = got.log_tail or file_tail(outputs / f"{array}_{k}.out")
                         yield f, got
             time.sleep(self.spec.poll_s)
-
-
-def _tail(path: Path, lines: int = 15) -> str:
-    """The last lines of a task's SLURM output (what it said before it ended), if it wrote one."""
-    return "\n".join(path.read_text(errors="replace").splitlines()[-lines:]) if path.exists() else ""
 
 
 def _slurm(cmd: list[str]) -> subprocess.CompletedProcess:

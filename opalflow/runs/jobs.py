@@ -119,12 +119,15 @@ def settle(folder: Path, state: str, **fields) -> None:
     rec.write(folder)
 
 
+def file_tail(path: Path, lines: int = 15) -> str:
+    """The last lines of a text file ("" where there is none)."""
+    return "\n".join(path.read_text(errors="replace").splitlines()[-lines:]) if path.exists() else ""
+
+
 def log_tail(folder: Path, lines: int = 15) -> str:
     """The last lines of the job's LAMMPS log, if it wrote one."""
     logs = sorted(Path(folder).glob("**/log.lammps"), key=lambda p: p.stat().st_mtime)
-    if not logs:
-        return ""
-    return "\n".join(logs[-1].read_text(errors="replace").splitlines()[-lines:])
+    return file_tail(logs[-1], lines) if logs else ""
 
 
 def _stop_on_signals(folder: Path, asked: list) -> dict:
