@@ -4,12 +4,13 @@ Importing numba and loading the first cached kernel cost 0.2 s and 0.3 s on this
 measured before and after, issue 39): more than the whole static solve of a small sample, which never calls
 a kernel (its products come from the assembled matrix).  A module that defines kernels with this ``njit``
 imports without numba; the first call compiles the kernel with numba's own ``njit(**options)`` and every
-later call goes straight to it.  A kernel called from another kernel needs numba's dispatcher itself: such
-modules (the aerogel's aggregation) import numba directly.
+later call goes straight to it.  A kernel may call another of these kernels: the callee is compiled first and
+the caller compiled against its dispatcher (numba types only its own dispatchers).
 """
 from __future__ import annotations
 
 import functools
+import types
 
 
 def njit(**options):
@@ -17,13 +18,23 @@ def njit(**options):
     def wrap(fn):
         compiled = None
 
-        @functools.wraps(fn)
-        def call(*args):
+        def kernel():
+            """numba's dispatcher of ``fn``, made on first use; the kernels ``fn`` calls made before it."""
             nonlocal compiled
             if compiled is None:
                 import numba
 
-                compiled = numba.njit(**options)(fn)
-            return compiled(*args)
+                callees = {name: fn.__globals__[name].kernel() for name in fn.__code__.co_names
+                           if hasattr(fn.__globals__.get(name), "kernel")}
+                f = fn if not callees else types.FunctionType(fn.__code__, {**fn.__globals__, **callees}, fn.__name__,
+                                                              fn.__defaults__, fn.__closure__)
+                compiled = numba.njit(**options)(f)
+            return compiled
+
+        @functools.wraps(fn)
+        def call(*args):
+            return (compiled or kernel())(*args)
+
+        call.kernel = kernel
         return call
     return wrap

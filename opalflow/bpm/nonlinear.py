@@ -120,6 +120,91 @@ def bond_loads(net: BondNetwork, u: np.ndarray, phi: np.ndarray) -> BondLoads:
     return BondLoads(*out[:, :9].reshape(-1, 3, 3).transpose(1, 0, 2), *out[:, 9:].T)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _qmul(a0, a1, a2, a3, b0, b1, b2, b3):
+    """The quaternion product a b."""
+    return (a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3, a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2,
+            a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1, a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _qrot(w, x, y, z, v0, v1, v2):
+    """v rotated by the unit quaternion (w, x, y, z)."""
+    t0, t1, t2 = 2.0 * (y * v2 - z * v1), 2.0 * (z * v0 - x * v2), 2.0 * (x * v1 - y * v0)
+    return (v0 + w * t0 + y * t2 - z * t1, v1 + w * t1 + z * t0 - x * t2, v2 + w * t2 + x * t1 - y * t0)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _quat(p0, p1, p2):
+    """The unit quaternion of the rotation vector p: |p| about p / |p|."""
+    angle = math.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
+    k = math.sin(0.5 * angle) / angle if angle > 1e-4 else 0.5 - angle * angle / 48.0    # (its series near 0)
+    return math.cos(0.5 * angle), k * p0, k * p1, k * p2
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _unit(v0, v1, v2):
+    """v / |v|; zero stays zero (LAMMPS's norm3 of a zero vector: a 0/0 there, reached only by a bond exactly at
+    rest, where the term it scales is zero)."""
+    n = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+    return (v0 / n, v1 / n, v2 / n) if n > 0 else (0.0, 0.0, 0.0)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _bond_loads(r0, L, a_r, a_s, bend, twist, b, x, res):
+    """Bond b's loads into ``res`` (13: :func:`_elastic`'s row) at ``x`` (i's 6 dofs, then j's)."""
+    jw, jx, jy, jz = _quat(x[9], x[10], x[11])
+    iw, ix, iy, iz = _quat(x[3], x[4], x[5])
+    p0, p1, p2 = r0[b, 0], r0[b, 1], r0[b, 2]
+    r_0, r_1, r_2 = p0 + x[0] - x[6], p1 + x[1] - x[7], p2 + x[2] - x[8]
+    r_mag = math.sqrt(r_0 * r_0 + r_1 * r_1 + r_2 * r_2)
+    rb0, rb1, rb2 = _qrot(jw, -jx, -jy, -jz, r_0, r_1, r_2)
+    Fr = a_r[b] * (r_mag - L[b])
+    c0, c1, c2 = rb1 * p2 - rb2 * p1, rb2 * p0 - rb0 * p2, rb0 * p1 - rb1 * p0          # rb x r0
+    gamma = math.atan2(math.sqrt(c0 * c0 + c1 * c1 + c2 * c2), p0 * rb0 + p1 * rb1 + p2 * rb2)
+    s0, s1, s2 = _unit(rb1 * c2 - rb2 * c1, rb2 * c0 - rb0 * c2, rb0 * c1 - rb1 * c0)   # rb x (rb x r0)
+    t0, t1, t2 = _unit(-c0, -c1, -c2)                                                   # r0 x rb
+    fs = a_s[b] * r_mag * gamma
+    ts = 0.5 * a_s[b] * r_mag * r_mag * gamma
+    # mq: the rotation of z onto rb (Wang and Mora's X'Y'Z' representation)
+    m0 = SQRT_HALF * math.sqrt(max(r_mag + rb2, 0.0) / r_mag)
+    rxy = math.sqrt(rb0 * rb0 + rb1 * rb1)
+    k = -SQRT_HALF / rxy * math.sqrt(max(r_mag - rb2, 0.0) / r_mag) if rxy != 0.0 else 0.0
+    m1, m2 = k * rb1, -k * rb0
+    # q21 = mq^-1 (qj^-1 qi) mq
+    a = _qmul(jw, -jx, -jy, -jz, iw, ix, iy, iz)
+    a = _qmul(a[0], a[1], a[2], a[3], m0, m1, m2, 0.0)
+    w, x, y, z = _qmul(m0, -m1, -m2, 0.0, a[0], a[1], a[2], a[3])
+    out_plane, in_plane = w * w + z * z, x * x + y * y
+    sign = 1.0 if z > 0 else (-1.0 if z < 0 else 0.0)
+    psi = 2.0 * math.atan2(abs(z), w) * sign                                # 2 acos(w / |(w, z)|)
+    theta = 2.0 * math.atan2(math.sqrt(in_plane), math.sqrt(out_plane))     # acos(w^2 - x^2 - y^2 + z^2)
+    if in_plane == 0.0:
+        cos_phi, sin_phi = 0.0, 0.0
+    elif out_plane == 0.0:
+        cos_phi, sin_phi = y / math.sqrt(in_plane), -x / math.sqrt(in_plane)
+    else:
+        both = math.sqrt(out_plane * in_plane)
+        cos_phi, sin_phi = (x * z + w * y) / both, (y * z - w * x) / both
+    e = a_s[b] * r_mag * theta
+    Fsp = _qrot(m0, m1, m2, 0.0, -0.5 * e * cos_phi, -0.5 * e * sin_phi, 0.0)
+    Tsp = _qrot(m0, m1, m2, 0.0, 0.25 * e * r_mag * sin_phi, -0.25 * e * r_mag * cos_phi, 0.0)
+    Tb = _qrot(m0, m1, m2, 0.0, -bend[b] * theta * sin_phi, bend[b] * theta * cos_phi, 0.0)
+    Tt = _qrot(m0, m1, m2, 0.0, 0.0, 0.0, twist[b] * psi)
+    Fs = (fs * s0 + Fsp[0], fs * s1 + Fsp[1], fs * s2 + Fsp[2])
+    Ts = (ts * t0 + Tsp[0], ts * t1 + Tsp[1], ts * t2 + Tsp[2])
+    g = Fr / r_mag
+    f = _qrot(jw, jx, jy, jz, g * rb0 + Fs[0], g * rb1 + Fs[1], g * rb2 + Fs[2])
+    tj = _qrot(jw, jx, jy, jz, Ts[0] + Tt[0] + Tb[0], Ts[1] + Tt[1] + Tb[1], Ts[2] + Tt[2] + Tb[2])
+    ti = _qrot(jw, jx, jy, jz, Ts[0] - Tt[0] - Tb[0], Ts[1] - Tt[1] - Tb[1], Ts[2] - Tt[2] - Tb[2])
+    for k3 in range(3):
+        res[k3], res[3 + k3], res[6 + k3] = f[k3], tj[k3], ti[k3]
+    res[9] = Fr
+    res[10] = math.sqrt(Fs[0] * Fs[0] + Fs[1] * Fs[1] + Fs[2] * Fs[2])
+    res[11] = math.sqrt(Tb[0] * Tb[0] + Tb[1] * Tb[1] + Tb[2] * Tb[2])
+    res[12] = math.sqrt(Tt[0] * Tt[0] + Tt[1] * Tt[1] + Tt[2] * Tt[2])
+
+
 @njit(cache=True, nogil=True)
 def _elastic(r0, L, a_r, a_s, bend, twist, zi, zj, h, out, blocks):
     """Bond b (rest vector r0 = L n, stiffnesses a_r, a_s, bend, twist) with its particles at displacements and
@@ -130,90 +215,19 @@ def _elastic(r0, L, a_r, a_s, bend, twist, zi, zj, h, out, blocks):
     (the module docstring), one bond at a time (numpy's gathers over ~80 short arrays cost 10-20x more); the angles
     LAMMPS takes as acos of cosines are taken as atan2 (the same angles without acos's loss of precision near 0:
     sqrt(machine epsilon) in the angle, which a difference quotient of the forces would see)."""
-
-    def mul(a0, a1, a2, a3, b0, b1, b2, b3):                 # the quaternion product a b
-        return (a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3, a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2,
-                a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1, a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0)
-
-    def rot(w, x, y, z, v0, v1, v2):                          # v rotated by the unit quaternion (w, x, y, z)
-        t0, t1, t2 = 2.0 * (y * v2 - z * v1), 2.0 * (z * v0 - x * v2), 2.0 * (x * v1 - y * v0)
-        return (v0 + w * t0 + y * t2 - z * t1, v1 + w * t1 + z * t0 - x * t2, v2 + w * t2 + x * t1 - y * t0)
-
-    def quat(p0, p1, p2):                  # the unit quaternion of the rotation vector p: |p| about p / |p|
-        angle = math.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
-        k = math.sin(0.5 * angle) / angle if angle > 1e-4 else 0.5 - angle * angle / 48.0    # (its series near 0)
-        return math.cos(0.5 * angle), k * p0, k * p1, k * p2
-
-    def unit(v0, v1, v2):                  # zero stays zero (LAMMPS's norm3 of a zero vector: a 0/0 there, reached
-        # only by a bond exactly at rest, where the term it scales is zero)
-        n = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
-        return (v0 / n, v1 / n, v2 / n) if n > 0 else (0.0, 0.0, 0.0)
-
-    def loads(b, x, res):                  # bond b's loads into res (13) at x (i's 6 dofs, then j's)
-        jw, jx, jy, jz = quat(x[9], x[10], x[11])
-        iw, ix, iy, iz = quat(x[3], x[4], x[5])
-        p0, p1, p2 = r0[b, 0], r0[b, 1], r0[b, 2]
-        r_0, r_1, r_2 = p0 + x[0] - x[6], p1 + x[1] - x[7], p2 + x[2] - x[8]
-        r_mag = math.sqrt(r_0 * r_0 + r_1 * r_1 + r_2 * r_2)
-        rb0, rb1, rb2 = rot(jw, -jx, -jy, -jz, r_0, r_1, r_2)
-        Fr = a_r[b] * (r_mag - L[b])
-        c0, c1, c2 = rb1 * p2 - rb2 * p1, rb2 * p0 - rb0 * p2, rb0 * p1 - rb1 * p0          # rb x r0
-        gamma = math.atan2(math.sqrt(c0 * c0 + c1 * c1 + c2 * c2), p0 * rb0 + p1 * rb1 + p2 * rb2)
-        s0, s1, s2 = unit(rb1 * c2 - rb2 * c1, rb2 * c0 - rb0 * c2, rb0 * c1 - rb1 * c0)   # rb x (rb x r0)
-        t0, t1, t2 = unit(-c0, -c1, -c2)                                                   # r0 x rb
-        fs = a_s[b] * r_mag * gamma
-        ts = 0.5 * a_s[b] * r_mag * r_mag * gamma
-        # mq: the rotation of z onto rb (Wang and Mora's X'Y'Z' representation)
-        m0 = SQRT_HALF * math.sqrt(max(r_mag + rb2, 0.0) / r_mag)
-        rxy = math.sqrt(rb0 * rb0 + rb1 * rb1)
-        k = -SQRT_HALF / rxy * math.sqrt(max(r_mag - rb2, 0.0) / r_mag) if rxy != 0.0 else 0.0
-        m1, m2 = k * rb1, -k * rb0
-        # q21 = mq^-1 (qj^-1 qi) mq
-        a = mul(jw, -jx, -jy, -jz, iw, ix, iy, iz)
-        a = mul(a[0], a[1], a[2], a[3], m0, m1, m2, 0.0)
-        w, x, y, z = mul(m0, -m1, -m2, 0.0, a[0], a[1], a[2], a[3])
-        out_plane, in_plane = w * w + z * z, x * x + y * y
-        sign = 1.0 if z > 0 else (-1.0 if z < 0 else 0.0)
-        psi = 2.0 * math.atan2(abs(z), w) * sign                                # 2 acos(w / |(w, z)|)
-        theta = 2.0 * math.atan2(math.sqrt(in_plane), math.sqrt(out_plane))     # acos(w^2 - x^2 - y^2 + z^2)
-        if in_plane == 0.0:
-            cos_phi, sin_phi = 0.0, 0.0
-        elif out_plane == 0.0:
-            cos_phi, sin_phi = y / math.sqrt(in_plane), -x / math.sqrt(in_plane)
-        else:
-            both = math.sqrt(out_plane * in_plane)
-            cos_phi, sin_phi = (x * z + w * y) / both, (y * z - w * x) / both
-        e = a_s[b] * r_mag * theta
-        Fsp = rot(m0, m1, m2, 0.0, -0.5 * e * cos_phi, -0.5 * e * sin_phi, 0.0)
-        Tsp = rot(m0, m1, m2, 0.0, 0.25 * e * r_mag * sin_phi, -0.25 * e * r_mag * cos_phi, 0.0)
-        Tb = rot(m0, m1, m2, 0.0, -bend[b] * theta * sin_phi, bend[b] * theta * cos_phi, 0.0)
-        Tt = rot(m0, m1, m2, 0.0, 0.0, 0.0, twist[b] * psi)
-        Fs = (fs * s0 + Fsp[0], fs * s1 + Fsp[1], fs * s2 + Fsp[2])
-        Ts = (ts * t0 + Tsp[0], ts * t1 + Tsp[1], ts * t2 + Tsp[2])
-        g = Fr / r_mag
-        f = rot(jw, jx, jy, jz, g * rb0 + Fs[0], g * rb1 + Fs[1], g * rb2 + Fs[2])
-        tj = rot(jw, jx, jy, jz, Ts[0] + Tt[0] + Tb[0], Ts[1] + Tt[1] + Tb[1], Ts[2] + Tt[2] + Tb[2])
-        ti = rot(jw, jx, jy, jz, Ts[0] - Tt[0] - Tb[0], Ts[1] - Tt[1] - Tb[1], Ts[2] - Tt[2] - Tb[2])
-        for k3 in range(3):
-            res[k3], res[3 + k3], res[6 + k3] = f[k3], tj[k3], ti[k3]
-        res[9] = Fr
-        res[10] = math.sqrt(Fs[0] * Fs[0] + Fs[1] * Fs[1] + Fs[2] * Fs[2])
-        res[11] = math.sqrt(Tb[0] * Tb[0] + Tb[1] * Tb[1] + Tb[2] * Tb[2])
-        res[12] = math.sqrt(Tt[0] * Tt[0] + Tt[1] * Tt[1] + Tt[2] * Tt[2])
-
     x, res = np.empty(12), np.empty(13)
     for b in range(len(L)):
         for k in range(6):
             x[k], x[6 + k] = zi[b, k], zj[b, k]
         if h == 0.0:
-            loads(b, x, res)
+            _bond_loads(r0, L, a_r, a_s, bend, twist, b, x, res)
             out[b, :] = res
             continue
         for d in range(12):
             at = x[d]
             for sign in (1.0, -1.0):
                 x[d] = at + sign * h
-                loads(b, x, res)
+                _bond_loads(r0, L, a_r, a_s, bend, twist, b, x, res)
                 c = sign / (2.0 * h)
                 for k in range(3):
                     blocks[b, k, d] += c * res[k]                # on i: force1on2, minus the torque on i
@@ -536,122 +550,173 @@ def solve_nonlinear_fracture(net: BondNetwork, strengths: Strengths, supports: S
     with threadpool_limits(limits=1):
         t0 = time.perf_counter()
         nw = _Network(net, supports, np.ones(len(net.L), bool), strengths, contacts)
-        setup = time.perf_counter() - t0
-        step = first_strain / steps_to_first if math.isfinite(first_strain) and first_strain > 0 else strain_max / 50
-        base_step = step
-        z, strain, secant = np.zeros(supports.drive.size), 0.0, None
-        scale = None
-        events: list[Event] = []
-        peak, peak_alive, peak_x, modulus, stopped = 0.0, None, None, float("nan"), f"strain_max {strain_max:g} reached"
+        run = _Loading(nw, t0, time.perf_counter() - t0, strain_max=strain_max, maxiter=maxiter,
+                       ptc_in_step=ptc_in_step, ptc_after_event=ptc_after_event, fire_steps=fire_steps,
+                       out_of_balance=out_of_balance, say=say)
+        run.step = first_strain / steps_to_first if math.isfinite(first_strain) and first_strain > 0 \
+            else strain_max / 50
+        run.base_step = run.step
+        return run.events_until(f_rtol, events_max, tolerance, locate_rtol, stop_fraction)
 
-        def out_of_balance_state(got, limit):
-            """got, or where it is None the least unbalanced state the solves passed if its max |F| is within
-            ``limit`` (iterations -1): the motion goes on in the next load steps, the residual left the force that
-            moves the spheres, as in LAMMPS's dynamics, where they move while the wall does.  Its residual is taken
-            again with the contact candidates found from it (the solves' were found where they started: a state of
-            small residual that overlapped pairs outside them was taken once, at 160x the stress of its neighbours)."""
-            if got is None and nw.best[1] is not None:
-                z_best = nw.best[1]
-                nw.refresh(z_best)
-                worst = float(np.max(np.abs(nw.residual(z_best))))
-                if worst <= limit:
-                    unbalanced.append(worst / scale)
-                    return z_best, -1
-            return got
 
-        def equilibrium(z_from, e_from, e_to, accept=True):
-            """Equilibrium at e_to from the one at e_from, predicted by the secant of the last two (the linear
-            network's unit solution where there is none); with ``accept``, a state within 10x Newton's tolerance where
-            none is found (the stalls of clusters that hang by a few bonds sit at 1.2-9x it: measured)."""
-            slope = nw.unit if secant is None else secant
-            nw.best = (math.inf, None)
-            got = nw.solve(z_from + slope * (e_to - e_from), e_to, f_tol, maxiter, ptc_in_step)
-            return out_of_balance_state(got, 10.0 * f_tol) if accept else got
+class _Loading:
+    """:func:`solve_nonlinear_fracture`'s load steps and events on one network: the state reached (``z`` at
+    ``strain``, the secant of the last two equilibria), the step, the events and the peak."""
 
-        def settle(z_guess, e):
-            """Equilibrium at e after an event or where load steps however short find none: longer continuation, then
-            dynamics (a longer run of it did not settle a slab after its first break: measured, the restructured 0.03
-            seed 1 slab still moving at 40-100x the tolerance after 20 000 steps), else a state out of balance."""
-            nw.best = (math.inf, None)
-            return out_of_balance_state(nw.solve(z_guess, e, f_tol, maxiter, ptc_after_event)
-                                        or nw.relax(z_guess, e, f_tol, fire_steps), out_of_balance * scale)
+    def __init__(self, nw: _Network, t0: float, setup: float, *, strain_max: float, maxiter: int,
+                 ptc_in_step: int, ptc_after_event: int, fire_steps: int, out_of_balance: float, say):
+        self.nw, self.t0, self.setup, self.strain_max, self.say = nw, t0, setup, strain_max, say
+        self.maxiter, self.ptc_in_step, self.ptc_after_event = maxiter, ptc_in_step, ptc_after_event
+        self.fire_steps, self.out_of_balance = fire_steps, out_of_balance
+        self.z, self.strain, self.secant = np.zeros(nw.supports.drive.size), 0.0, None
+        self.step = self.base_step = math.nan
+        self.scale, self.f_tol = None, math.inf
+        self.events: list[Event] = []
+        self.peak, self.peak_alive, self.peak_x, self.modulus = 0.0, None, None, float("nan")
+        self.stopped = f"strain_max {strain_max:g} reached"
+        self.unbalanced: list[float] = []       # max |F| / the forces' scale of each state taken out of balance
+        self.flowing = False                    # the last state settle's, out of balance: the next straight to settle
 
-        f_tol = math.inf
-        unbalanced: list[float] = []            # max |F| / the forces' scale of each state taken out of balance
-        flowing = False                         # the last state settle's, out of balance: the next straight to settle
-        while strain < strain_max and len(events) < events_max:
-            target = min(strain + step, strain_max)
-            if scale is None:       # the first step's reactions (the forces' scale) set Newton's tolerance
-                trial = nw.internal(nw.prescribed(z + nw.unit * (target - strain), target))
-                scale = float(np.max(np.abs(np.where(nw.free, 0.0, trial.ravel()))))
-                f_tol = f_rtol * scale
-            got = None if flowing else equilibrium(z, strain, target)
-            if got is None and (flowing or step < base_step / 64):
-                # no equilibrium near, however short the step (a sphere slips off another, a branch buckles): the
-                # motion followed by continuation as after an event
-                got = settle(z + (nw.unit if secant is None else secant) * (target - strain), target)
-                if got is None and step < base_step / 64:
-                    stopped = f"no equilibrium found at strain {target:.5g} (an instability the steps do not follow)"
-                    break
-                flowing = got is not None and got[1] < 0        # (a longer step that settles nowhere: halved)
+    def out_of_balance_state(self, got, limit):
+        """got, or where it is None the least unbalanced state the solves passed if its max |F| is within
+        ``limit`` (iterations -1): the motion goes on in the next load steps, the residual left the force that
+        moves the spheres, as in LAMMPS's dynamics, where they move while the wall does.  Its residual is taken
+        again with the contact candidates found from it (the solves' were found where they started: a state of
+        small residual that overlapped pairs outside them was taken once, at 160x the stress of its neighbours)."""
+        nw = self.nw
+        if got is None and nw.best[1] is not None:
+            z_best = nw.best[1]
+            nw.refresh(z_best)
+            worst = float(np.max(np.abs(nw.residual(z_best))))
+            if worst <= limit:
+                self.unbalanced.append(worst / self.scale)
+                return z_best, -1
+        return got
+
+    def equilibrium(self, z_from, e_from, e_to, accept=True):
+        """Equilibrium at e_to from the one at e_from, predicted by the secant of the last two (the linear
+        network's unit solution where there is none); with ``accept``, a state within 10x Newton's tolerance where
+        none is found (the stalls of clusters that hang by a few bonds sit at 1.2-9x it: measured)."""
+        nw = self.nw
+        slope = nw.unit if self.secant is None else self.secant
+        nw.best = (math.inf, None)
+        got = nw.solve(z_from + slope * (e_to - e_from), e_to, self.f_tol, self.maxiter, self.ptc_in_step)
+        return self.out_of_balance_state(got, 10.0 * self.f_tol) if accept else got
+
+    def settle(self, z_guess, e):
+        """Equilibrium at e after an event or where load steps however short find none: longer continuation, then
+        dynamics (a longer run of it did not settle a slab after its first break: measured, the restructured 0.03
+        seed 1 slab still moving at 40-100x the tolerance after 20 000 steps), else a state out of balance."""
+        nw = self.nw
+        nw.best = (math.inf, None)
+        return self.out_of_balance_state(nw.solve(z_guess, e, self.f_tol, self.maxiter, self.ptc_after_event)
+                                         or nw.relax(z_guess, e, self.f_tol, self.fire_steps),
+                                         self.out_of_balance * self.scale)
+
+    def events_until(self, f_rtol, events_max, tolerance, locate_rtol, stop_fraction) -> FractureResult:
+        """Load steps until ``strain_max``, ``events_max`` events, a fall below ``stop_fraction`` of the peak or a
+        state no step finds; each crossing of B = 1 located to ``locate_rtol`` and broken as an event."""
+        nw = self.nw
+        while self.strain < self.strain_max and len(self.events) < events_max:
+            target = min(self.strain + self.step, self.strain_max)
+            if self.scale is None:  # the first step's reactions (the forces' scale) set Newton's tolerance
+                trial = nw.internal(nw.prescribed(self.z + nw.unit * (target - self.strain), target))
+                self.scale = float(np.max(np.abs(np.where(nw.free, 0.0, trial.ravel()))))
+                self.f_tol = f_rtol * self.scale
+            got = self.load_step(target)
+            if got == "stop":
+                break
             if got is None:
-                step *= 0.5
+                self.step *= 0.5
                 continue
-            z_new, iterations = got
-            B, _ = breaking_index(nw.loads(z_new), nw.strengths)
-            if math.isnan(modulus):
-                modulus = nw.stress(z_new) / target
+            B, _ = breaking_index(nw.loads(got[0]), nw.strengths)
+            if math.isnan(self.modulus):
+                self.modulus = nw.stress(got[0]) / target
             if B.max(initial=0.0) < 1.0:
-                secant = (z_new - z) / (target - strain) if iterations >= 0 else None
-                z, strain = z_new, target
-                nw.commit(z)
-                if iterations <= 3:         # an easy step, or one out of balance: back towards the first step's size
-                    step = min(1.5 * step, base_step)
-                say(f"quasi-static (nonlinear): strain {strain:.4f} of {strain_max:g}, stress {nw.stress(z):.4g} MPa, "
-                    f"max B {B.max(initial=0.0):.3f}, "
-                    + (f"{got[1]} Newton iterations, " if iterations >= 0 else
-                       f"out of balance by {unbalanced[-1]:.2g} of the forces' scale, ")
-                    + f"{time.perf_counter() - t0:.0f} s")
+                self.accept(got, target, B)
                 continue
-            # the first crossing between strain and target, by bisection
-            lo, hi, z_lo, z_hi = strain, target, z, z_new
-            while hi - lo > locate_rtol * hi:
-                mid = 0.5 * (lo + hi)
-                got = equilibrium(z_lo, lo, mid, accept=False)
-                if got is None:
-                    break
-                B_mid, _ = breaking_index(nw.loads(got[0]), nw.strengths)
-                if B_mid.max(initial=0.0) >= 1.0:
-                    hi, z_hi = mid, got[0]
-                else:
-                    lo, z_lo = mid, got[0]
-            z, strain = z_hi, hi
-            touching = nw.commit(z)
-            stress = nw.stress(z)
-            B, which = breaking_index(nw.loads(z), nw.strengths)
-            k = B >= (1.0 - tolerance) * B.max()
-            ids = np.flatnonzero(nw.alive)[k]
-            if stress > peak:
-                peak, peak_alive, peak_x = stress, nw.alive.copy(), z.reshape(-1, 6).copy()
-            alive = nw.alive.copy()
-            alive[ids] = False
-            nw.set_alive(alive)
-            got = settle(z, strain)
-            if got is None:         # no equilibrium near the last one: the network snaps through (dynamic): none after
-                events.append(Event(strain, stress, math.nan, [int(b) for b in ids], 0, False,
-                                    [int(c) for c in which[k]], touching))
-                stopped = f"no equilibrium after the event at strain {strain:.5g} (snap-through)"
+            self.locate(got[0], target, locate_rtol)
+            if not self.event(tolerance, stop_fraction):
                 break
-            z, secant = got[0], None
-            touching = nw.commit(z)
-            after = nw.stress(z)
-            events.append(Event(strain, stress, after, [int(b) for b in ids], max(got[1], 0), False,
-                                [int(c) for c in which[k]], touching))
-            say(f"quasi-static (nonlinear): event {len(events)}, {int((~nw.alive).sum())} bonds broken, strain "
-                f"{strain:.5f}, stress {stress:.4g} -> {after:.4g} MPa (peak {peak:.4g})")
-            if after < stop_fraction * peak:
-                stopped = f"stress fell below {stop_fraction:g} of the peak"
+        return FractureResult(self.modulus, self.events, nw.alive, self.stopped, time.perf_counter() - self.t0,
+                              self.setup, "newton", nw.factorizations, peak_alive=self.peak_alive,
+                              peak_x=self.peak_x, end_x=self.z.reshape(-1, 6), loose=int(nw.loose.sum()),
+                              unbalanced=self.unbalanced)
+
+    def load_step(self, target):
+        """The state at ``target``: (z, Newton iterations; -1 out of balance), None where the step should be
+        halved, "stop" where no equilibrium is found however short the step."""
+        nw = self.nw
+        got = None if self.flowing else self.equilibrium(self.z, self.strain, target)
+        if got is None and (self.flowing or self.step < self.base_step / 64):
+            # no equilibrium near, however short the step (a sphere slips off another, a branch buckles): the
+            # motion followed by continuation as after an event
+            got = self.settle(self.z + (nw.unit if self.secant is None else self.secant) * (target - self.strain),
+                              target)
+            if got is None and self.step < self.base_step / 64:
+                self.stopped = f"no equilibrium found at strain {target:.5g} (an instability the steps do not follow)"
+                return "stop"
+            self.flowing = got is not None and got[1] < 0       # (a longer step that settles nowhere: halved)
+        return got
+
+    def accept(self, got, target, B) -> None:
+        """The load step to ``target`` taken: no bond at its limit."""
+        nw = self.nw
+        z_new, iterations = got
+        self.secant = (z_new - self.z) / (target - self.strain) if iterations >= 0 else None
+        self.z, self.strain = z_new, target
+        nw.commit(self.z)
+        if iterations <= 3:         # an easy step, or one out of balance: back towards the first step's size
+            self.step = min(1.5 * self.step, self.base_step)
+        self.say(f"quasi-static (nonlinear): strain {self.strain:.4f} of {self.strain_max:g}, stress "
+                 f"{nw.stress(self.z):.4g} MPa, max B {B.max(initial=0.0):.3f}, "
+                 + (f"{iterations} Newton iterations, " if iterations >= 0 else
+                    f"out of balance by {self.unbalanced[-1]:.2g} of the forces' scale, ")
+                 + f"{time.perf_counter() - self.t0:.0f} s")
+
+    def locate(self, z_new, target, locate_rtol) -> None:
+        """The first crossing of B = 1 between the state reached and ``target``, by bisection: the state there."""
+        lo, hi, z_lo, z_hi = self.strain, target, self.z, z_new
+        while hi - lo > locate_rtol * hi:
+            mid = 0.5 * (lo + hi)
+            got = self.equilibrium(z_lo, lo, mid, accept=False)
+            if got is None:
                 break
-        return FractureResult(modulus, events, nw.alive, stopped, time.perf_counter() - t0, setup, "newton",
-                              nw.factorizations, peak_alive=peak_alive, peak_x=peak_x, end_x=z.reshape(-1, 6),
-                              loose=int(nw.loose.sum()), unbalanced=unbalanced)
+            B_mid, _ = breaking_index(self.nw.loads(got[0]), self.nw.strengths)
+            if B_mid.max(initial=0.0) >= 1.0:
+                hi, z_hi = mid, got[0]
+            else:
+                lo, z_lo = mid, got[0]
+        self.z, self.strain = z_hi, hi
+
+    def event(self, tolerance, stop_fraction) -> bool:
+        """Break the bonds at their limit (within ``tolerance`` of the largest B) and settle; False where the run
+        stops (a snap-through, or the stress below ``stop_fraction`` of the peak)."""
+        nw = self.nw
+        touching = nw.commit(self.z)
+        stress = nw.stress(self.z)
+        B, which = breaking_index(nw.loads(self.z), nw.strengths)
+        k = B >= (1.0 - tolerance) * B.max()
+        ids = np.flatnonzero(nw.alive)[k]
+        if stress > self.peak:
+            self.peak, self.peak_alive, self.peak_x = stress, nw.alive.copy(), self.z.reshape(-1, 6).copy()
+        alive = nw.alive.copy()
+        alive[ids] = False
+        nw.set_alive(alive)
+        got = self.settle(self.z, self.strain)
+        if got is None:         # no equilibrium near the last one: the network snaps through (dynamic): none after
+            self.events.append(Event(self.strain, stress, math.nan, [int(b) for b in ids], 0, False,
+                                     [int(c) for c in which[k]], touching))
+            self.stopped = f"no equilibrium after the event at strain {self.strain:.5g} (snap-through)"
+            return False
+        self.z, self.secant = got[0], None
+        touching = nw.commit(self.z)
+        after = nw.stress(self.z)
+        self.events.append(Event(self.strain, stress, after, [int(b) for b in ids], max(got[1], 0), False,
+                                 [int(c) for c in which[k]], touching))
+        self.say(f"quasi-static (nonlinear): event {len(self.events)}, {int((~nw.alive).sum())} bonds broken, strain "
+                 f"{self.strain:.5f}, stress {stress:.4g} -> {after:.4g} MPa (peak {self.peak:.4g})")
+        if after < stop_fraction * self.peak:
+            self.stopped = f"stress fell below {stop_fraction:g} of the peak"
+            return False
+        return True

@@ -26,7 +26,8 @@ from opalflow.bpm.deck import particle_contacts, particle_material
 from opalflow.bpm.facts import RunFacts
 from opalflow.bpm.loading import LOADINGS
 from opalflow.materials import contact_properties
-from opalflow.bpm.quasistatic import CHECKS, Event, SavedState, Stopped, Strengths, peak_facts, solve_fracture
+from opalflow.bpm.quasistatic import (CHECKS, Event, FractureResult, SavedState, Stopped, Strengths, peak_facts,
+                                      solve_fracture)
 from opalflow.bpm.scene import scene_of
 from opalflow.bpm.spec import BREAKING_RULES, BpmWorkflow
 from opalflow.bpm.methods import METHODS
@@ -135,6 +136,36 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
         + (f"; contacts: {describe_contacts(contacts, spec.contacts.quasistatic, spec.contacts.reference_strain)}"
            if contacts else ""))
     strengths, supports = strengths_of(data, sample.coefficients, spec.bonds.breaking), loading.supports(sample)
+    res = _solve(spec, out, net, data, sample, strengths, supports, contacts, state, record, written, tell)
+    result = _result(spec, res, s, sample, run, loading, contacts)
+    summary = result.summary()
+    record.sessions[-1].last_step = result.quasistatic.events
+    plots = METHODS["quasistatic"].draws_plots(c.plots)
+
+    def files(stage):
+        stage(RESULTS).write_bytes(h5_bytes(lambda h: _fill_h5(h, res, data, result, sample, run,
+                                                                          spec.bonds.breaking)))
+        if plots:
+            _plot_curve(stage("stress_strain.png"), res, result)
+        frames = _frames(net, data, res)
+        if frames and plots:
+            fracture.plot_fracture(stage("fracture.png"), frames, data.box_lengths, float(np.mean(data.diameters)),
+                                   title=f"{spec.name} (quasi-static, {loading.name})")
+        for tag, (_, snap) in zip(("peak", "end"), frames):
+            _write_dump(stage(f"fracture.{tag}.dump"), data, snap)
+
+    written = finish(out, summary, lambda: _report(run, summary, result, loading, sample, plots), result=type(result),
+                     files=files, record=record, started=t0)
+    (out / STATE).unlink(missing_ok=True)
+    (out / PEAK).unlink(missing_ok=True)
+    return written
+
+
+def _solve(spec: BpmWorkflow, out: Path, net, data, sample, strengths, supports, contacts, state, record, written,
+           tell) -> FractureResult:
+    """The events of the linear method (and the nonlinear one after its first event sets the load step); a
+    scheduler's signal or Ctrl-C ends the session in run.json with the state saved."""
+    c = spec.compression
     try:
         res = solve_fracture(net, strengths, data.positions, supports, strain_max=c.strain_max,
                              stop_fraction=c.stop_fraction, events_max=1 if c.geometry == "nonlinear" else c.events_max,
@@ -155,12 +186,18 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
         raise Interrupted(out, None) from None
     finally:
         written.result()                         # data.lmp, written while the events ran, is whole
+    return res
+
+
+def _result(spec: BpmWorkflow, res: FractureResult, s, sample, run, loading, contacts) -> CompressionResult:
+    """The run's result: the peak's facts, the broken bonds by material and by check, the events' facts."""
+    data = sample.structure
     got = peak_facts(res)
     by_type = np.bincount(data.bond_types[~res.alive] - 1, minlength=len(sample.bins.materials))
     by_material = {m: int(sum(k for k, mk in zip(by_type, sample.bins.materials) if mk == m))
                    for m in sorted(set(sample.bins.materials))}       # (no string per bond: 0.6 GiB at the paper's)
     E = got.youngs_modulus_GPa
-    result = CompressionResult.of(
+    return CompressionResult.of(
         spec.kind, run.sample.structure or {}, workflow=spec.name, method="quasistatic", loading=loading.name,
         youngs_modulus_GPa=E, youngs_modulus_specimen_GPa=E,
         strength_MPa=got.strength_MPa, strain_at_peak=got.strain_at_peak,
@@ -177,27 +214,6 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
                  f"E = {E:.4g} GPa, no strength: no bond reached its limit before the run stopped ({res.stopped}; "
                  "quasi-static)",
     ).refer(run.references)
-    summary = result.summary()
-    record.sessions[-1].last_step = got.events
-    plots = METHODS["quasistatic"].draws_plots(c.plots)
-
-    def files(stage):
-        stage(RESULTS).write_bytes(h5_bytes(lambda h: _fill_h5(h, res, data, result, sample, run,
-                                                                          spec.bonds.breaking)))
-        if plots:
-            _plot_curve(stage("stress_strain.png"), res, result)
-        frames = _frames(net, data, res)
-        if frames and plots:
-            fracture.plot_fracture(stage("fracture.png"), frames, data.box_lengths, float(np.mean(data.diameters)),
-                                   title=f"{spec.name} (quasi-static, {loading.name})")
-        for tag, (_, snap) in zip(("peak", "end"), frames):
-            _write_dump(stage(f"fracture.{tag}.dump"), data, snap)
-
-    written = finish(out, summary, lambda: _report(run, summary, result, loading, sample, plots), result=type(result),
-                     files=files, record=record, started=t0)
-    (out / STATE).unlink(missing_ok=True)
-    (out / PEAK).unlink(missing_ok=True)
-    return written
 
 
 def resumed_state(out: Path, say) -> SavedState:

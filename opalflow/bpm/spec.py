@@ -188,6 +188,12 @@ class BpmWorkflow(WorkflowSpec):
 
     def validate(self) -> None:
         super().validate()
+        self._check_materials()
+        self._check_bonds_and_contacts()
+        self._check_compression()
+
+    def _check_materials(self) -> None:
+        """[materials.NAME]: known materials, known keys, values in range."""
         materials = material_names()
         for mname, props in self.materials.items():
             check_name("materials", mname)
@@ -199,6 +205,9 @@ class BpmWorkflow(WorkflowSpec):
                 lo, hi = PROPERTY_RANGES[key]
                 check(is_number(value) and lo <= value <= hi, f"materials.{mname}.{key}", value,
                       f"must be a number in [{lo:g}, {hi:g}]")
+
+    def _check_bonds_and_contacts(self) -> None:
+        """The matrix's material, [bonds] and [contacts]."""
         check_material("material", self.material)
         b = self.bonds
         check(b.model in BOND_MODELS, "bonds.model", b.model, f"must be one of {', '.join(BOND_MODELS)}")
@@ -225,7 +234,10 @@ class BpmWorkflow(WorkflowSpec):
         if k.quasistatic != "off":
             check(self.compression.local_rtol == 0, "compression.local_rtol", self.compression.local_rtol,
                   "must be 0 with contacts.quasistatic (the local step takes no contacts)")
-        c = self.compression
+
+    def _check_compression(self) -> None:
+        """[compression]: the loading, the method and their settings (each as one line: field, value, allowed)."""
+        b, c = self.bonds, self.compression
         check(0 < c.strain_max <= 0.5, "compression.strain_max", c.strain_max, "must be in (0, 0.5]")
         check(0 < c.plate_speed_m_s <= 100, "compression.plate_speed_m_s", c.plate_speed_m_s,
               "must be in (0, 100] m/s (quasi-static loading)")
@@ -274,7 +286,6 @@ class BpmWorkflow(WorkflowSpec):
         self._apply_calibration()
         check(0 < c.restart_every_strain <= 1, "compression.restart_every_strain", c.restart_every_strain,
               "must be in (0, 1] (restart files every this much strain; >= strain_max: none)")
-
 
     def _apply_calibration(self) -> None:
         """Fold the first estimate (``[calibration]``) into ``materials.<material>``."""

@@ -305,6 +305,12 @@ def _sweeps(bs: int):
     (each a loop over its own blocks, no test per block: columns sorted), and ``backward(indptr, indices, data,
     Dinv, x, old, b, first, last)`` the backward sweep from x, rows and blocks in reverse, x_j read from ``old``
     outside the share (``old`` is ``x`` for a whole sweep)."""
+    return _lower_sweep(bs), _rest_sweep(bs), _backward_sweep(bs)
+
+
+@functools.cache
+def _lower_sweep(bs: int):
+    """The forward sweep of block rows ``first`` .. ``last`` - 1 (:func:`_sweeps`)."""
 
     @njit(cache=True, nogil=True)
     def lower(indptr, indices, data, split, Dinv, x, b, first, last):
@@ -328,6 +334,13 @@ def _sweeps(bs: int):
                     acc += Dinv[row, a, c] * r[c]
                 x[at + a] = acc
 
+    return lower
+
+
+@functools.cache
+def _rest_sweep(bs: int):
+    """r = -(the blocks the forward sweeps left out) x (:func:`_sweeps`)."""
+
     @njit(cache=True, nogil=True)
     def rest(indptr, indices, data, split, x, r, first, last):
         acc = np.empty(bs, data.dtype)
@@ -348,6 +361,13 @@ def _sweeps(bs: int):
                             acc[a] -= data[jj, a, c] * xc
             for a in range(bs):
                 r[row * bs + a] = acc[a]
+
+    return rest
+
+
+@functools.cache
+def _backward_sweep(bs: int):
+    """The backward sweep of block rows ``last`` - 1 .. ``first`` (:func:`_sweeps`)."""
 
     @njit(cache=True, nogil=True)
     def backward(indptr, indices, data, Dinv, x, old, b, first, last):
@@ -379,7 +399,7 @@ def _sweeps(bs: int):
                     acc += Dinv[row, a, c] * r[c]
                 x[at + a] = acc
 
-    return lower, rest, backward
+    return backward
 
 
 def transfers(P, threads: int = 1):
