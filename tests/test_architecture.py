@@ -11,6 +11,7 @@ from pathlib import Path
 import opalflow
 from opalflow import registry
 from opalflow.cli import main
+from opalflow.jit import njit
 
 PACKAGE = Path(opalflow.__file__).resolve().parent
 #: modules every track may use; they import no track
@@ -223,3 +224,33 @@ def test_a_run_folders_files_are_named_in_one_module():
                     if name in node.value:
                         spelled.setdefault(name, set()).add(str(path.relative_to(PACKAGE)))
     assert spelled == {name: {"store.py"} for name in ("run.json", "summary.json", "results.h5")}
+
+
+def test_no_function_is_over_80_lines():
+    """A function (method included, the functions defined inside it counted in its lines) fits a screen: 80 lines
+    at most (issue 54; the nonlinear method's kernel and event loop had grown to 100 and 145)."""
+    long = [f"{path.relative_to(PACKAGE)}:{node.name} ({node.end_lineno - node.lineno + 1} lines)"
+            for path in PACKAGE.rglob("*.py") for node in ast.walk(ast.parse(path.read_text()))
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and node.end_lineno - node.lineno >= 80]
+    assert long == []
+
+
+@njit(nogil=True)
+def _twice(x):
+    return 2.0 * x
+
+
+@njit(nogil=True)
+def _sum_twice(values):
+    total = 0.0
+    for v in values:
+        total += _twice(v)
+    return total
+
+
+def test_a_lazy_kernel_calls_another():
+    """opalflow.jit.njit: a kernel that calls another such kernel compiles (against the callee's dispatcher) and
+    gives the callee's numbers."""
+    import numpy as np
+
+    assert _sum_twice(np.arange(4.0)) == 12.0
