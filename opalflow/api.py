@@ -85,15 +85,6 @@ def load_workflow(workflow: str | Path | dict | WorkflowSpec, set: Settings = No
     return registry.spec_from_dict(raw, raw_workflow(workflow) if set else None)
 
 
-def run_json(out: str | Path, field: str = "folder") -> dict:
-    """The run record of a prepared run folder as a dict (kind, spec, state, deck facts, sessions)."""
-    import dataclasses
-
-    from opalflow.runs.record import RunRecord
-
-    return dataclasses.asdict(RunRecord.read(out, field))
-
-
 def run(workflow: str | Path | dict | WorkflowSpec | None, out: str | Path, *, set: Settings = None, np: int = 1,
         resume: bool = False, suffix: str | None = None, executor: str | None = None, quiet: bool = False) -> dict:
     """Build, run and analyze ``workflow`` into the folder ``out``; returns its summary (summary.json).
@@ -233,10 +224,11 @@ def check(workflow: str | Path | dict | WorkflowSpec, out: str | Path, *, set: S
 
 def analyze(folder: str | Path) -> dict:
     """The results of a run folder whose deck ran outside opalflow (``bash run.sh``): writes and returns them."""
+    from opalflow.runs.record import RunRecord
     from opalflow.runs.result import read_summary
 
     folder = Path(folder)
-    kind = run_json(folder)["spec"].get("kind", registry.DEFAULT_KIND)
+    kind = RunRecord.read(folder).kind or registry.DEFAULT_KIND
     registry.get(kind).analyze_folder(folder)
     return read_summary(folder)
 

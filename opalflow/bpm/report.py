@@ -243,11 +243,12 @@ def git_commit() -> str:
 
 def provenance_group(h, run: RunFacts) -> None:
     """results.h5's ``provenance`` group, every method's: the spec, LAMMPS's version, opalflow's commit, the
-    seeds and the run's facts (:meth:`opalflow.bpm.facts.RunFacts.provenance`: the spec apart, the rest JSON)."""
+    seeds and the run's facts (:class:`opalflow.bpm.facts.RunFacts`: the spec apart; the workflow, the references
+    and the sample's facts as JSON)."""
     from opalflow.lammps.engine import lammps_version
 
-    facts = run.provenance()
-    spec = facts.pop("spec")
+    spec = run.spec.to_dict()
+    facts = {"workflow": run.workflow, "references": run.references, **run.sample.to_dict()}
     p = h.create_group("provenance")
     p.attrs["spec"] = json.dumps(spec)
     p.attrs["lammps_version"] = lammps_version()

@@ -9,6 +9,7 @@ and :mod:`opalflow.runs.status` reads any of them.  What a job came to is an :cl
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -130,23 +131,30 @@ def log_tail(folder: Path, lines: int = 15) -> str:
     return file_tail(logs[-1], lines) if logs else ""
 
 
-def _stop_on_signals(folder: Path, asked: list) -> dict:
-    """SIGUSR1 (SLURM's warning before the time limit) and SIGTERM: write a restart and stop; a USR1 that came
-    before this handler (the folder's :data:`STOP_NOTE`, written by the SLURM array's script) counts too.  The
-    signals that came are appended to ``asked``; returns the handlers replaced (none off the main thread)."""
+@contextlib.contextmanager
+def _stop_on_signals(folder: Path, asked: list):
+    """While in it: SIGUSR1 (SLURM's warning before the time limit) and SIGTERM write a restart and stop; a USR1
+    that came before this handler (the folder's :data:`STOP_NOTE`, written by the SLURM array's script) counts too.
+    The signals that came are appended to ``asked``; on leaving, the note is gone and the caller's handlers are
+    back (a study's own process; none are replaced off the main thread)."""
     from opalflow.lammps.engine import request_stop
 
     def stop(signum, frame=None):
         asked.append(signal.Signals(signum).name)
         request_stop(signum, frame)
 
-    before = {}
+    before = []
     if threading.current_thread() is threading.main_thread():
-        before = {sig: signal.signal(sig, stop) for sig in (signal.SIGUSR1, signal.SIGTERM)}
-    if (folder / STOP_NOTE).exists():
-        (folder / STOP_NOTE).unlink()
-        stop(signal.SIGUSR1)
-    return before
+        before = [(sig, signal.signal(sig, stop)) for sig in (signal.SIGUSR1, signal.SIGTERM)]
+    try:
+        if (folder / STOP_NOTE).exists():
+            (folder / STOP_NOTE).unlink()
+            stop(signal.SIGUSR1)
+        yield
+    finally:
+        (folder / STOP_NOTE).unlink(missing_ok=True)       # a USR1 the handler took may have left its note too
+        for sig, handler in before:
+            signal.signal(sig, handler)
 
 
 def run_job(folder: str, np_: int = 1, threads: int = 1) -> Outcome:
@@ -158,8 +166,7 @@ def run_job(folder: str, np_: int = 1, threads: int = 1) -> Outcome:
     inherited: the same sums in the same order, so a job gives the same numbers to the last digit on a
     local pool, a Dask worker or a SLURM node, and jobs side by side do not oversubscribe the cores."""
     folder, asked = Path(folder).resolve(), []
-    before = _stop_on_signals(folder, asked)
-    try:
+    with _stop_on_signals(folder, asked):
         import scipy.linalg  # noqa: F401 - load every BLAS/OpenMP library first: threadpoolctl limits the loaded ones
         import scipy.sparse.linalg  # noqa: F401
         from threadpoolctl import threadpool_limits
@@ -169,10 +176,6 @@ def run_job(folder: str, np_: int = 1, threads: int = 1) -> Outcome:
         if got.state != "finished" and asked and not got.stopped:
             got.stopped = asked[0]
         return got
-    finally:
-        (folder / STOP_NOTE).unlink(missing_ok=True)       # a USR1 the handler took may have left its note too
-        for sig, handler in before.items():                # the caller's handlers back (a study's own process)
-            signal.signal(sig, handler)
 
 
 def _run_job(folder: Path, np_: int) -> Outcome:

