@@ -39,14 +39,16 @@ def case(name: str, diameter: float, sample: int) -> dict:
         extra = [*paper.study.paper_set, f"packing.diameter_nm={diameter:g}"]
         sets.append(f"study.paper_set={json.dumps(extra)}")
     spec = load_spec(WORKFLOWS / f"{name}.toml", sets)
-    p = plan(spec, sample=sample, say=lambda m: print(m, flush=True)).as_dict()
+    from opalflow.runs.result import table_of
+
+    p = plan(spec, sample=sample, say=lambda m: print(m, flush=True))
     return {"study": name, "diameter_nm": diameter, "command": "python -m opalflow plan " + name + " " + " ".join(
-        f"--set '{s}'" for s in sets), "jobs": len(p["jobs"]), "core_hours": p["core_hours"],
-        "longest_job_s": p["longest_job_s"], "peak_GiB": p["peak_MiB"] / 1024,
-        "particles": [min(j["n_particles"] for j in p["jobs"]), max(j["n_particles"] for j in p["jobs"])],
-        "events": [j.get("events") for j in p["jobs"]], "priced_by": sorted({j.get("priced_by", "first solve")
-                                                                             for j in p["jobs"]}),
-        "slurm": p["slurm"], "plan": p}
+        f"--set '{s}'" for s in sets), "jobs": len(p.jobs), "core_hours": p.core_hours,
+        "longest_job_s": p.longest_job_s, "peak_GiB": p.peak_MiB / 1024,
+        "particles": [min(j.facts.n_particles for j in p.jobs), max(j.facts.n_particles for j in p.jobs)],
+        "events": [j.prediction.events for j in p.jobs],
+        "priced_by": sorted({j.prediction.priced_by or "first solve" for j in p.jobs}),
+        "slurm": p.slurm, "plan": table_of(p)}
 
 
 def measured_paper_runs() -> list[dict]:

@@ -1,10 +1,14 @@
 """The Python API: one function per CLI verb (the CLI parses its arguments and calls these).
 
 >>> import opalflow
->>> summary = opalflow.run("lattice_sc", "runs/sc", set={"compression.strain_max": 0.002})
->>> summary["youngs_modulus_GPa"]
+>>> result = opalflow.run("lattice_sc", "runs/sc", set={"compression.strain_max": 0.002})
+>>> result.youngs_modulus_GPa                   # (also result["youngs_modulus_GPa"]: summary.json's table)
 >>> res = opalflow.load_results("runs/sc")
 >>> res["curve/stress_MPa"], res.units("curve/stress_MPa")
+
+``run``, ``build``, ``analyze`` give the run's result: its kind's :class:`opalflow.runs.result.Result` class
+(:class:`opalflow.bpm.result.CompressionResult` for a compression), typed, and a read-only mapping of its
+summary.json; ``check`` gives its :class:`opalflow.bpm.stability.StabilityCheck`, ``info`` an :class:`Info`.
 
 A workflow is a file path, the name of a file in ``workflows/`` (``opalflow.workflows()`` lists them), a
 workflow table as a dict (the TOML's content), or a spec already made.  ``set`` overrides fields: a dict
@@ -20,13 +24,18 @@ import copy
 import sys
 import tomllib
 from pathlib import Path
-from typing import Any, Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Callable
 
 from opalflow import registry
 from opalflow.resources import WORKFLOWS
+from opalflow.runs.result import Result
 from opalflow.runs.spec import executor_from_raw
 from opalflow.spec import SpecError, WorkflowSpec, apply_overrides, read_toml, set_value
 from opalflow.store import usable_folder
+
+if TYPE_CHECKING:
+    from opalflow.lammps.engine import LammpsInfo
 
 Settings = dict[str, Any] | list[str] | str | None
 
@@ -86,8 +95,10 @@ def load_workflow(workflow: str | Path | dict | WorkflowSpec, set: Settings = No
 
 
 def run(workflow: str | Path | dict | WorkflowSpec | None, out: str | Path, *, set: Settings = None, np: int = 1,
-        resume: bool = False, suffix: str | None = None, executor: str | None = None, quiet: bool = False) -> dict:
-    """Build, run and analyze ``workflow`` into the folder ``out``; returns its summary (summary.json).
+        resume: bool = False, suffix: str | None = None, executor: str | None = None, quiet: bool = False
+        ) -> Result:
+    """Build, run and analyze ``workflow`` into the folder ``out``; returns its result (summary.json as its kind's
+    result class).
 
     ``np``: MPI processes (runs ``lmp`` under mpiexec); ``resume``: continue the run in ``out`` from its
     newest restart file (``workflow`` None: the spec comes from ``out/run.json``); ``suffix``: accelerator
@@ -111,22 +122,19 @@ def run(workflow: str | Path | dict | WorkflowSpec | None, out: str | Path, *, s
         if suffix not in usable:
             raise SpecError("--suffix", suffix, f"this LAMMPS build offers {', '.join(usable) or 'none'}")
     from opalflow.runs.record import refuse_finished, run_kind
-    from opalflow.runs.result import read_summary
 
     kind = registry.get(spec.kind)
     if not resume and "executor" not in kind.options:      # (a study run again goes on: its finished jobs kept)
         refuse_finished(out)
     ex = executor_of(None if resume and workflow is None else workflow, set, executor)
     if "executor" in kind.options:              # a kind of many jobs sends them there
-        run_kind(kind, spec, out, np_=np, resume=resume, say=_say(quiet), suffix=suffix,
-                 executor=ex if executor is not None else None)
-    elif ex.type != "local":                    # any other run goes there as one job
+        return run_kind(kind, spec, out, np_=np, resume=resume, say=_say(quiet), suffix=suffix,
+                        executor=ex if executor is not None else None)
+    if ex.type != "local":                      # any other run goes there as one job
         if suffix:
             raise SpecError("--suffix", suffix, "is for runs on this machine (a submitted run uses the launcher)")
         return submit(spec, out, ex, np_=np, say=_say(quiet))
-    else:
-        run_kind(kind, spec, out, np_=np, resume=resume, say=_say(quiet), suffix=suffix)
-    return read_summary(out)            # as written (the typed result: opalflow.load_results(out).result)
+    return run_kind(kind, spec, out, np_=np, resume=resume, say=_say(quiet), suffix=suffix)
 
 
 def resumed_spec(out: Path, workflow=None, set: Settings = None) -> WorkflowSpec:
@@ -173,9 +181,9 @@ def executor_of(workflow, set: Settings = None, override: str | None = None):
     return executor_from_raw({} if workflow is None else raw_workflow(workflow, set), override)
 
 
-def submit(spec: WorkflowSpec, out: str | Path, ex, *, np_: int = 1, say=_stderr) -> dict:
+def submit(spec: WorkflowSpec, out: str | Path, ex, *, np_: int = 1, say=_stderr) -> Result:
     """One run as a job of the executor ``ex`` (Dask, SLURM): the folder ``out`` is its job folder
-    (resumed from its restart file where it has one); returns its summary, or raises EngineError with
+    (resumed from its restart file where it has one); returns its result, or raises EngineError with
     its log tail when it failed."""
     from opalflow.lammps.engine import EngineError
     from opalflow.runs.executors import executor
@@ -190,24 +198,27 @@ def submit(spec: WorkflowSpec, out: str | Path, ex, *, np_: int = 1, say=_stderr
     (_, got), = list(executor(ex, np_).run([str(out)], say))
     if not got.ok:
         raise EngineError(f"{got.error or got.state}\n--- log tail ---\n{got.log_tail}")
-    return got.summary
+    return got.result
 
 
 def build(workflow: str | Path | dict | WorkflowSpec, out: str | Path, *, set: Settings = None,
-          quiet: bool = False) -> dict:
-    """Everything a run writes before it runs (structure, data.lmp, in.lmp, run.sh, summary.json); no run."""
+          quiet: bool = False) -> Result:
+    """Everything a run writes before it runs (structure, data.lmp, in.lmp, run.sh, summary.json); no run.  Its
+    result holds what is known before the run (the structure's statistics; ``state`` "built")."""
     from opalflow.runs.result import read_summary
 
     spec = load_workflow(workflow, set)
     out = usable_folder(out, "out")
-    registry.get(spec.kind).build_workflow(spec, out, say=_say(quiet))
-    return read_summary(out)
+    kind = registry.get(spec.kind)
+    kind.build_workflow(spec, out, say=_say(quiet))
+    return kind.result_class().from_summary(read_summary(out))
 
 
 def check(workflow: str | Path | dict | WorkflowSpec, out: str | Path, *, set: Settings = None, steps: int = 3000,
           timestep_factor: float = 1.0, strain: float | None = None, bisect: bool = False,
-          quiet: bool = False) -> dict:
-    """A short run of the scene's real deck judged for numerical stability (``summary["passed"]``)."""
+          quiet: bool = False):
+    """A short run of the scene's real deck judged for numerical stability: the kind's check (a bonded-particle
+    scene's :class:`opalflow.bpm.stability.StabilityCheck`: ``.passed``, ``.headline``; stability.json)."""
     if steps < 100:
         raise SpecError("--steps", steps, "must be >= 100")
     if not 0 < timestep_factor <= 100:
@@ -215,41 +226,51 @@ def check(workflow: str | Path | dict | WorkflowSpec, out: str | Path, *, set: S
     if strain is not None and not 0 < strain <= 0.9:
         raise SpecError("--strain", strain, "must be in (0, 0.9] (compress the sample this far)")
     spec = load_workflow(workflow, set)
-    from opalflow.runs.result import table_of
-
-    check = registry.get(spec.kind).check_workflow(spec, usable_folder(out, "out"), say=_say(quiet), steps=steps,
-                                                   timestep_factor=timestep_factor, bisect=bisect, strain=strain)
-    return table_of(check)
+    return registry.get(spec.kind).check_workflow(spec, usable_folder(out, "out"), say=_say(quiet), steps=steps,
+                                                  timestep_factor=timestep_factor, bisect=bisect, strain=strain)
 
 
-def analyze(folder: str | Path) -> dict:
+def analyze(folder: str | Path) -> Result:
     """The results of a run folder whose deck ran outside opalflow (``bash run.sh``): writes and returns them."""
     from opalflow.runs.record import RunRecord
-    from opalflow.runs.result import read_summary
 
     folder = Path(folder)
     kind = RunRecord.read(folder).kind or registry.DEFAULT_KIND
-    registry.get(kind).analyze_folder(folder)
-    return read_summary(folder)
+    return registry.get(kind).analyze_folder(folder)
 
 
-def workflows() -> dict[str, dict]:
-    """The workflows in workflows/: {name: {"kind": ..., "description": ..., "path": ...}}."""
-    out = {}
+@dataclass
+class Workflow:
+    """A workflow file of ``workflows/``: its name (the file's stem), kind, description and path."""
+
+    name: str
+    kind: str
+    description: str
+    path: str
+
+
+def workflows() -> list[Workflow]:
+    """The workflows in workflows/, by name."""
+    out = []
     for path in sorted(WORKFLOWS.glob("*.toml")):
         raw = tomllib.loads(path.read_text())
-        out[path.stem] = {"kind": raw.get("kind", registry.DEFAULT_KIND), "description": raw.get("description", ""),
-                          "path": str(path)}
+        out.append(Workflow(path.stem, raw.get("kind", registry.DEFAULT_KIND), raw.get("description", ""), str(path)))
     return out
 
 
-def info() -> dict:
-    """opalflow's version, the LAMMPS library's version, packages and accelerators, the executables found
-    (lmp, mpiexec, liggghts) and the workflow kinds."""
-    import dataclasses
+@dataclass
+class Info:
+    """What ``python -m opalflow info`` shows: opalflow's version, the LAMMPS library's facts (version, packages,
+    accelerators, the executables found: lmp, mpiexec, liggghts) and the workflow kinds ({name: what it does})."""
 
+    opalflow_version: str
+    lammps: LammpsInfo
+    kinds: dict[str, str]
+
+
+def info() -> Info:
+    """This installation's :class:`Info`."""
     from opalflow.lammps.engine import lammps_info
     from opalflow.version import __version__
 
-    return {"opalflow_version": __version__, **dataclasses.asdict(lammps_info()),
-            "kinds": {k.name: k.summary for k in registry.kinds().values()}}
+    return Info(__version__, lammps_info(), {k.name: k.summary for k in registry.kinds().values()})

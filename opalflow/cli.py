@@ -18,10 +18,11 @@ from opalflow.version import __version__
 
 
 def cmd_info(args) -> int:
-    from opalflow.lammps.engine import accelerator_args, lammps_info
+    from opalflow.lammps.engine import accelerator_args
 
-    info = lammps_info()
-    print(f"opalflow {__version__}")
+    facts = api.info()
+    info = facts.lammps
+    print(f"opalflow {facts.opalflow_version}")
     where = f"OPALFLOW_LAMMPS={info.prefix}" if info.prefix else "the installed lammps module"
     print(f"LAMMPS {info.version} (Python module {info.module}: {where})")
     for pkg, present in info.reported.items():
@@ -41,8 +42,8 @@ def cmd_info(args) -> int:
 
 def cmd_list(args) -> int:
     """The workflows in workflows/: name, kind, description."""
-    for name, w in api.workflows().items():
-        print(f"{name:<20} {w['kind']:<19} {w['description']}")
+    for w in api.workflows():
+        print(f"{w.name:<20} {w.kind:<19} {w.description}")
     return 0
 
 
@@ -59,22 +60,22 @@ def cmd_run(args) -> int:
     command_run(args.out, STARTED)
 
     try:
-        summary = api.run(args.workflow, args.out, set=args.set, np=args.np, resume=args.resume, suffix=args.suffix,
-                          executor=args.executor)
+        result = api.run(args.workflow, args.out, set=args.set, np=args.np, resume=args.resume, suffix=args.suffix,
+                         executor=args.executor)
     except EngineError as exc:
         print(f"error: {exc}", file=sys.stderr)
         print(f"run folder kept: {args.out}", file=sys.stderr)
         return 1
-    print(f"{summary['headline']}, {summary['wall_s']:.1f} s -> {args.out}/report.md")
+    print(f"{result['headline']}, {result['wall_s']:.1f} s -> {args.out}/report.md")
     return 0
 
 
 def cmd_check(args) -> int:
     """A short run of the scene's real deck judged for numerical stability (exit 1 if unstable)."""
-    summary = api.check(args.workflow, args.out, set=args.set, steps=args.steps, timestep_factor=args.timestep_factor,
-                        strain=args.strain, bisect=args.bisect)
-    print(f"{summary['headline']} -> {args.out}/stability.md")
-    return 0 if summary["passed"] else 1
+    check = api.check(args.workflow, args.out, set=args.set, steps=args.steps, timestep_factor=args.timestep_factor,
+                      strain=args.strain, bisect=args.bisect)
+    print(f"{check.headline} -> {args.out}/stability.md")
+    return 0 if check.passed else 1
 
 
 def cmd_job(args) -> int:
@@ -111,8 +112,8 @@ def cmd_plan(args) -> int:
 
 
 def cmd_analyze(args) -> int:
-    summary = api.analyze(args.folder)
-    print(f"{summary['headline']} -> {args.folder}/report.md")
+    result = api.analyze(args.folder)
+    print(f"{result['headline']} -> {args.folder}/report.md")
     return 0
 
 

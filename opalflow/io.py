@@ -117,13 +117,13 @@ def load_results(folder: str | Path) -> Results:
     return res
 
 
-def _structure(folder: Path) -> tuple[Structure, dict]:
-    info = RunRecord.read(folder).facts() if RunRecord.exists(folder) else {}
+def _structure(folder: Path) -> Structure:
+    """The folder's data file, its sides periodic as the run's deck facts say (an aggregate: all three)."""
+    deck = RunRecord.read(folder).deck if RunRecord.exists(folder) else {}
     data = next((p for p in (folder / "data.lmp", folder / "aggregate.lmp") if p.exists()), None)
     if data is None:
         raise SpecError("folder", str(folder), "has no data.lmp: not a bonded-particle run folder")
-    periodic = info.get("periodic", (True, True, False))
-    return read_data(data, periodic=tuple(periodic)), info
+    return read_data(data, periodic=tuple(deck.get("periodic", (True, True, False))))
 
 
 def _snapshot(folder: Path, step: int | None, s: Structure, files: dict[int, Path]) -> tuple[dict | None, int | None]:
@@ -156,7 +156,7 @@ def read_ase(folder: str | Path, step: int | None = None):
     from ase import Atoms
 
     folder = Path(folder)
-    s, info = _structure(folder)
+    s = _structure(folder)
     dump, step = _snapshot(folder, step, s, mech.snapshot_files(folder, "particles", "dump"))
     positions = s.positions if dump is None else np.column_stack([dump["x"], dump["y"], dump["z"]])
     atoms = Atoms(positions=(positions - s.box_lo) * ANGSTROM_PER_NM, cell=np.diag(s.box_lengths * ANGSTROM_PER_NM),
@@ -183,7 +183,7 @@ def read_mdanalysis(folder: str | Path):
     from MDAnalysis.coordinates.memory import MemoryReader
 
     folder = Path(folder)
-    s, _ = _structure(folder)
+    s = _structure(folder)
     files = mech.snapshot_files(folder, "particles", "dump")
     frames, steps = [], []
     for step in files:

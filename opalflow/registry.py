@@ -269,4 +269,6 @@ def spec_from_dict(raw: dict, base: dict | None = None) -> WorkflowSpec:
 def load_spec(path: str | Path, overrides: list[str] | None = None) -> WorkflowSpec:
     """Read, override and validate a workflow file."""
     base = read_toml(path)
-    return spec_from_dict(apply_overrides(copy.deepcopy(base), overrides or []), base)
+    raw = copy.deepcopy(base)
+    apply_overrides(raw, overrides or [])
+    return spec_from_dict(raw, base)

@@ -94,18 +94,17 @@ def parse_value(text: str) -> Any:
         return text
 
 
-def apply_overrides(raw: dict, overrides: list[str]) -> dict:
-    """Apply ``section.key=value`` overrides to the raw TOML dict (before validation)."""
+def apply_overrides(raw: dict, overrides: list[str]) -> None:
+    """Apply ``section.key=value`` overrides to the raw TOML dict, in place (before validation)."""
     for item in overrides:
         if "=" not in item:
             raise SpecError("--set", item, "expected section.key=value")
         path, text = item.split("=", 1)
         set_value(raw, path.strip(), parse_value(text.strip()), item)
-    return raw
 
 
-def set_value(raw: dict, path: str, value: Any, item: Any = None) -> dict:
-    """Set ``section.key`` of the raw TOML dict to ``value`` (a Python value: the API's ``set={...}``)."""
+def set_value(raw: dict, path: str, value: Any, item: Any = None) -> None:
+    """Set ``section.key`` of the raw TOML dict to ``value``, in place (a Python value: the API's ``set={...}``)."""
     keys = path.split(".")
     if not all(NAME_RE.fullmatch(k) for k in keys):
         raise SpecError("--set", item if item is not None else path, "keys must match [A-Za-z0-9_]+ separated by dots")
@@ -115,7 +114,6 @@ def set_value(raw: dict, path: str, value: Any, item: Any = None) -> dict:
         if not isinstance(node, dict):
             raise SpecError(path, item if item is not None else value, f"'{k}' is not a section")
     node[keys[-1]] = value
-    return raw
 
 
 def convert(cls, raw: dict, prefix: str = ""):

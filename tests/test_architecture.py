@@ -254,3 +254,12 @@ def test_a_lazy_kernel_calls_another():
     import numpy as np
 
     assert _sum_twice(np.arange(4.0)) == 12.0
+
+
+def test_every_result_class_compares_as_its_summary():
+    """Every kind's result class keeps Result's mapping equality (a ``@dataclass`` without ``eq=False`` would put
+    back field-by-field equality, and ``opalflow.run(...) == summary`` would be False)."""
+    from opalflow.runs.result import Result
+
+    classes = {k.result_class() for k in registry.kinds().values()}
+    assert len(classes) >= 8 and all(c.__eq__ is Result.__eq__ for c in classes)

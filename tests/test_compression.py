@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from opalflow.runs.record import RunRecord
+from opalflow.bpm.facts import SampleFacts
 
 from opalflow.cli import main
 from opalflow.bpm.deck import compression_deck
@@ -143,8 +144,8 @@ def test_killed_run_resumes(tmp_path, lattice_run):
     os.killpg(proc.pid, signal.SIGKILL)
     proc.wait()
     steps_done = max(int(p.name.split(".")[1]) for p in out.glob("restart.*.bin"))
-    info = RunRecord.read(out).facts()
-    assert 0 < steps_done < info["steps"]
+    info = SampleFacts.read(RunRecord.read(out))
+    assert 0 < steps_done < info.steps
     assert main(["run", "--out", str(out), "--resume"]) == 0
     resumed = json.loads((out / "summary.json").read_text())
     assert resumed["youngs_modulus_GPa"] == pytest.approx(summary.youngs_modulus_GPa, rel=0.01)
@@ -222,12 +223,12 @@ def test_opal_run_carries_its_structure_statistics(tmp_path, quick_spec, quick_s
     from opalflow.opal.result import OpalResult
 
     _, record = prepare(quick_spec, tmp_path)
-    info = RunRecord.read(tmp_path).facts()
-    assert info == json.loads(json.dumps(record.facts(), default=float))    # the record the run holds is the file
+    info = SampleFacts.read(RunRecord.read(tmp_path))
+    assert RunRecord.read(tmp_path).deck == json.loads(json.dumps(record.deck, default=float))  # the record is the file
     stats = structure_statistics(quick_structure)
-    assert info["structure"] == pytest.approx({k: getattr(stats, k) for k in OpalResult.structure_keys()})
+    assert info.structure == pytest.approx({k: getattr(stats, k) for k in OpalResult.structure_keys()})
     assert OpalResult.structure_keys() == ("porosity", "total_porosity", "density_kg_m3")
-    assert 0.3 < info["structure"]["porosity"] < 0.9
+    assert 0.3 < info.structure["porosity"] < 0.9
 
 
 # ----------------------------------------------------------------------------- resume while bonds break
@@ -261,7 +262,7 @@ def interrupted(whole, dest, rows_past_restart: int = 7):
     for step in steps:
         if step <= restart:
             (dest / f"restart.{step}.bin").write_bytes((whole / f"restart.{step}.bin").read_bytes())
-    every = RunRecord.read(whole).facts()["output_every_steps"]
+    every = SampleFacts.read(RunRecord.read(whole)).output_every_steps
     lines = (whole / "curve.txt").read_text().splitlines(keepends=True)
     (dest / "curve.txt").write_text("".join(
         line for line in lines if line.startswith("#") or int(line.split()[0]) <= restart + rows_past_restart * every))
@@ -287,7 +288,7 @@ def test_breaking_run_resumes_to_the_same_curve(breaking_run, tmp_path):
     out = tmp_path / "resumed"
     restart = interrupted(whole, out)
     curve = np.loadtxt(whole / "curve.txt", comments="#")
-    bonds = RunRecord.read(whole).facts()["n_bonds"]
+    bonds = SampleFacts.read(RunRecord.read(whole)).n_bonds
     broken_at_restart = bonds - np.interp(restart, curve[:, 0], curve[:, 4])
     assert broken_at_restart >= 10 and bonds - curve[-1, 4] >= broken_at_restart + 50
     assert main(["run", "--out", str(out), "--resume"]) == 0
@@ -351,7 +352,7 @@ def test_stability_check_to_a_strain(tmp_path, capsys):
     assert summary["passed"] and summary["strain"] == 0.2
     dt_ns = summary["timestep_s"] * 1e9
     planned = math.ceil(0.2 * 100.0 / 50.0 / dt_ns)        # 6 cells of 20 nm: the mobile part is 100 nm high
-    assert planned <= info["steps"] < planned * 1.05
+    assert planned <= info.steps < planned * 1.05
     assert "(to strain 0.2)" in summary["headline"]
     assert main(["check", "lattice_sc", "--out", str(tmp_path / "x"), "--strain", "2"]) == 2
     assert "--strain = 2.0" in capsys.readouterr().err
@@ -400,7 +401,7 @@ def kill_at_random_step(argv, out, info, seed, env=None) -> int:
     seeded random step after the first restart file; returns the last curve step written."""
     import random
 
-    kill_at = random.Random(seed).randint(info["restart_every_steps"] + 1, info["steps"] - info["output_every_steps"])
+    kill_at = random.Random(seed).randint(info.restart_every_steps + 1, info.steps - info.output_every_steps)
     proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env,
                             start_new_session=True)
     deadline, last = time.time() + 120, 0
@@ -411,21 +412,21 @@ def kill_at_random_step(argv, out, info, seed, env=None) -> int:
         last = int(rows[-1].split()[0]) if rows else 0
     os.killpg(proc.pid, signal.SIGKILL)
     proc.wait()
-    assert 0 < last < info["steps"], "killed before the end"
+    assert 0 < last < info.steps, "killed before the end"
     return last
 
 
 @pytest.mark.parametrize("seed", [1, 2])
 def test_run_killed_at_a_random_step_resumes_to_the_same_curve(breaking_run, tmp_path, seed):
     """SIGKILL of 'python -m opalflow run' at a seeded random point while bonds break, then --resume."""
-    info = RunRecord.read(breaking_run).facts()
+    info = SampleFacts.read(RunRecord.read(breaking_run))
     out = tmp_path / "killed"
     argv = [sys.executable, "-m", "opalflow", "run", "opal_quick", "--out", str(out)]
     for s in BREAKING:
         argv += ["--set", s]
     kill_at_random_step(argv, out, info, seed)
     assert main(["run", "--out", str(out), "--resume"]) == 0
-    assert_same_curve(breaking_run, out, info["restart_every_steps"])
+    assert_same_curve(breaking_run, out, info.restart_every_steps)
     a = json.loads((breaking_run / "summary.json").read_text())
     b = json.loads((out / "summary.json").read_text())
     assert b["strength_MPa"] == pytest.approx(a["strength_MPa"], rel=0.01)
@@ -437,7 +438,7 @@ def test_run_sh_killed_at_a_random_step_resumes_with_run_sh(breaking_run, tmp_pa
     'bash run.sh resume' and analyze: the same curve."""
     import shutil
 
-    info = RunRecord.read(breaking_run).facts()
+    info = SampleFacts.read(RunRecord.read(breaking_run))
     out = tmp_path / "alone"
     out.mkdir()
     (out / "snapshots").mkdir()
@@ -447,7 +448,7 @@ def test_run_sh_killed_at_a_random_step_resumes_with_run_sh(breaking_run, tmp_pa
     kill_at_random_step(["bash", str(out / "run.sh")], out, info, 3, env=env)
     resumed = subprocess.run(["bash", str(out / "run.sh"), "resume"], capture_output=True, text=True, env=env)
     assert resumed.returncode == 0, resumed.stdout[-2000:]
-    assert_same_curve(breaking_run, out, info["restart_every_steps"])
+    assert_same_curve(breaking_run, out, info.restart_every_steps)
     assert main(["analyze", str(out)]) == 0
     assert json.loads((out / "summary.json").read_text())["complete"]
 

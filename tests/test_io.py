@@ -36,6 +36,28 @@ def test_python_api_gives_the_cli_numbers(api_run, tmp_path, capsys):
     assert set(res.table(f"snapshots/{step}/position_nm")) == {"x", "y", "z"}
 
 
+def test_the_api_gives_typed_results_that_read_as_summary_json(api_run, tmp_path):
+    """opalflow.run gives the kind's result class, typed down to its nested parts, and reads as summary.json's
+    table (the file's keys and values, nested parts as tables); build, check, workflows and info are typed too."""
+    from opalflow.bpm.result import CompressionResult
+    from opalflow.bpm.stability import StabilityCheck
+
+    out, result = api_run
+    on_disk = json.loads((out / "summary.json").read_text())
+    assert isinstance(result, CompressionResult) and result.method == "dynamic"
+    assert result.youngs_modulus_GPa == on_disk["youngs_modulus_GPa"] and result.n_bonds == on_disk["n_bonds"]
+    assert dict(result) == on_disk and result == on_disk and set(result) == set(on_disk)
+    assert result["state"] == "finished" and "sessions" in result and isinstance(result["sessions"][0], dict)
+    assert all(type(s).__name__ == "Session" for s in result.sessions)          # typed where read
+    built = opalflow.build("opal_quick", tmp_path / "built", quiet=True)
+    assert type(built).__name__ == "OpalResult" and built["state"] == "built" and built.n_particles > 1000
+    check = opalflow.check("lattice_sc", tmp_path / "check", steps=200, quiet=True)
+    assert isinstance(check, StabilityCheck) and check.passed and check.run.steps == 200
+    names = [w.name for w in opalflow.workflows()]
+    assert "quickstart" in names and next(w for w in opalflow.workflows() if w.name == "quickstart").kind == "opal"
+    assert opalflow.info().lammps.version >= 20250722 and "study" in opalflow.info().kinds
+
+
 def test_every_dataset_of_results_h5_has_units(api_run, tmp_path):
     """Walk every dataset of the dynamic, static and aggregation results: each has units, each 2-D one columns."""
     import h5py
@@ -238,11 +260,12 @@ def test_the_sample_facts_are_read_back_typed_and_a_foreign_fact_is_one_line(api
     opalflow does not know (a newer record) is refused in one line, not read as a dict."""
     from opalflow.bpm.facts import RunFacts, SampleFacts
     from opalflow.runs.record import RunRecord
+    from opalflow.runs.result import table_of
     from opalflow.spec import InputError
 
     record = RunRecord.read(api_run[0])
     run = RunFacts.of(record)
     assert run.spec.bonds.breakable is False and run.spec.kind == "lattice" and run.sample.steps > 0
-    assert run.sample.bond_types[0].kr_pN > 0 and run.sample.to_dict() == record.deck
+    assert run.sample.bond_types[0].kr_pN > 0 and table_of(run.sample) == record.deck
     with pytest.raises(InputError, match="unknown facts surprise"):
         SampleFacts.from_dict({**record.deck, "surprise": 1})

@@ -52,7 +52,8 @@ def test_overrides_parse_toml_values():
     assert parse_value("3") == 3
     assert parse_value("random") == "random"
     assert parse_value('"a b"') == "a b"
-    raw = apply_overrides({}, ["pores.arrangement=random", "pores.porosity=0.49"])
+    raw = {}
+    apply_overrides(raw, ["pores.arrangement=random", "pores.porosity=0.49"])
     assert raw == {"pores": {"arrangement": "random", "porosity": 0.49}}
 
 

@@ -8,7 +8,7 @@ from opalflow.bpm.result import EVERY_CASE, LOADED, CompressionResult
 from opalflow.runs.result import key
 
 
-@dataclass
+@dataclass(eq=False)
 class AerogelResult(CompressionResult):
     """An aerogel run's result; the network's numbers as :func:`opalflow.aerogel.scene.statistics` defines them."""
 

@@ -203,7 +203,7 @@ def analyze(out: Path, started: float | None = None, lammps_s: float | None = No
         stress_by_material={f"{v.strain:.4f}": v.by_material for v in snapshots.values()},
         solid_fraction=sample.solid_fraction, bond_stiffness_error_max=sample.bond_stiffness_error_max,
         timestep_estimate_s=sample.timestep_estimate_s, build_timings_s=sample.build_timings_s,
-        statistics=sample.statistics or {}, rate_check=rate_check)
+        extra=sample.statistics or {}, rate_check=rate_check)
     result.headline = report.headline(result, run.references, breakable)
     result.refer(run.references)
     if not result.complete:

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from opalflow import registry
 from opalflow.bpm.spec import BpmWorkflow
 from opalflow.materials import Material
-from opalflow.runs.result import typed
+from opalflow.runs.result import optional, typed
 from opalflow.spec import InputError
 from opalflow.store import RECORD
 
@@ -52,45 +52,41 @@ class SampleFacts:
     periodic: list
     loading: str = "plate"
     loading_sense: int = 1                  # +1 compression, -1 tension
-    height_nm: float | None = None          # strain = the driven particles' displacement / height_nm
-    area_nm2: float | None = None           # stress = their force / area_nm2
+    height_nm: float | None = optional()          # strain = the driven particles' displacement / height_nm
+    area_nm2: float | None = optional()           # stress = their force / area_nm2
     source: str = ""                        # the data file a datafile scene read
-    method: str | None = None               # a solve's compression.method (the dynamic deck's record has none)
+    method: str | None = optional()               # a solve's compression.method (the dynamic deck's record has none)
     # the structure as prepared for the dynamic deck
-    mean_diameter_nm: float | None = None
-    box_nm: list | None = None
+    mean_diameter_nm: float | None = optional()
+    box_nm: list | None = optional()
     materials: dict[str, Material] = field(default_factory=dict)    # each particle material's properties
-    statistics: dict | None = None                          # the scene's statistics (build's summary.json)
-    structure: dict | None = None                           # those of them each run summary carries
-    build_timings_s: dict | None = None
+    statistics: dict | None = optional()                          # the scene's statistics (build's summary.json)
+    structure: dict | None = optional()                           # those of them each run summary carries
+    build_timings_s: dict | None = optional()
     # the dynamic deck (opalflow.bpm.deck.CompressionDeck)
-    timestep_s: float | None = None
-    steps: int | None = None
-    output_every_steps: int | None = None
-    restart_every_steps: int | None = None
-    snapshot_steps: list | None = None
-    plate_z0_nm: float | None = None
-    plate_speed_m_s: float | None = None
-    blocks: list | None = None
-    modulus_affine_GPa: float | None = None
-    omega1_per_ns: float | None = None
-    viscous_gamma: float | None = None
-    top_z0_nm: float | None = None
-    timestep_estimate_s: dict | None = None
-    bond_types: list[BondType] | None = None
-    bond_stiffness_error_max: float | None = None
-    bond_stiffness_error_rms: float | None = None
+    timestep_s: float | None = optional()
+    steps: int | None = optional()
+    output_every_steps: int | None = optional()
+    restart_every_steps: int | None = optional()
+    snapshot_steps: list | None = optional()
+    plate_z0_nm: float | None = optional()
+    plate_speed_m_s: float | None = optional()
+    blocks: list | None = optional()
+    modulus_affine_GPa: float | None = optional()
+    omega1_per_ns: float | None = optional()
+    viscous_gamma: float | None = optional()
+    top_z0_nm: float | None = optional()
+    timestep_estimate_s: dict | None = optional()
+    bond_types: list[BondType] | None = optional()
+    bond_stiffness_error_max: float | None = optional()
+    bond_stiffness_error_rms: float | None = optional()
     # the solves (static, quasi-static, the periodic tensor)
-    top_layer_particles: int | None = None
-    structure_cache: str | None = None
-    structure_first_build_s: float | None = None
-    timings_s: dict | None = None
-    volume_nm3: float | None = None
+    top_layer_particles: int | None = optional()
+    structure_cache: str | None = optional()
+    structure_first_build_s: float | None = optional()
+    timings_s: dict | None = optional()
+    volume_nm3: float | None = optional()
     facts_version: int = FACTS_VERSION
-
-    def to_dict(self) -> dict:
-        """run.json's ``deck``: the fields this run has (None left out), bond types as tables."""
-        return {k: v for k, v in dataclasses.asdict(self).items() if v is not None}
 
     @classmethod
     def from_dict(cls, raw: dict) -> SampleFacts:

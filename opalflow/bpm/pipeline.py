@@ -62,7 +62,7 @@ def prepare(spec: BpmWorkflow, out: Path, progress=None) -> tuple[CompressionDec
         facts.statistics = table_of(stats)
         facts.structure = {k: getattr(stats, k) for k in scene.run_keys}
     facts.build_timings_s = dict(deck.structure.meta.get("timings_s", {}))
-    record = RunRecord.new(spec, deck=facts.to_dict(), folder=out)
+    record = RunRecord.new(spec, deck=table_of(facts), folder=out)
     record.write(out)
     return deck, record
 

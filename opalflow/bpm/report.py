@@ -18,6 +18,7 @@ from opalflow.bpm.facts import RunFacts, SampleFacts
 from opalflow.bpm.loading import LOADINGS
 from opalflow.resources import DATA, ROOT
 from opalflow.runs.record import Session
+from opalflow.runs.result import table_of
 from opalflow.store import RECORD, RESULTS, SUMMARY
 
 
@@ -248,7 +249,7 @@ def provenance_group(h, run: RunFacts) -> None:
     from opalflow.lammps.engine import lammps_version
 
     spec = run.spec.to_dict()
-    facts = {"workflow": run.workflow, "references": run.references, **run.sample.to_dict()}
+    facts = {"workflow": run.workflow, "references": run.references, **table_of(run.sample)}
     p = h.create_group("provenance")
     p.attrs["spec"] = json.dumps(spec)
     p.attrs["lammps_version"] = lammps_version()

@@ -10,11 +10,12 @@ of a run opalflow drove).  The scene's statistics (porosity, density, ...) are a
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 from opalflow import registry
 from opalflow.analysis.elasticity import IsotropicAverage
 from opalflow.bpm.report import provenance_group, reference_errors, why
+from opalflow.bpm.stiffness import EnergyParts
 from opalflow.runs.record import Session
 from opalflow.runs.result import Result, key
 from opalflow.store import json_text
@@ -67,7 +68,7 @@ class EventFacts:
     out_of_balance_max: float = 0.0
 
 
-@dataclass
+@dataclass(eq=False)
 class CompressionResult(Result):
     """What a bonded-particle run found (compression, tension or bending; the periodic tensor), by method."""
 
@@ -108,7 +109,7 @@ class CompressionResult(Result):
     peak_memory_MiB: float = key(*SOLVED)
     timings_s: dict = key(STATIC)                 # set-up, solve, analysis, files (the whole in wall_s)
     loose_particles_left_out: int = key(*SOLVED)
-    energy_split: dict = key(STATIC)              # bonds' strain energy by mode (BondNetwork.energy_parts)
+    energy_split: EnergyParts | None = key(STATIC)    # bonds' strain energy by mode (BondNetwork.energy_parts)
     bond_strain_per_strain: dict = key(STATIC)
     quasistatic: EventFacts = key(QUASISTATIC)   # the events: where they stopped, re-solves, contacts, cost
     # the periodic tensor (opalflow.analysis.elasticity)
@@ -134,7 +135,6 @@ class CompressionResult(Result):
     opalflow_version: str = key(*LOADED, TENSOR, default=__version__)
     headline: str = key(*LOADED, TENSOR, default="")
     reference: dict = key(*LOADED, TENSOR)
-    statistics: dict = field(default_factory=dict)   # the scene's other statistics: where no key above has them
 
     @property
     def case(self) -> str:
@@ -145,27 +145,17 @@ class CompressionResult(Result):
     def of(cls, kind: str, structure: dict, **keys) -> CompressionResult:
         """A run of ``kind``: its track's result class (:attr:`opalflow.registry.Kind.result`), the structure's
         numbers (``Scene.run_keys``) over the method's ``keys``; a structure's number that the class does not
-        declare goes to ``statistics``."""
+        declare goes to ``extra`` (summary.json has it beside the declared keys)."""
         track = registry.get(kind).result_class()
         track = track if issubclass(track, cls) else cls
         names = {f.name for f in dataclasses.fields(track)}
-        keys.setdefault("statistics", {})
-        keys["statistics"] = {**{k: v for k, v in structure.items() if k not in names}, **keys["statistics"]}
+        keys["extra"] = {**{k: v for k, v in structure.items() if k not in names}, **keys.get("extra", {})}
         return track(**{**keys, **{k: v for k, v in structure.items() if k in names}})
 
     @classmethod
     def structure_keys(cls) -> tuple[str, ...]:
         """The structure's numbers a track's class declares (its scene's ``run_keys``)."""
         return tuple(cls.__annotations__)
-
-    def summary(self) -> dict:
-        """summary.json: the method's keys and the structure's, the scene's other statistics beside."""
-        out = super().summary()
-        return {**out, **{k: v for k, v in self.statistics.items() if k not in out}}
-
-    def rest(self, keys: dict) -> None:
-        """Read back: summary.json's keys that no field declares are the scene's statistics (and the run's state)."""
-        self.statistics.update(keys)
 
     def refer(self, references: dict) -> CompressionResult:
         """Each reference value ({key: (value, source)}) with its source and this result's error against it."""
@@ -186,7 +176,7 @@ class CompressionResult(Result):
         lines = ["| quantity | value | reference | error | why the error |", "|---|---|---|---|---|"]
         for f in dataclasses.fields(self):
             name, label = f.name, f.metadata.get("label")
-            if not label or name not in self.keys():
+            if not label or name not in self.case_keys():
                 continue
             if name == "youngs_modulus_specimen_GPa" and self.method != DYNAMIC:
                 continue                  # a solve strains the top layer as the plate: one modulus

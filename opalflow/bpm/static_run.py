@@ -14,6 +14,7 @@ moduli, Poisson ratios and bulk modulus it implies.
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
@@ -32,10 +33,11 @@ from opalflow.bpm.scene import scene_of, solid_fraction
 from opalflow.bpm.spec import BpmWorkflow
 from opalflow.bpm.static import (LooseParticlesError, StaticResult, auto_solver, loose_message,
                                   loose_particles, solve_compression, solve_tensor)
-from opalflow.bpm.stiffness import BondNetwork, stiffness_network
+from opalflow.bpm.stiffness import BondNetwork, EnergyParts, stiffness_network
 from opalflow.lammps.datafile import write_data
 from opalflow.runs.plan import CostFacts
 from opalflow.runs.record import RunRecord, finish
+from opalflow.runs.result import table_of
 from opalflow.store import RESULTS, SUMMARY, h5_bytes, new_figure, put, save_figure
 from opalflow.version import __version__
 
@@ -99,7 +101,7 @@ def network_run(spec: BpmWorkflow, s, out: Path, t0: float, *, launcher: str, re
     if scene.run_keys:
         stats = scene.statistics_of(sample.source)
         facts.structure = {k: getattr(stats, k) for k in scene.run_keys}
-    record = RunRecord.read(out) if resume else RunRecord.new(spec, deck=facts.to_dict(), folder=out)
+    record = RunRecord.read(out) if resume else RunRecord.new(spec, deck=table_of(facts), folder=out)
     record.begin(out, launcher=launcher, restart=resume or "")
     return sample, net, RunFacts(spec, facts, spec.references()), record, written
 
@@ -138,9 +140,6 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> CompressionResult:
     volumes = data.particle_volumes()
     sigma_unit = particle_stress(net, res.u, res.theta, volumes) / STRAIN       # per unit strain
     strain_unit = bond_strain(net, res.u) / STRAIN
-    parts = net.energy_parts(res.u, res.theta)
-    total = sum(parts.values())
-    energy_split = {k: v / total for k, v in parts.items()} if total > 0 else {}
     types = data.types
     snapshots = {e: sigma_unit * e for e in c.snapshot_strains}       # strain -> the particles' stresses (MPa)
     result = CompressionResult.of(
@@ -154,7 +153,8 @@ def run_static(spec: BpmWorkflow, out: Path, say=print) -> CompressionResult:
         # bond strains; files: results.h5 and the plots), the whole in wall_s
         timings_s={**facts.timings_s, "setup": res.setup_seconds, "solve": res.seconds - res.setup_seconds,
                    "analysis": time.perf_counter() - t},
-        build_s=facts.build_s, loose_particles_left_out=res.loose, energy_split=energy_split,
+        build_s=facts.build_s, loose_particles_left_out=res.loose,
+        energy_split=net.energy_parts(res.u, res.theta).fractions(),
         stress_by_material={f"{e:.4f}": mech.stress_by_material(sigma, types, data.type_names)
                             for e, sigma in snapshots.items()},
         bond_strain_per_strain={"mean": float(strain_unit.mean()), "std": float(strain_unit.std()),
@@ -225,7 +225,8 @@ def _report(run: RunFacts, summary: dict, result, res: StaticResult, sides: str,
              *result.results_table(float(sample.structure.diameters.mean()))]
     if result.energy_split:
         lines += ["", "Strain energy of the bonds by mode: " + ", ".join(
-            f"{k} {100 * v:.1f} %" for k, v in result.energy_split.items()) + " (BondNetwork.energy_parts)."]
+            f"{f.name} {100 * getattr(result.energy_split, f.name):.1f} %" for f in dataclasses.fields(EnergyParts))
+            + " (BondNetwork.energy_parts)."]
     lines += ["", f"Solver `{res.solver}`: {res.iterations} iterations to relative residual {res.residual:.1e}; "
               f"set-up {res.setup_seconds:.1f} s, iterations {res.seconds - res.setup_seconds:.1f} s, peak memory "
               f"{res.peak_memory_MiB:.0f} MiB; "
@@ -255,7 +256,7 @@ def run_tensor(spec: BpmWorkflow, s, out: Path, t0: float, say=print) -> Compres
         spec.references())
     out.mkdir(parents=True, exist_ok=True)
     write_data(out / "data.lmp", data, title=f"opalflow {__version__} {spec.name} (static, periodic)")
-    RunRecord.new(spec, deck=run.sample.to_dict(), folder=out).begin(out, launcher="in-process (static solve)")
+    RunRecord.new(spec, deck=table_of(run.sample), folder=out).begin(out, launcher="in-process (static solve)")
     result = CompressionResult.of(
         spec.kind, {}, workflow=spec.name, method="static", loading="periodic", stiffness_tensor_GPa=C.tolist(),
         youngs_modulus_GPa=float(E[2]), youngs_moduli_GPa={"x": float(E[0]), "y": float(E[1]), "z": float(E[2])},

@@ -79,6 +79,31 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 @dataclass
+class EnergyParts:
+    """The bonds' strain energy by deformation mode (:meth:`BondNetwork.energy_parts`: totals in the network's
+    units), or its fractions of the whole (:meth:`fractions`)."""
+
+    stretching: float
+    shear: float
+    bending: float
+    twisting: float
+
+    def __add__(self, other: EnergyParts) -> EnergyParts:
+        return EnergyParts(self.stretching + other.stretching, self.shear + other.shear,
+                           self.bending + other.bending, self.twisting + other.twisting)
+
+    @property
+    def total(self) -> float:
+        return self.stretching + self.shear + self.bending + self.twisting
+
+    def fractions(self) -> EnergyParts | None:
+        """Each mode's share of the whole (None where there is no energy)."""
+        total = self.total
+        return None if total <= 0 else EnergyParts(self.stretching / total, self.shear / total,
+                                                   self.bending / total, self.twisting / total)
+
+
+@dataclass
 class BondNetwork:
     """Linear bonds between particles i and j (i < j): unit vector n = (x_i - x_j) / L and the four
     coefficients of the linearised bond (see the module docstring)."""
@@ -108,7 +133,7 @@ class BondNetwork:
         self._loads(np.hstack([u, theta]), _NO_ROWS if stretch is None else stretch, F, threads)
         return F
 
-    def energy_parts(self, u: np.ndarray, theta: np.ndarray, stretch: np.ndarray | None = None) -> dict[str, float]:
+    def energy_parts(self, u: np.ndarray, theta: np.ndarray, stretch: np.ndarray | None = None) -> EnergyParts:
         """The strain energy of the bonds split by deformation mode (totals, in the network's units):
         stretching 1/2 a_r (n . du)^2, shear 1/2 a_s |s|^2 with s = P du + L/2 n x (theta_i + theta_j) (the
         shear force is a_s s and the shear torque L/2 n x a_s s), bending 1/2 kb |P dtheta|^2 and twisting
@@ -117,15 +142,13 @@ class BondNetwork:
         ENERGY_CHUNK bonds at a time: numpy's temporaries stay small and are reused (the paper's 17.5 M bonds
         4.5 s in one piece into fresh memory, 6.4 s in its static run, 2.1 s in pieces; pieces of 0.1 or 0.2 M
         bonds 3.0-3.3 s)."""
-        parts = dict.fromkeys(("stretching", "shear", "bending", "twisting"), 0.0)
+        parts = EnergyParts(0.0, 0.0, 0.0, 0.0)
         for start in range(0, len(self.L), ENERGY_CHUNK):
             sel = slice(start, start + ENERGY_CHUNK)
-            piece = self.part(sel)._energy_parts(u, theta, None if stretch is None else stretch[sel])
-            for k, v in piece.items():
-                parts[k] += v
+            parts = parts + self.part(sel)._energy_parts(u, theta, None if stretch is None else stretch[sel])
         return parts
 
-    def _energy_parts(self, u: np.ndarray, theta: np.ndarray, stretch: np.ndarray | None) -> dict[str, float]:
+    def _energy_parts(self, u: np.ndarray, theta: np.ndarray, stretch: np.ndarray | None) -> EnergyParts:
         n = self.n
         F = self.bond_forces(u, theta, stretch)
         Fr = np.einsum("ij,ij->i", n, F)
@@ -135,9 +158,9 @@ class BondNetwork:
 
         def over(a, b):         # (a bond of zero stiffness carries nothing)
             return float(np.sum(np.divide(a, b, out=np.zeros_like(a), where=b > 0)))
-        return {"stretching": 0.5 * over(Fr**2, self.a_r), "shear": 0.5 * over(np.einsum("ij,ij->i", Fs, Fs), self.a_s),
-                "bending": float(0.5 * np.sum(self.bend * (np.einsum("ij,ij->i", d_t, d_t) - n_dt**2))),
-                "twisting": float(0.5 * np.sum(self.twist * n_dt**2))}
+        return EnergyParts(0.5 * over(Fr**2, self.a_r), 0.5 * over(np.einsum("ij,ij->i", Fs, Fs), self.a_s),
+                           float(0.5 * np.sum(self.bend * (np.einsum("ij,ij->i", d_t, d_t) - n_dt**2))),
+                           float(0.5 * np.sum(self.twist * n_dt**2)))
 
     def part(self, sel: slice) -> "BondNetwork":
         """The bonds in ``sel`` (views, no copies)."""

@@ -34,7 +34,7 @@ class CrossCheck:
     first_step_over_tolerance: int | None
 
 
-@dataclass
+@dataclass(eq=False)
 class GranularResult(Result):
     """Kind ``granular``: the plate's force and stress at the end on each engine, and their cross-check."""
 
@@ -79,7 +79,7 @@ class ImpactCase:
     restitution: dict[str, float] | None = None
 
 
-@dataclass
+@dataclass(eq=False)
 class ImpactsResult(Result):
     """Kind ``granular_impacts``: each case's verdict and the head-on restitution against the one asked."""
 

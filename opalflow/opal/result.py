@@ -8,7 +8,7 @@ from opalflow.bpm.result import EVERY_CASE, CompressionResult
 from opalflow.runs.result import key
 
 
-@dataclass
+@dataclass(eq=False)
 class OpalResult(CompressionResult):
     """An opal run's result; the structure's numbers as :func:`opalflow.opal.scene.structure_statistics` defines
     them (Dosta et al. sections 2.1 and 4)."""

@@ -158,12 +158,6 @@ class PlanRow:
     prediction: Prediction
     measured: Measured | None = None
 
-    def as_dict(self) -> dict:
-        """The row as one table (facts and prediction side by side), as ``plan``'s JSON gives it."""
-        row = {"label": self.label, "built": self.built, **dataclasses.asdict(self.facts),
-               **{k: v for k, v in dataclasses.asdict(self.prediction).items() if v is not None}}
-        return row | ({"measured": dataclasses.asdict(self.measured)} if self.measured else {})
-
 
 @dataclass
 class Plan:
@@ -176,9 +170,6 @@ class Plan:
     slurm: dict
     machine: dict
     laws_measured: str
-
-    def as_dict(self) -> dict:
-        return {**dataclasses.asdict(self), "jobs": [r.as_dict() for r in self.jobs]}
 
 
 def laws() -> CostLaws:

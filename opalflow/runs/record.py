@@ -201,11 +201,6 @@ class RunRecord:
     def exists(folder: str | os.PathLike) -> bool:
         return (Path(folder) / RECORD).exists()
 
-    # ------------------------------------------------------------------ views
-    def facts(self) -> dict:
-        """The deck facts with the spec, the workflow name and the references: what an analysis reads."""
-        return {**self.deck, "workflow": self.workflow, "spec": self.spec, "references": self.references}
-
     # ------------------------------------------------------------------ state changes
     def begin(self, folder, *, launcher: str = "in-process", restart: str = "", first_step: int = 0) -> Session:
         """A new session starts (state running); a session begun under a requeued SLURM job counts a requeue."""

@@ -17,6 +17,7 @@ import json
 import os
 import types
 import typing
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -95,13 +96,18 @@ def key(*cases: str, label: str = "", fmt: str = "{:.4g}", optional: bool = Fals
     return field(default=default, metadata=meta)
 
 
-@dataclass
-class Result:
+@dataclass(eq=False)
+class Result(Mapping):
     """A run's result; subclasses declare the keys (:func:`key`) and say the run's :attr:`case`.
 
     Read back from a run folder as the same object (:meth:`read`, :meth:`from_summary`: the pattern of atomate2's
     task documents).  ``extra``: summary.json's keys that no field declares (the run's ``state``; a kind without
     a result class of its own reads back as this class with every key here).
+
+    The typed fields are the way to read it (``result.youngs_modulus_GPa``, ``result.quasistatic.events``); it is
+    also a read-only mapping of summary.json's table (``result["youngs_modulus_GPa"]``, ``dict(result)``: nested
+    parts as tables, as the file holds them), so code written against the file reads it unchanged.  Two results
+    are equal when their tables are.
     """
 
     extra: dict = field(default_factory=dict)
@@ -132,13 +138,28 @@ class Result:
         """The run's case (a subclass names it; the generic class has none: its keys are all in ``extra``)."""
         return ""
 
-    def keys(self) -> list[str]:
-        """The keys this run's case gives, in the order declared."""
+    def case_keys(self) -> list[str]:
+        """The declared keys this run's case gives, in the order declared."""
         return [f.name for f in dataclasses.fields(self) if self.case in f.metadata.get("cases", ())
                 and not (f.metadata["optional"] and getattr(self, f.name) is None)]
 
     def summary(self) -> dict:
         """summary.json (before :func:`opalflow.runs.record.finish` adds the state); the values are this object's
         own (a dict filled later, such as a timings dict, is filled in both)."""
-        own = {k: getattr(self, k) for k in self.keys()}
+        own = {k: getattr(self, k) for k in self.case_keys()}
         return {**own, **{k: v for k, v in self.extra.items() if k not in own}}
+
+    # summary.json's table, read only (the Mapping protocol: [], get, in, keys, items, len, dict(result))
+    def __getitem__(self, name: str):
+        return table_of(self.summary()[name])
+
+    def __iter__(self):
+        return iter(self.summary())
+
+    def __len__(self) -> int:
+        return len(self.summary())
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, Mapping) and dict(self.items()) == dict(other.items())
+
+    __hash__ = None

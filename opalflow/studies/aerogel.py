@@ -12,6 +12,7 @@ and silica-aerogel experiments (data/reference/aerogel_literature.toml).
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import tomllib
 from dataclasses import dataclass
@@ -21,6 +22,7 @@ import numpy as np
 
 from opalflow.analysis.fits import Fit, fit_power_law
 from opalflow.bpm.methods import METHODS
+from opalflow.bpm.stiffness import EnergyParts
 from opalflow.resources import DATA, resource
 from opalflow.store import RESULTS, new_figure, save_figure
 from opalflow.studies.spec import StudyWorkflow
@@ -29,9 +31,27 @@ from opalflow.studies.sweep import Job, fmt_value, job_spec, label_number
 COMBINATIONS = (("parallel", "hertz"), ("parallel", "linear"), ("contact", "hertz"), ("contact", "linear"))
 
 
-def literature() -> dict:
-    """Reference values of the aerogel track (data/reference/aerogel_literature.toml)."""
-    return tomllib.loads(resource(DATA / "reference", "aerogel_literature.toml").read_text())
+@dataclass
+class DensityScaling:
+    """The literature's density exponents (data/reference/aerogel_literature.toml's ``[density_scaling]``, with
+    their sources): E ~ rho^m of DLCA beam networks and of experiments, sigma ~ rho^n of brittle open-cell foams
+    and of experiments (the strength exponents absent from a study written before them)."""
+
+    m_dlca_beams: float
+    m_dlca_beams_source: str
+    m_experiment_low: float
+    m_experiment_high: float
+    m_experiment_source: str
+    n_foam_brittle: float | None = None
+    n_foam_source: str = ""
+    n_experiment: float | None = None
+    n_experiment_source: str = ""
+
+
+def density_scaling() -> DensityScaling:
+    """The literature's density exponents (data/reference/aerogel_literature.toml)."""
+    raw = tomllib.loads(resource(DATA / "reference", "aerogel_literature.toml").read_text())
+    return DensityScaling(**raw["density_scaling"])
 
 
 def _curve(out: Path, job: Job) -> tuple[np.ndarray, np.ndarray] | None:
@@ -200,7 +220,7 @@ class DensityRun:
     E_kPa: float
     mean_coordination: float | None
     loops_per_10k: float | None
-    energy_split: dict
+    energy_split: EnergyParts | None
     loaded: StrengthRun | None
     wall_s: float
 
@@ -246,7 +266,7 @@ class DensitySeries:
     scatter_max_min: float
     mean_coordination: float
     loops_per_10k: float
-    energy_split: dict
+    energy_split: EnergyParts | None          # the runs' mean (None: no run has one)
     strength: list[DensityStrength]
 
 
@@ -258,7 +278,7 @@ class Density:
     runs: list[DensityRun]
     fits: dict[str, Fit]
     models: dict[str, DensitySeries]
-    literature: dict
+    literature: DensityScaling
     modulus_exponent: float
     modulus_exponent_ci95: tuple[float, float]
     strength_exponent: float | None = None
@@ -338,8 +358,9 @@ def aerogel_density_jobs(spec: StudyWorkflow) -> list[Job]:
 
 def _density_series(runs: list[DensityRun]) -> DensitySeries:
     fits = _density_fits(runs)
-    split = {k: float(np.mean([r.energy_split[k] for r in runs if r.energy_split]))
-             for k in ("stretching", "shear", "bending", "twisting") if any(r.energy_split for r in runs)}
+    have = [r.energy_split for r in runs if r.energy_split is not None]
+    split = EnergyParts(*(float(np.mean([getattr(e, f.name) for e in have]))
+                          for f in dataclasses.fields(EnergyParts))) if have else None
     strength = [x for f in sorted({r.target_solid_fraction for r in runs}) if (x := _strength_at(f, runs))]
     return DensitySeries(runs, fits, _scatter(runs), float(np.mean([r.mean_coordination or 0 for r in runs])),
                          float(np.mean([r.loops_per_10k or 0 for r in runs])), split, strength)
@@ -364,21 +385,21 @@ def aerogel_density_analyse(spec: StudyWorkflow, jobs: list[Job], res: dict) -> 
         if static is not None:
             series[model].append(DensityRun(
                 model, f, s, static.solid_fraction, static.density_kg_m3, static.youngs_modulus_GPa * 1e6,
-                static.mean_coordination, static.loops_per_10k, getattr(static, "energy_split", None) or {},
+                static.mean_coordination, static.loops_per_10k, static.energy_split,
                 _strength_run(loaded) if loaded else None,
                 static.wall_s + (loaded.wall_s if loaded and loaded is not static else 0.0)))
     models = {m: _density_series(runs) for m, runs in series.items() if len({r.density_kg_m3 for r in runs}) >= 2}
     if not models:
         return None
-    ref = literature()["density_scaling"]
+    ref = density_scaling()
     first = models[next(iter(models))]
     m, n = first.fits["E"], first.fits.get("strength")
     study = Density([r for m in models.values() for r in m.runs], first.fits, models, ref, m.exponent,
                     m.exponent_ci, n.exponent if n else None, n.exponent_ci if n else None)
     n_txt = f", n = {n.exponent:.2f} [{n.exponent_ci[0]:.2f}, {n.exponent_ci[1]:.2f}]" if n else ""
     study.headline = ("E ~ rho^m with " + "; ".join(f"{_m_text(m.fits['E'])} ({name})" for name, m in models.items())
-                      + n_txt + f"; Ma et al. m = {ref['m_dlca_beams']}, experiments {ref['m_experiment_low']}-"
-                      f"{ref['m_experiment_high']}")
+                      + n_txt + f"; Ma et al. m = {ref.m_dlca_beams}, experiments {ref.m_experiment_low}-"
+                      f"{ref.m_experiment_high}")
     return study
 
 
@@ -408,10 +429,10 @@ def aerogel_density_render(spec: StudyWorkflow, study: Density, out: Path) -> li
                 f"| {model} | {'E = a rho^m' if law == 'E' else 'sigma = a rho^n'} (kPa) | {f.exponent:.3f} | "
                 f"[{f.exponent_ci[0]:.3f}, {f.exponent_ci[1]:.3f}] | {f.prefactor:.4g} | {f.r2:.4f} | "
                 f"{m.scatter_max_min:.1f} | {m.mean_coordination:.2f} | {m.loops_per_10k:.0f} | "
-                + (" / ".join(f"{100 * e[k]:.0f} %" for k in ("bending", "twisting", "shear", "stretching")) if e
+                + (" / ".join(f"{100 * getattr(e, k):.0f} %" for k in ("bending", "twisting", "shear", "stretching")) if e
                    else "-")
-                + (f" | m = {ref['m_dlca_beams']} ({ref['m_dlca_beams_source']}); {ref['m_experiment_low']}-"
-                   f"{ref['m_experiment_high']} ({ref['m_experiment_source']}) |" if law == "E" else
+                + (f" | m = {ref.m_dlca_beams} ({ref.m_dlca_beams_source}); {ref.m_experiment_low}-"
+                   f"{ref.m_experiment_high} ({ref.m_experiment_source}) |" if law == "E" else
                    f" | {_n_reference(ref)} |"))
     if method:
         lines += ["", f"Strength per solid fraction ({method}; geometric means over the seeds; share of "
@@ -437,12 +458,12 @@ def aerogel_density_render(spec: StudyWorkflow, study: Density, out: Path) -> li
         ["", "![stress-strain curves, one per solid fraction](curves.png)"] if method else [])
 
 
-def _n_reference(ref: dict) -> str:
+def _n_reference(ref: DensityScaling) -> str:
     """The literature's strength exponents (data/reference/aerogel_literature.toml), where it has them."""
-    if "n_experiment" not in ref:
+    if ref.n_experiment is None:
         return "-"
-    return (f"n = {ref['n_experiment']} ({ref['n_experiment_source']}); brittle open cells n = "
-            f"{ref['n_foam_brittle']} ({ref['n_foam_source']})")
+    return (f"n = {ref.n_experiment} ({ref.n_experiment_source}); brittle open cells n = "
+            f"{ref.n_foam_brittle} ({ref.n_foam_source})")
 
 
 def _plot_curves(spec: StudyWorkflow, study: Density, out: Path, path: Path) -> None:

@@ -208,7 +208,7 @@ def calibration(spec: StudyWorkflow, out: Path, say) -> Calibration:
         jobs = [_calibration_job(spec, p) for p in points]
         results = sweep(spec, out, jobs, say)
         if len(results) < len(jobs):
-            bad = {k: v["error"] for k, v in failed_jobs(out, 0).items() if k in {j.label for j in jobs}}
+            bad = {f.label: f.error for f in failed_jobs(out, 0) if f.label in {j.label for j in jobs}}
             raise SpecError("study", spec.name, f"calibration run failed: {bad}; see {out}/jobs")
         runs += len(points)
         values = [np.array([r.youngs_modulus_GPa, r.strength_MPa]) for r in results.values()]
@@ -817,13 +817,13 @@ def run(spec: StudyWorkflow, out: Path, say=print, executor=None) -> Result:
     else:
         summary = table_of(result)
         body = resolve(STUDY_TYPES[spec.study.type].render)(spec, result, out)
-    summary["failed_jobs"] = {k: v["error"] for k, v in failed.items()}
+    summary["failed_jobs"] = {f.label: f.error for f in failed}
     if failed:
         body += ["", "## Failed jobs (left out above; a rerun tries them again)", ""]
-        for k, v in failed.items():
-            body += [f"- `{k}`: {v['error']} (folder `{v['folder']}`)"]
-            if v["log_tail"]:
-                body += ["", "  ```", *[f"  {line}" for line in v["log_tail"].splitlines()[-8:]], "  ```", ""]
+        for f in failed:
+            body += [f"- `{f.label}`: {f.error} (folder `{f.folder}`)"]
+            if f.log_tail:
+                body += ["", "  ```", *[f"  {line}" for line in f.log_tail.splitlines()[-8:]], "  ```", ""]
     summary.update({"study": spec.study.type, "wall_s": time.perf_counter() - t0, "opalflow_version": __version__,
                     "executor": spec.executor.type, "spec": spec.to_dict()})
     report = [f"# Study: {spec.study.type} ({spec.name})", "",

@@ -6,6 +6,7 @@ jobs."""
 from __future__ import annotations
 
 import copy
+from dataclasses import dataclass
 from pathlib import Path
 
 from opalflow import registry
@@ -17,7 +18,7 @@ from opalflow.runs.jobs import Job, job_record
 from opalflow.spec import SpecError, WorkflowSpec, apply_overrides, read_toml, set_value
 from opalflow.store import RECORD
 
-__all__ = ["Job", "job_spec", "study_set", "sweep", "failed_jobs", "fmt_value", "label_number"]
+__all__ = ["Job", "FailedJob", "job_spec", "study_set", "sweep", "failed_jobs", "fmt_value", "label_number"]
 
 
 # ----------------------------------------------------------------------------- a study's jobs
@@ -55,15 +56,23 @@ def sweep(spec, out: Path, jobs: list[Job], say) -> dict[str, CompressionResult]
     return {k: v.result for k, v in res.items() if v.ok}
 
 
-def failed_jobs(out: Path, since: float) -> dict[str, dict]:
-    """label -> {error, log_tail, folder} of the study's jobs that failed in a run started at ``since``
-    (time.time()), read from each job's folder."""
-    failed = {}
+@dataclass
+class FailedJob:
+    """A study job that failed: its label, the error's first line, the LAMMPS log's tail and its folder."""
+
+    label: str
+    error: str
+    log_tail: str
+    folder: str
+
+
+def failed_jobs(out: Path, since: float) -> list[FailedJob]:
+    """The study's jobs that failed in a run started at ``since`` (time.time()), read from each job's folder."""
+    failed = []
     for path in sorted(Path(out).glob(f"jobs/*/{RECORD}")):
         rec = job_record(path.parent)
         if rec is not None and rec.state == "failed" and (rec.attempted or 0) >= since:
-            failed[rec.label or path.parent.name] = {"error": rec.error, "log_tail": rec.log_tail,
-                                                     "folder": str(path.parent)}
+            failed.append(FailedJob(rec.label or path.parent.name, rec.error, rec.log_tail, str(path.parent)))
     return failed
 
 

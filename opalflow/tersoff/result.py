@@ -51,7 +51,7 @@ class StabilitySummary:
     runs: list[BoundaryResult]
 
 
-@dataclass
+@dataclass(eq=False)
 class TersoffResult(Result):
     """What a Tersoff workflow found: the properties against Table 1, the MD stability, the fit."""
 

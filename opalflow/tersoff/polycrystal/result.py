@@ -169,7 +169,7 @@ class WaveExperiment(WaveFront):
     error_vs_measured_moduli: float
 
 
-@dataclass
+@dataclass(eq=False)
 class PolycrystalResult(Result):
     """What both polycrystal kinds give: the single crystal, its bounds, the check against LAMMPS."""
 
@@ -185,7 +185,7 @@ class PolycrystalResult(Result):
     wall_s: float | None = key(TENSION, WAVES)
 
 
-@dataclass
+@dataclass(eq=False)
 class TensionResult(PolycrystalResult):
     """Kind ``polycrystal_tension``: E and nu over every mesh and seed, each mesh's spread."""
 
@@ -204,7 +204,7 @@ class TensionResult(PolycrystalResult):
         return TENSION
 
 
-@dataclass
+@dataclass(eq=False)
 class WavesResult(PolycrystalResult):
     """Kind ``polycrystal_waves``: each wave's speed, and the moduli measured on the same potential."""
 
