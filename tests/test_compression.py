@@ -352,7 +352,7 @@ def test_stability_check_to_a_strain(tmp_path, capsys):
     assert summary["passed"] and summary["strain"] == 0.2
     dt_ns = summary["timestep_s"] * 1e9
     planned = math.ceil(0.2 * 100.0 / 50.0 / dt_ns)        # 6 cells of 20 nm: the mobile part is 100 nm high
-    assert planned <= info.steps < planned * 1.05
+    assert planned <= info["steps"] < planned * 1.05
     assert "(to strain 0.2)" in summary["headline"]
     assert main(["check", "lattice_sc", "--out", str(tmp_path / "x"), "--strain", "2"]) == 2
     assert "--strain = 2.0" in capsys.readouterr().err

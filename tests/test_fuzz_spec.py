@@ -224,12 +224,15 @@ def test_the_command_line_refuses_in_one_line_or_accepts_and_writes_nothing_on_r
     of every kind, unknown ones, malformed items): exit 0 (the spec is valid: the run itself is stubbed out, it
     is not what this checks) or one line ``error: ...`` with exit 2 and no folder; never a traceback."""
     import opalflow.runs.record as record
+    from opalflow.runs.result import Result
 
     accepted = []
-    def stub(kind, spec, out, **kw):          # the run: its spec kept, a summary written as finish() would
+    def stub(kind, spec, out, **kw):          # the run: its spec kept, a summary written and returned as finish()
         accepted.append(spec)
         Path(out).mkdir(parents=True, exist_ok=True)
-        write_json_atomic(Path(out) / SUMMARY, {"headline": "stub", "wall_s": 0.0, "state": "finished"})
+        summary = {"headline": "stub", "wall_s": 0.0, "state": "finished"}
+        write_json_atomic(Path(out) / SUMMARY, summary)
+        return Result.from_summary(summary)
 
     monkeypatch.setattr(record, "run_kind", stub)
     rng = random.Random(20261203)
