@@ -7,7 +7,9 @@
 The study resumes job by job (a rerun keeps the finished jobs and continues a stopped one from its saved
 events), so it may run over several sittings; this records what its folder holds: each finished job's porosity,
 density, E, strength, events, bonds broken, particles and bonds, its last session's wall time and the peak
-memory of its process, and the study's fits once the study has written them (all its jobs finished).
+memory of its process, and the study's fits once the study has written them (all its jobs finished).  The jobs
+already recorded stay (a folder on another machine, a study of other seeds: ``--set 'study.seeds=[2]'``); a job
+of the same label is replaced by the folder's.
 """
 from __future__ import annotations
 
@@ -43,7 +45,38 @@ def record(folder: Path) -> dict:
             "jobs_finished": len(jobs), "jobs": jobs, "fits": fits}
 
 
+def merged(result: dict) -> dict:
+    """``result`` with the jobs recorded before that its folder does not hold (their sitting's date kept)."""
+    if not OUT.exists():
+        return result
+    before = json.loads(OUT.read_text())
+    mine = {j["label"] for j in result["jobs"]}
+    date = before.get("machine", {}).get("date", "")
+    kept = [{**j, "date": j.get("date", date)} for j in before["jobs"] if j["label"] not in mine]
+    today = result["machine"]["date"]
+    jobs = sorted(kept + [{**j, "date": today} for j in result["jobs"]], key=lambda j: j["label"])
+    return {**result, "jobs_finished": len(jobs), "jobs": jobs, "fits": result["fits"] or before.get("fits")}
+
+
+def fits_of_recorded(jobs: list[dict]) -> dict | None:
+    """Eqs. 22, 23 and 26 fitted to every recorded job (the study's own fits: opalflow.analysis.fits, 95 %
+    intervals), beside the paper's values (opalflow.studies.run.paper()): the table while the study is partly run."""
+    from opalflow.analysis.fits import fit_exponential, fit_power
+    from opalflow.runs.result import table_of
+    from opalflow.studies.run import paper
+
+    if len(jobs) < 3:
+        return None
+    eps = [j["porosity"] for j in jobs]
+    fits = {"E_exponential": fit_exponential(eps, [j["youngs_modulus_GPa"] for j in jobs]),
+            "E_power": fit_power(eps, [j["youngs_modulus_GPa"] for j in jobs]),
+            "strength_exponential": fit_exponential(eps, [j["strength_MPa"] for j in jobs])}
+    return {"jobs": sorted(j["label"] for j in jobs), "fits": {k: table_of(f) for k, f in fits.items()},
+            "paper": table_of(paper().porosity)}
+
+
 if __name__ == "__main__":
-    result = record(Path(sys.argv[1]))
+    result = merged(record(Path(sys.argv[1])))
+    result["fits_of_recorded_jobs"] = fits_of_recorded(result["jobs"])
     OUT.write_text(json.dumps(result, indent=1) + "\n")
     print(f"{result['jobs_finished']} jobs finished -> {OUT}")
