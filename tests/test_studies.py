@@ -131,9 +131,9 @@ def test_a_study_killed_stops_its_jobs(tmp_path):
 
 
 def test_a_study_of_one_worker_stops_with_its_job(tmp_path):
-    """Was: with executor.workers = 1 (the jobs in the study's own process) SIGTERM stopped the running job and
-    the study went on with the next one, to "too few jobs finished" and exit 0.  Now the study stops with the
-    job: exit 143, the line that says how to go on, the stopped job resumable and the next one not started."""
+    """Was: with executor.workers = 1 (then the jobs in the study's own process) SIGTERM stopped the running job
+    and the study went on with the next one, to "too few jobs finished" and exit 0.  The study stops with the job:
+    exit 143, the line that says how to go on, the stopped job resumable and the next one not started."""
     import time
 
     from opalflow.runs.record import RunRecord

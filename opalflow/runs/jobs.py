@@ -64,9 +64,6 @@ class Outcome:
     error: str = ""
     log_tail: str = ""
     step: int | None = None
-    #: what stopped the job before it ended, if something did ("SIGINT": Ctrl-C; "SIGTERM", "SIGUSR1": asked to
-    #: stop): a study that runs its jobs in its own process stops with them
-    stopped: str = ""
 
     @classmethod
     def finished(cls, folder: str | os.PathLike, kind: str, summary: dict) -> Outcome:
@@ -132,24 +129,19 @@ def log_tail(folder: Path, lines: int = 15) -> str:
 
 
 @contextlib.contextmanager
-def _stop_on_signals(folder: Path, asked: list):
+def _stop_on_signals(folder: Path):
     """While in it: SIGUSR1 (SLURM's warning before the time limit) and SIGTERM write a restart and stop; a USR1
     that came before this handler (the folder's :data:`STOP_NOTE`, written by the SLURM array's script) counts too.
-    The signals that came are appended to ``asked``; on leaving, the note is gone and the caller's handlers are
-    back (a study's own process; none are replaced off the main thread)."""
+    On leaving, the note is gone and the caller's handlers are back (none are replaced off the main thread)."""
     from opalflow.lammps.engine import request_stop
-
-    def stop(signum, frame=None):
-        asked.append(signal.Signals(signum).name)
-        request_stop(signum, frame)
 
     before = []
     if threading.current_thread() is threading.main_thread():
-        before = [(sig, signal.signal(sig, stop)) for sig in (signal.SIGUSR1, signal.SIGTERM)]
+        before = [(sig, signal.signal(sig, request_stop)) for sig in (signal.SIGUSR1, signal.SIGTERM)]
     try:
         if (folder / STOP_NOTE).exists():
             (folder / STOP_NOTE).unlink()
-            stop(signal.SIGUSR1)
+            request_stop(signal.SIGUSR1, None)
         yield
     finally:
         (folder / STOP_NOTE).unlink(missing_ok=True)       # a USR1 the handler took may have left its note too
@@ -165,17 +157,14 @@ def run_job(folder: str, np_: int = 1, threads: int = 1) -> Outcome:
     BLAS and OpenMP run ``threads`` threads in the job (threadpoolctl), whatever the executor's process
     inherited: the same sums in the same order, so a job gives the same numbers to the last digit on a
     local pool, a Dask worker or a SLURM node, and jobs side by side do not oversubscribe the cores."""
-    folder, asked = Path(folder).resolve(), []
-    with _stop_on_signals(folder, asked):
+    folder = Path(folder).resolve()
+    with _stop_on_signals(folder):
         import scipy.linalg  # noqa: F401 - load every BLAS/OpenMP library first: threadpoolctl limits the loaded ones
         import scipy.sparse.linalg  # noqa: F401
         from threadpoolctl import threadpool_limits
 
         with threadpool_limits(limits=threads):
-            got = _run_job(folder, np_)
-        if got.state != "finished" and asked and not got.stopped:
-            got.stopped = asked[0]
-        return got
+            return _run_job(folder, np_)
 
 
 def _run_job(folder: Path, np_: int) -> Outcome:
@@ -210,13 +199,12 @@ def _run_job(folder: Path, np_: int) -> Outcome:
     except Preempted as exc:
         settle(folder, "requeued")
         requeue_self(say)
-        return Outcome("requeued", str(folder), step=exc.step, stopped="SIGTERM")
+        return Outcome("requeued", str(folder), step=exc.step)
     except (Exception, KeyboardInterrupt) as exc:  # noqa: BLE001 - the job's failure is its result
         first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         tail = log_tail(folder)
         settle(folder, "failed", error=first, log_tail=tail)
-        return Outcome("failed", str(folder), error=first, log_tail=tail,
-                       stopped="SIGINT" if isinstance(exc, KeyboardInterrupt) else "")
+        return Outcome("failed", str(folder), error=first, log_tail=tail)
     settle(folder, "finished", peak_rss_MiB=peak_rss_MiB())
     return Outcome("finished", str(folder), result)
 
