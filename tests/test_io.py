@@ -58,6 +58,15 @@ def test_the_api_gives_typed_results_that_read_as_summary_json(api_run, tmp_path
     assert opalflow.info().lammps.version >= 20250722 and "study" in opalflow.info().kinds
 
 
+def test_quiet_means_no_progress_lines(tmp_path, capsys):
+    """Was: ``quiet=True`` left LAMMPS's progress lines ("step N/M (..%), ... steps/s, ... s left") on stderr."""
+    opalflow.run("lattice_sc", tmp_path / "quiet", set=SMALL, quiet=True)
+    assert capsys.readouterr().err == ""
+    opalflow.run("lattice_sc", tmp_path / "said", set=SMALL)
+    err = capsys.readouterr().err
+    assert "steps/s" in err and "100 %" in err
+
+
 def test_every_dataset_of_results_h5_has_units(api_run, tmp_path):
     """Walk every dataset of the dynamic, static and aggregation results: each has units, each 2-D one columns."""
     import h5py

@@ -105,11 +105,11 @@ def execute(out: Path, record: RunRecord, *, np_: int = 1, resume: bool = False,
     record.begin(out, launcher=launcher.describe(), restart=restart, first_step=first)
     if not launcher.in_process:
         return run_subprocess(out, np=np_, total_steps=sample.steps, resume=resume, label=label, suffix=suffix,
-                              env=launcher.env())
+                              env=launcher.env(), say=say)
     script = (out / ("resume.lmp" if resume else "in.lmp")).read_text()
     return run_in_process(out, script, every=sample.output_every_steps,
                           strain_per_step=sample.plate_speed_m_s * sample.timestep_s * 1e9 / sample.height_nm,
-                          suffix=suffix, label=label)
+                          suffix=suffix, label=label, say=say)
 
 
 def restart_files(out: Path) -> list[tuple[int, Path]]:

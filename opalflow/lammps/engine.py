@@ -392,13 +392,14 @@ def session(folder: Path, *, log: str = "log.lammps", suffix: str | None = None)
 
 
 def run_in_process(folder: Path, script: str, *, every: int, strain_per_step: float,
-                   suffix: str | None = None, label: str = "") -> float:
+                   suffix: str | None = None, label: str = "", say=None) -> float:
     """Run ``script`` (text of in.lmp or resume.lmp) in ``folder`` with the LAMMPS module.
 
     The final ``run N upto`` is split into chunks of about :data:`CHUNK_S` seconds so that progress is
     printed and Ctrl-C answered within seconds; the result is the same run.  Returns LAMMPS seconds.
     A stop asked for by :func:`request_stop` (a scheduler's signal) runs on to the next whole output interval
-    (``every`` steps), writes ``restart.STEP.bin`` there and raises :class:`Preempted`.
+    (``every`` steps), writes ``restart.STEP.bin`` there and raises :class:`Preempted`.  ``say``: where the
+    progress lines go (None: stderr).
     """
     t = time.perf_counter()
     folder = Path(folder).resolve()          # the session works inside it: progress.json needs the full path
@@ -413,7 +414,7 @@ def run_in_process(folder: Path, script: str, *, every: int, strain_per_step: fl
                     # run): LAMMPS holds Ctrl-C and signals until a chunk ends
                     longest = max(every, target // 50)
                     chunk = min(every, 100)
-                    progress = Progress(target, step, label, folder=folder)
+                    progress = Progress(target, step, label, folder=folder, say=say)
                     first = True
                     while step < target:
                         nxt = min(target, step + chunk)
@@ -515,9 +516,9 @@ def _version() -> str:
 
 
 def run_subprocess(folder: Path, *, np: int, total_steps: int, resume: bool, label: str = "",
-                   suffix: str | None = None, env: dict | None = None) -> float:
+                   suffix: str | None = None, env: dict | None = None, say=None) -> float:
     """Run ``bash run.sh`` (``NP`` processes; ``env`` adds to the environment, e.g. the launch command of
-    :mod:`opalflow.runs.launch`); progress from the thermo lines on its output."""
+    :mod:`opalflow.runs.launch`); progress from the thermo lines on its output, to ``say`` (None: stderr)."""
     import subprocess
 
     env = {**os.environ, "NP": str(np), "SUFFIX": suffix or "", **(env or {})}
@@ -525,7 +526,7 @@ def run_subprocess(folder: Path, *, np: int, total_steps: int, resume: bool, lab
         env["OMP_NUM_THREADS"] = str(max(1, threads_per_rank() // np))
     t = time.perf_counter()
     cmd = ["bash", str(Path(folder) / "run.sh")] + (["resume"] if resume else [])
-    progress = Progress(total_steps, 0, label, folder=folder)
+    progress = Progress(total_steps, 0, label, folder=folder, say=say)
     step = None
     with subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env) as p:
         try:
