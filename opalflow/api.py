@@ -23,8 +23,8 @@ from __future__ import annotations
 import copy
 import sys
 import tomllib
-from pathlib import Path
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
 
 from opalflow import registry

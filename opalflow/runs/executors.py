@@ -56,7 +56,7 @@ class LocalExecutor:
         main = threading.current_thread() is threading.main_thread()
         # the study killed (SIGTERM: kill, a scheduler) stops its jobs too, as Ctrl-C does (measured: a study's
         # process killed left its two jobs running, one holding its folder's lock against the next study)
-        before = signal.signal(signal.SIGTERM, signal.SIG_DFL) if main else None
+        before = signal.getsignal(signal.SIGTERM) if main else None
         if main:
             signal.signal(signal.SIGTERM, functools.partial(_on_term, before))
         try:
