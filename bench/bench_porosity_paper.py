@@ -2,21 +2,23 @@
 
     python -m opalflow run porosity_strength --out DIR --set study.paper_scale=true [--set 'study.seeds=[1]']
         --set executor.workers=1 --set executor.cpus_per_rank=2     # one job at a time: the densest need ~18 GiB
-    python bench/bench_porosity_paper.py DIR                        # -> bench/results/porosity_quasistatic_d15.json
+    python bench/bench_porosity_paper.py DIR [--paused LABEL=SECONDS ...]
+                                                    # -> bench/results/porosity_quasistatic_d15.json
 
 The study resumes job by job (a rerun keeps the finished jobs and continues a stopped one from its saved
 events), so it may run over several sittings; this records what its folder holds: each finished job's porosity,
 density, E, strength, events, bonds broken, particles and bonds, its last session's wall time and the peak
 memory of its process, and the study's fits once the study has written them (all its jobs finished).  The jobs
 already recorded stay (a folder on another machine, a study of other seeds: ``--set 'study.seeds=[2]'``); a job
-of the same label is replaced by the folder's.
+of the same label is replaced by the folder's.  ``--paused LABEL=SECONDS``: the job's process was stopped
+(SIGSTOP) that long during its session (the machine lent to something else): kept as ``paused_s``, its wall
+time stays as measured.
 """
 from __future__ import annotations
 
 import datetime
 import json
 import os
-import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -76,7 +78,18 @@ def fits_of_recorded(jobs: list[dict]) -> dict | None:
 
 
 if __name__ == "__main__":
-    result = merged(record(Path(sys.argv[1])))
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("folder", type=Path)
+    ap.add_argument("--paused", action="append", default=[], metavar="LABEL=SECONDS")
+    args = ap.parse_args()
+    result = record(args.folder)
+    paused = {k: float(v) for k, v in (p.split("=") for p in args.paused)}
+    for job in result["jobs"]:
+        if job["label"] in paused:
+            job["paused_s"] = paused[job["label"]]
+    result = merged(result)
     result["fits_of_recorded_jobs"] = fits_of_recorded(result["jobs"])
     OUT.write_text(json.dumps(result, indent=1) + "\n")
     print(f"{result['jobs_finished']} jobs finished -> {OUT}")
