@@ -61,18 +61,15 @@ def merged(result: dict) -> dict:
 
 
 def fits_of_recorded(jobs: list[dict]) -> dict | None:
-    """Eqs. 22, 23 and 26 fitted to every recorded job (the study's own fits: opalflow.analysis.fits, 95 %
+    """Eqs. 22, 23 and 26 fitted to every recorded job (the study's own fits: opalflow.studies.run.porosity_fits, 95 %
     intervals), beside the paper's values (opalflow.studies.run.paper()): the table while the study is partly run."""
-    from opalflow.analysis.fits import fit_exponential, fit_power
     from opalflow.runs.result import table_of
-    from opalflow.studies.run import paper
+    from opalflow.studies.run import paper, porosity_fits
 
     if len(jobs) < 3:
         return None
-    eps = [j["porosity"] for j in jobs]
-    fits = {"E_exponential": fit_exponential(eps, [j["youngs_modulus_GPa"] for j in jobs]),
-            "E_power": fit_power(eps, [j["youngs_modulus_GPa"] for j in jobs]),
-            "strength_exponential": fit_exponential(eps, [j["strength_MPa"] for j in jobs])}
+    fits = porosity_fits([j["porosity"] for j in jobs], [j["youngs_modulus_GPa"] for j in jobs],
+                         [j["strength_MPa"] for j in jobs])
     return {"jobs": sorted(j["label"] for j in jobs), "fits": {k: table_of(f) for k, f in fits.items()},
             "paper": table_of(paper().porosity)}
 

@@ -478,17 +478,24 @@ def porosity_jobs(spec: StudyWorkflow) -> list[Job]:
             for p in spec.study.porosities for s in spec.study.seeds]
 
 
+def porosity_fits(porosity, E_GPa, strength_MPa=None) -> dict[str, Fit]:
+    """Eqs. 22 and 23 (E) and 26 (strength, where given) fitted with 95 % intervals."""
+    eps, e = np.asarray(porosity, float), np.asarray(E_GPa, float)
+    fits = {"E_exponential": fit_exponential(eps, e), "E_power": fit_power(eps, e)}
+    if strength_MPa is not None:
+        fits["strength_exponential"] = fit_exponential(eps, np.asarray(strength_MPa, float))
+    return fits
+
+
 def porosity_analyse(spec: StudyWorkflow, jobs: list[Job], results: dict) -> Porosity | None:
     """Random pores at each porosity x seed -> fits of eqs. 22, 23, 26 with 95 % intervals (three runs at least)."""
     runs = [PorosityRun(*job.at, r.porosity, r.density_kg_m3, r.youngs_modulus_GPa, r.strength_MPa, r.wall_s)
             for job in jobs if (r := results.get(job.label)) is not None]
     if len(runs) < 3:
         return None
-    eps = np.array([r.porosity for r in runs])
-    e = np.array([r.youngs_modulus_GPa for r in runs])
-    fits = {"E_exponential": fit_exponential(eps, e), "E_power": fit_power(eps, e)}
-    if METHODS[spec.study.method].strength:        # dynamic or quasi-static: a strength per job
-        fits["strength_exponential"] = fit_exponential(eps, np.array([r.strength_MPa for r in runs]))
+    fits = porosity_fits([r.porosity for r in runs], [r.youngs_modulus_GPa for r in runs],
+                         # dynamic or quasi-static: a strength per job
+                         [r.strength_MPa for r in runs] if METHODS[spec.study.method].strength else None)
     better = "power" if fits["E_power"].r2 > fits["E_exponential"].r2 else "exponential"
     sigma = (f", b_sigma = {fits['strength_exponential'].exponent:.2f}, sigma0 = "
              f"{fits['strength_exponential'].prefactor:.4g} MPa" if "strength_exponential" in fits else " (static)")
