@@ -118,7 +118,7 @@ def load_results(folder: str | Path) -> Results:
 
 
 def _structure(folder: Path) -> Structure:
-    """The folder's data file, its sides periodic as the run's deck facts say (an aggregate: all three)."""
+    """The folder's data file, its sides periodic as the run's deck facts say (no record: x and y periodic)."""
     deck = RunRecord.read(folder).deck if RunRecord.exists(folder) else {}
     data = next((p for p in (folder / "data.lmp", folder / "aggregate.lmp") if p.exists()), None)
     if data is None:
