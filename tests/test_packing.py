@@ -4,7 +4,8 @@ import math
 import numpy as np
 import pytest
 
-from opalflow.neighbors import pairs_within
+from opalflow import neighbors
+from opalflow.neighbors import neighbour_counts, pairs_within
 from opalflow.packing import dense_random_packing, max_pair_overlap, tile_count
 
 BOX = np.array([600.0, 520.0, 400.0])
@@ -36,6 +37,24 @@ def test_whole_box_packing_is_periodic_in_x_and_y():
     dx = np.abs(p.positions[pairs[:, 0], 0] - p.positions[pairs[:, 1], 0])
     assert (dx > BOX[0] / 2).sum() > 10
     assert max_pair_overlap(p.positions, p.diameters, BOX, (True, True, False)) <= 0.01
+
+
+@pytest.mark.parametrize("box,periodic", [(BOX, (True, True, False)), (np.array([75.0, 520.0, 120.0]), (True,) * 3)])
+def test_the_cell_list_finds_the_trees_pairs_and_counts(monkeypatch, tiled, box, periodic):
+    """pairs_within and neighbour_counts by the cell list (from CELL_MIN_POINTS points: the paper's samples) give
+    the k-d trees' pairs and counts to the last one: a packing periodic in x and y (pairs across both faces, none
+    across z), and a box of one cell along x and two along z, periodic in all three (each cell visited once), the
+    neighbours of half the points."""
+    x = np.mod(tiled.positions, box)
+    radii = np.array([29.25, 30.75, 50.66, 52.5])              # (g(r)'s shells at d and sqrt(3) d)
+    centres = np.random.default_rng(1).random(len(x)) < 0.5
+    tree = pairs_within(x, 52.5, box, periodic), neighbour_counts(x, centres, radii, box, periodic)
+    monkeypatch.setattr(neighbors, "CELL_MIN_POINTS", 0)
+    cells = pairs_within(x, 52.5, box, periodic), neighbour_counts(x, centres, radii, box, periodic)
+    assert len(tree[0]) > 5 * len(x) and np.array_equal(tree[0], cells[0])
+    assert np.all(np.diff(tree[1]) > 0) and tree[1][0] >= centres.sum() and np.array_equal(tree[1], cells[1])
+    across = np.abs(x[cells[0][:, 0]] - x[cells[0][:, 1]]) > box / 2
+    assert np.all((across.sum(axis=0) > 10) == np.array(periodic))
 
 
 def test_same_seed_same_bytes_other_seed_other_packing():

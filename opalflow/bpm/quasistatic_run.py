@@ -38,6 +38,7 @@ from opalflow.bpm.static_run import network_run, particle_stress
 from opalflow.runs.plan import CostFacts
 from opalflow.runs.record import finish
 from opalflow.progress import note
+from opalflow.lammps.datafile import write_dump
 from opalflow.lammps.engine import Interrupted, Preempted, stop_requested
 from opalflow.spec import SpecError
 from opalflow.store import (RESULTS, SUMMARY, DamagedFile, atomic_path, h5_bytes, new_figure, put, read_json, save_figure,
@@ -152,7 +153,10 @@ def run_quasistatic(spec: BpmWorkflow, out: Path, *, resume: bool = False, say=p
             fracture.plot_fracture(stage("fracture.png"), frames, data.box_lengths, float(np.mean(data.diameters)),
                                    title=f"{spec.name} (quasi-static, {loading.name})")
         for tag, (_, snap) in zip(("peak", "end"), frames):
-            _write_dump(stage(f"fracture.{tag}.dump"), data, snap)
+            x, y, z = snap.position_nm.T
+            write_dump(stage(f"fracture.{tag}.dump"), data, {"id": snap.id, "type": data.types, "x": x, "y": y, "z": z,
+                                                             "radius": data.diameters / 2,
+                                                             "broken_bonds": snap.broken_bonds})
 
     written = finish(out, summary, lambda: _report(run, summary, result, loading, sample, plots), result=type(result),
                      files=files, record=record, started=t0)
@@ -311,19 +315,6 @@ def _frames(net, data, res) -> list[fracture.Frame]:
     return [(f"at the peak (strain {100 * res.events[p].strain:.2f} %)", snap(peak_alive, res.peak_x, res.events[p].strain)),
             (f"at the end (strain {100 * last.strain:.2f} %, {int((~res.alive).sum())} bonds broken)",
              snap(res.alive, res.end_x, last.strain))]
-
-
-def _write_dump(path: Path, data, snap: fracture.Snapshot) -> None:
-    """A LAMMPS text dump (OVITO reads it): id type x y z radius broken_bonds (positions displaced)."""
-    lo, hi = data.box_lo, data.box_hi
-    bounds = "pp" if data.periodic[0] else "ff"
-    head = ["ITEM: TIMESTEP", "0", "ITEM: NUMBER OF ATOMS", str(data.n_particles),
-            f"ITEM: BOX BOUNDS {bounds} {bounds} ff"] + [f"{float(lo[k])!r} {float(hi[k])!r}" for k in range(3)]
-    head.append("ITEM: ATOMS id type x y z radius broken_bonds")
-    rows = np.column_stack([snap.id, data.types, snap.position_nm, data.diameters / 2, snap.broken_bonds])
-    with open(path, "w") as f:
-        f.write("\n".join(head) + "\n")
-        np.savetxt(f, rows, fmt=["%d", "%d", "%.6f", "%.6f", "%.6f", "%.6f", "%d"])
 
 
 def _fill_h5(h, res, data, result, sample, run: RunFacts, rule: str) -> None:
