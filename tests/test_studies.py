@@ -234,6 +234,26 @@ def test_a_study_at_paper_scale_runs_the_papers_sample_not_the_coarse_one(name):
         assert job.compression.strain_max == coarse.compression.strain_max
 
 
+def test_a_porosity_study_at_another_resolution_changes_only_the_particles(tmp_path, capsys):
+    """study.diameter_nm: the same paper-scale porosity study with d = 30 nm particles (the resolution study of
+    issue 56): every job's diameter set, its labels, pores, seeds and run settings the d = 15 nm study's; 0 keeps
+    the base's; a diameter out of range is refused in one line before anything is written."""
+    from conftest import assert_refused
+    from opalflow.runs.plan import jobs_of
+
+    paper = ["study.paper_scale=true"]
+    fine = jobs_of(load_spec(WORKFLOWS / "porosity_strength.toml", paper))
+    coarse = jobs_of(load_spec(WORKFLOWS / "porosity_strength.toml", [*paper, "study.diameter_nm=30"]))
+    assert [j.label for j in fine] == [j.label for j in coarse] and len(fine) == 18
+    assert {j.spec.packing.diameter_nm for j in fine} == {15.0}
+    assert {j.spec.packing.diameter_nm for j in coarse} == {30.0}
+    for a, b in zip(fine, coarse):
+        assert (a.at, a.spec.pores, a.spec.compression, a.spec.bonds) == (b.at, b.spec.pores, b.spec.compression,
+                                                                          b.spec.bonds)
+    assert_refused(capsys, ["run", "porosity_strength", "--out", str(tmp_path / "r")], ["study.diameter_nm=2"],
+                   "study.diameter_nm", tmp_path / "r")
+
+
 def test_bad_study_field_is_one_line(tmp_path, capsys):
     from conftest import assert_refused
 

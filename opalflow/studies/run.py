@@ -472,10 +472,13 @@ class Porosity:
 
 
 def porosity_jobs(spec: StudyWorkflow) -> list[Job]:
-    """Random pores at each porosity x seed (``at``: porosity, seed)."""
+    """Random pores at each porosity x seed (``at``: porosity, seed), the particles ``study.diameter_nm`` across where
+    it is set."""
+    st = spec.study
+    size = {"packing.diameter_nm": st.diameter_nm} if st.diameter_nm else {}
     return [Job(f"p{label_number(p)}_s{s}", job_spec(spec, {"pores.arrangement": "random", "pores.porosity": p,
-                                                          "pores.seed": s, "packing.seed": s}), at=(p, s))
-            for p in spec.study.porosities for s in spec.study.seeds]
+                                                          "pores.seed": s, "packing.seed": s, **size}), at=(p, s))
+            for p in st.porosities for s in st.seeds]
 
 
 def porosity_fits(porosity, E_GPa, strength_MPa=None) -> dict[str, Fit]:

@@ -46,7 +46,8 @@ STUDY_TYPES = {t.name: t for t in (
           "Newton iteration on bond E_b and strength to E* and sigma* (eqs. 18-19)", iterate=True),
     _type("bulk", _RUN, ("diameters_nm",), "K_E = E_macro / E_b (eq. 20) of pore-free samples at each diameter"),
     _type("coating", _RUN, ("thicknesses_nm",), "titania coatings at E_exp -+ std (Fig. 9)"),
-    _type("porosity", _RUN, ("porosities", "seeds"), "random pores: fits of eqs. 22, 23, 26 with 95 % intervals"),
+    _type("porosity", _RUN, ("porosities", "seeds", "diameter_nm"),
+          "random pores: fits of eqs. 22, 23, 26 with 95 % intervals"),
     _type("convergence", _RUN, ("cells", "diameters_nm", "seeds"),
           "cross-section and diameter x seeds: the resolution's effect"),
     _type("sides", _RUN, (), "periodic against open sides (section 3.1.3)"),
@@ -91,6 +92,9 @@ class StudySpec:
     thicknesses_nm: list[float] = field(default_factory=lambda: [0.0, 10.0, 20.0, 34.0])
     #: porosity: the targets of random pores
     porosities: list[float] = field(default_factory=lambda: [0.30, 0.36, 0.42, 0.49, 0.55, 0.62])
+    #: porosity: every job's particle diameter, the study's resolution (0: the base's; the paper's 15 nm at paper
+    #: scale): the same study at several resolutions finds the coarsest that gives the paper's exponents
+    diameter_nm: float = 0.0
     #: porosity, convergence, aerogel studies: one job per seed
     seeds: list[int] = field(default_factory=lambda: [1, 2, 3])
     #: convergence: pore cells [x, y] of each cross-section
@@ -138,6 +142,8 @@ class StudyWorkflow(WorkflowSpec):
               "must be >= 0 (0: the material's)")
         check(len(st.diameters_nm) >= 1 and all(d > 0 for d in st.diameters_nm), "study.diameters_nm",
               st.diameters_nm, "must be a non-empty list of diameters > 0")
+        check(st.diameter_nm == 0 or 5 <= st.diameter_nm <= 200, "study.diameter_nm", st.diameter_nm,
+              "must be 0 (the base's) or a particle diameter in [5, 200] nm")
         check(all(0 <= t < 200 for t in st.thicknesses_nm), "study.thicknesses_nm", st.thicknesses_nm,
               "must be thicknesses in [0, 200) nm")
         check(len(st.porosities) >= 1 and all(0 < p <= 0.66 for p in st.porosities), "study.porosities",
