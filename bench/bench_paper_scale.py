@@ -8,7 +8,8 @@ time of a run goes.
 
 ``runs``: each command (:data:`COMMANDS`) ``--repeat`` times under ``/usr/bin/time -v``, the structure built in the
 run (``OPALFLOW_CACHE=off``), one at a time on an otherwise idle machine: wall, peak memory (its rusage), the
-strength or E, the run's own phase timings (summary.json); medians against :data:`TARGETS`; ``--profile``: one run
+strength or E, the run's own phase timings (summary.json), the code's commit; medians against :data:`TARGETS` (the
+medians they replace kept in ``earlier_medians``); ``--profile``: one run
 more of each command under ``py-spy`` (not timed: py-spy's sampling adds to its wall and hides its memory from
 /usr/bin/time), its profile sorted as ``profile`` sorts one (label ``after_NAME``).
 ``profile``: a ``py-spy record --idle --threads -f raw`` of one run (``py-spy`` is not a dependency: ``pip install
@@ -95,8 +96,9 @@ def one_run(name: str, folder: Path, raw: Path | None = None) -> dict:
         f.flush()
         peak, wall = _time_output(f.name)
     s = json.loads((folder / "summary.json").read_text())
+    code = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True, text=True)
     row = {"wall_s": round(wall, 1), "peak_GiB": round(peak, 2), "youngs_modulus_GPa": s["youngs_modulus_GPa"],
-           "solver_wall_s": s.get("wall_s"), "when": time.strftime("%Y-%m-%d %H:%M")}
+           "solver_wall_s": s.get("wall_s"), "when": time.strftime("%Y-%m-%d %H:%M"), "code": code.stdout.strip()}
     q = s.get("quasistatic")
     if q:
         row.update(strength_MPa=s["strength_MPa"], events=q["events"], cg_iterations=q["cg_iterations"],
@@ -299,6 +301,12 @@ def main(argv=None) -> None:
     a = p.parse_args(argv)
     old = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
     if a.what == "runs":
+        for name in a.only:                 # the medians measured before these runs, kept
+            if name in old.get("runs", {}):
+                was = old["runs"][name]
+                old.setdefault("earlier_medians", []).append(
+                    {"command": name, "when": was["runs"][0]["when"], "code": was["runs"][0].get("code", ""),
+                     "median_wall_s": was["median_wall_s"], "median_peak_GiB": was["median_peak_GiB"]})
         old.setdefault("runs", {}).update(runs(a.only, a.repeat, old.setdefault("profiles", {}) if a.profile else None))
         old["machine"] = machine()
     elif a.what == "kernels":
