@@ -15,7 +15,8 @@ memory of its process, and the study's fits once the study has written them (all
 already recorded stay (a folder on another machine, a study of other seeds: ``--set 'study.seeds=[2]'``); a job
 of the same label is replaced by the folder's.  ``--paused LABEL=SECONDS``: the job's process was stopped
 (SIGSTOP) that long during its session (the machine lent to something else): kept as ``paused_s``, its wall
-time stays as measured; ``--note LABEL=TEXT``: what else ran on the machine during the job.
+time stays as measured; ``--note LABEL=TEXT``: what else ran on the machine during the job.  ``peak_rss_of``
+(seed 1 of the d = 15 nm study): whose peak memory a job's ``peak_rss_GiB`` is where it is not the job's own.
 
 ``--resolution``: each recorded resolution's fits of eqs. 22 and 23 (b_E and m with their 95 % intervals, every
 recorded job) against the finest resolution's intervals, and its cost (the mean wall time of a job, over the
@@ -39,13 +40,14 @@ def out_of(diameter_nm: float) -> Path:
 
 
 def record(folder: Path) -> dict:
-    jobs, diameters = [], set()
+    jobs, diameters, settings = [], set(), set()
     for job in sorted(folder.glob("jobs/*/summary.json")):
         s = json.loads(job.read_text())
         if s.get("state") != "finished":
             continue
         rec = json.loads((job.parent / "run.json").read_text())
         diameters.add(rec["spec"]["packing"]["diameter_nm"])
+        settings.add((rec["spec"]["bonds"]["breaking"], rec["spec"]["compression"]["event_tolerance"]))
         last = rec["sessions"][-1]
         jobs.append({"label": rec["label"], "porosity": s["porosity"], "density_kg_m3": s["density_kg_m3"],
                      "youngs_modulus_GPa": s["youngs_modulus_GPa"], "strength_MPa": s["strength_MPa"],
@@ -57,12 +59,13 @@ def record(folder: Path) -> dict:
         raise SystemExit(f"{folder}: {len(diameters)} particle diameters among its finished jobs (one study's jobs "
                          "share one)")
     d = diameters.pop()
+    (breaking, tolerance), = settings
     study = folder / "summary.json"
     fits = json.loads(study.read_text()).get("fits") if study.exists() else None
     size = "" if d == 15 else f" --set study.diameter_nm={d:g}"
     return {"command": "python -m opalflow run porosity_strength --out DIR --set study.paper_scale=true" + size +
                        " --set executor.workers=1 --set executor.cpus_per_rank=2; python bench/bench_porosity_paper.py "
-                       "DIR", "diameter_nm": d,
+                       "DIR", "diameter_nm": d, "breaking": breaking, "event_tolerance": tolerance,
             "machine": {"cpus": os.cpu_count(), "date": datetime.date.today().isoformat()},
             "jobs_finished": len(jobs), "jobs": jobs, "fits": fits}
 

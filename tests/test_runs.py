@@ -370,6 +370,28 @@ def test_a_quasistatic_job_is_priced_by_the_runs_measured_with_its_rule():
         assert d30.wall_s < d20.wall_s < paper.wall_s and d30.events <= d20.events <= events
 
 
+def test_a_paper_scale_porosity_job_is_priced_by_the_studys_recorded_jobs():
+    """Issue 56 item 4: the jobs of the paper-scale porosity studies (bench/results/porosity_paper_d*.json) price a
+    job of their rule and tolerance: at a recorded job's size the plan gives that job's wall time (less the time it
+    was stopped) and its own peak memory; a job resumed, or noted to have shared the machine, is not among them,
+    nor the peak of one that ran in the study's own process."""
+    from opalflow.runs.plan import ROOT, STUDY_RECORDS, CostFacts, laws, predict, study_jobs
+
+    jobs = [j for p in (ROOT / "bench" / "results").glob(STUDY_RECORDS) for j in json.loads(p.read_text())["jobs"]]
+    used = {run.bonds: run for _, run in study_jobs()}
+    assert len(jobs) >= 10 and len(used) >= 6
+    for j in jobs:
+        assert (j["bonds"] in used) == (not j["last_session_resumed"] and not j.get("note")), j["label"]
+        assert j["bonds"] not in used or (used[j["bonds"]].peak_MiB is None) == bool(j.get("peak_rss_of"))
+    law = laws()
+    for j in (j for j in jobs if j["bonds"] in used and not j.get("peak_rss_of")):
+        p = predict(CostFacts("quasistatic", 0, j["bonds"], solver="block-amg", breaking="musen", event_tolerance=0.05),
+                    law)
+        assert p.priced_by == "measured runs" and p.events == j["events"]
+        assert p.wall_s == pytest.approx(j["last_session_wall_s"] - j.get("paused_s", 0.0), rel=1e-9)
+        assert p.peak_MiB == pytest.approx(1024 * j["peak_rss_GiB"], rel=1e-9)
+
+
 def test_a_nonlinear_job_is_priced_by_the_strength_study_jobs():
     """Was: priced as its first linear solve (0.7 s, where the study's jobs took 13-638 s); now the mean per bond
     of the aerogel strength study's jobs (bench/results/aerogel_strength.json ``job_costs``: the study's total), the

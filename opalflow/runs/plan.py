@@ -12,8 +12,10 @@ this kind of machine (``bench/bench_cost.py`` -> ``bench/results/cost_laws.json`
   bond), divided by the MPI ranks at the measured efficiency, plus the analysis;
 - quasi-static run: the wall time and peak memory of the whole runs measured with the job's breaking rule
   and event tolerance (``bench/results/quasistatic_scale.json``: the standard sample at d = 60-15 nm, the
-  fastest setting at each size), interpolated in bonds on log-log axes (extrapolated beyond by the end
-  segments), plus the build; where none was measured, its first solve (a lower bound);
+  fastest setting at each size; and the jobs of the paper-scale porosity studies,
+  ``bench/results/porosity_paper_d*.json``, each its own size, those that ran alone and in one session),
+  interpolated in bonds on log-log axes (extrapolated beyond by the end segments), plus the build; where none
+  was measured, its first solve (a lower bound);
 - geometrically nonlinear quasi-static run (``compression.geometry = "nonlinear"``): the mean wall time per bond
   of the jobs of the aerogel strength study (``bench/results/aerogel_strength.json``, ``job_costs``: 2 000-sphere
   slabs) times the job's bonds, plus the build; their spread (13-638 s) is each slab's own breaks, so the longest
@@ -43,6 +45,8 @@ from opalflow.store import RECORD
 LAWS = ROOT / "bench" / "results" / "cost_laws.json"
 SOLVERS = ROOT / "bench" / "results" / "static_quickstart.json"
 QUASISTATIC = ROOT / "bench" / "results" / "quasistatic_scale.json"
+#: the paper-scale porosity studies' records (bench/bench_porosity_paper.py), one a particle diameter
+STUDY_RECORDS = "porosity_paper_d*.json"
 NONLINEAR = ROOT / "bench" / "results" / "aerogel_strength.json"
 #: SLURM asks for this much more than predicted (memory and time)
 MARGIN = 1.5
@@ -196,21 +200,40 @@ def laws() -> CostLaws:
 
 def quasistatic_runs() -> dict[str, list[MeasuredRun]]:
     """"breaking rule, event tolerance" -> the fastest complete quasi-static run at each size, from
-    bench/results/quasistatic_scale.json (none: {})."""
-    if not QUASISTATIC.exists():
-        return {}
+    bench/results/quasistatic_scale.json and the paper-scale studies' jobs (:func:`study_jobs`; none: {})."""
     best: dict[tuple, MeasuredRun] = {}
-    for r in json.loads(QUASISTATIC.read_text())["rows"]:
+    rows = json.loads(QUASISTATIC.read_text())["rows"] if QUASISTATIC.exists() else []
+    for r in rows:
         if not r.get("complete") or not r.get("wall_s"):
             continue
         key = (f"{r.get('breaking', 'lammps')}, {r['tolerance']:g}", r["n_bonds"])
         if key not in best or r["wall_s"] < best[key].wall_s:
             best[key] = MeasuredRun(r["n_bonds"], r["wall_s"], r["events"], r["diameter_nm"],
                                     1024 * r["peak_memory_GiB"] if r.get("peak_memory_GiB") else None)
+    for setting, run in study_jobs():
+        if (setting, run.bonds) not in best or run.wall_s < best[setting, run.bonds].wall_s:
+            best[setting, run.bonds] = run
     runs: dict[str, list[MeasuredRun]] = {}
     for (setting, _), row in sorted(best.items(), key=lambda kv: kv[0][1]):
         runs.setdefault(setting, []).append(row)
     return runs
+
+
+def study_jobs() -> list[tuple[str, MeasuredRun]]:
+    """("breaking rule, event tolerance", the job) of every job the paper-scale porosity studies recorded
+    (:data:`STUDY_RECORDS`) that ran in one session with the machine to itself (a job resumed, or noted to have
+    shared the machine, is left out; a job stopped for a while counts its wall less that while; a peak that was
+    not the job's own, ``peak_rss_of`` says whose, is not taken)."""
+    out = []
+    for path in sorted((ROOT / "bench" / "results").glob(STUDY_RECORDS)):
+        rec = json.loads(path.read_text())
+        setting = f"{rec.get('breaking', 'musen')}, {rec.get('event_tolerance', 0.05):g}"
+        for j in rec["jobs"]:
+            if not j["last_session_resumed"] and not j.get("note"):
+                out.append((setting, MeasuredRun(j["bonds"], j["last_session_wall_s"] - j.get("paused_s", 0.0),
+                                                 j["events"], rec.get("diameter_nm", 15.0),
+                                                 None if j.get("peak_rss_of") else 1024 * j["peak_rss_GiB"])))
+    return out
 
 
 def nonlinear_runs() -> list[MeasuredRun]:
@@ -381,8 +404,9 @@ def plan_lines(p: Plan) -> list[str]:
     if any(r.prediction.priced_by == "measured runs" for r in quasistatic):
         events = [r.prediction.events for r in quasistatic if r.prediction.events]
         lines.append("quasistatic jobs are priced by the whole runs measured with their breaking rule and event "
-                     f"tolerance ({QUASISTATIC.name}: the standard sample's events, {min(events)}-{max(events)} "
-                     "here; a study's pores or coatings change how many events a run takes)")
+                     f"tolerance ({QUASISTATIC.name}: the standard sample's; {STUDY_RECORDS}: the paper-scale "
+                     f"porosity studies' jobs; their events, {min(events)}-{max(events)} here: a study's pores or "
+                     "coatings change how many events a run takes)")
     if any(not r.prediction.priced_by for r in quasistatic):
         lines.append("quasistatic jobs are priced as their first solve, a lower bound: each broken bond costs a "
                      "re-solve and their number is not known before the run")
