@@ -119,8 +119,8 @@ def _products(Xptr, Xind, Xdata, Yptr, Yind, Ydata, width: int, first: int, last
     n, q = Ydata.shape[1], Ydata.shape[2]
     ind, data = np.empty(ptr[-1], np.int64), np.empty((ptr[-1], m, q), dtype)
     mark[:] = -1
-    _row_sums(m, n, q, mode)(Xptr, Xind, Xdata, Yptr, Yind, Ydata, mark,
-                                          np.empty((int(sizes.max(initial=1)), m, q)), ptr, ind, data, first, last)
+    acc = np.empty((int(sizes.max(initial=1)), m, q))
+    _row_sums(m, n, q, mode)(Xptr, Xind, Xdata, Yptr, Yind, Ydata, mark, acc, ptr, ind, data, first, last)
     return ptr, ind, data
 
 
