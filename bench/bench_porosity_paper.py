@@ -100,7 +100,8 @@ def fits_of_recorded(jobs: list[dict]) -> dict | None:
 
 def resolution() -> dict:
     """The resolution table (module docstring) of every recorded study (porosity_paper_d*.json)."""
-    studies = sorted((json.loads(p.read_text()) for p in RESULTS.glob("porosity_paper_d*.json")),
+    studies = sorted((r for p in RESULTS.glob("porosity_paper_d*.json")
+                      if (r := json.loads(p.read_text())).get("fits_of_recorded_jobs")),     # (3 jobs at least)
                      key=lambda r: r.get("diameter_nm", 15.0))
     finest = studies[0]
     ref = finest["fits_of_recorded_jobs"]["fits"]

@@ -45,8 +45,10 @@ from opalflow.store import RECORD
 LAWS = ROOT / "bench" / "results" / "cost_laws.json"
 SOLVERS = ROOT / "bench" / "results" / "static_quickstart.json"
 QUASISTATIC = ROOT / "bench" / "results" / "quasistatic_scale.json"
-#: the paper-scale porosity studies' records (bench/bench_porosity_paper.py), one a particle diameter
+#: the paper-scale porosity studies' records (bench/bench_porosity_paper.py), one a particle diameter, and their
+#: resolution table (``--resolution``)
 STUDY_RECORDS = "porosity_paper_d*.json"
+RESOLUTION = ROOT / "bench" / "results" / "porosity_resolution.json"
 NONLINEAR = ROOT / "bench" / "results" / "aerogel_strength.json"
 #: SLURM asks for this much more than predicted (memory and time)
 MARGIN = 1.5
@@ -174,6 +176,27 @@ class Plan:
     slurm: dict
     machine: dict
     laws_measured: str
+    #: a paper-scale porosity study: the coarsest resolution measured to give the paper's resolution's exponents
+    #: (:func:`cheapest_resolution`), a line of text; "" otherwise
+    resolution: str = ""
+
+
+def cheapest_resolution(spec) -> str:
+    """For a porosity study at paper scale: what the resolution table (:data:`RESOLUTION`, bench/bench_porosity_paper.py
+    --resolution) says of the coarsest particle diameter whose fits of eqs. 22 and 23 (b_E and m) fall inside the
+    finest's 95 % intervals, and what a job costs there; "" for any other workflow or where none is measured."""
+    st = getattr(spec, "study", None)
+    if st is None or st.type != "porosity" or not st.paper_scale or not RESOLUTION.exists():
+        return ""
+    table = json.loads(RESOLUTION.read_text())
+    ref, tried = table["reference_diameter_nm"], ", ".join(f"{r['diameter_nm']:g}" for r in table["rows"][1:])
+    if table["cheapest_diameter_nm"] is None:
+        return (f"resolution ({RESOLUTION.name}): no coarser particle diameter measured ({tried} nm) gives the "
+                f"d = {ref:g} nm study's b_E and m within their 95 % intervals")
+    return (f"resolution ({RESOLUTION.name}): d = {table['cheapest_diameter_nm']:g} nm is the coarsest measured "
+            f"({tried} nm) whose b_E and m fall within the d = {ref:g} nm study's 95 % intervals, at "
+            f"{table['cheapest_cost_ratio']:.2g} of a d = {ref:g} nm job's wall time: --set "
+            f"study.diameter_nm={table['cheapest_diameter_nm']:g}")
 
 
 def laws() -> CostLaws:
@@ -371,7 +394,7 @@ def plan(spec, *, ranks: int = 1, sample: int = 3, against: Path | None = None, 
     slurm = {"ntasks": ranks, "mem": f"{math.ceil(MARGIN * peak / 1024)}G",
              "time_min": max(1, math.ceil(MARGIN * longest / 60)), "array": f"0-{len(rows) - 1}"}
     return Plan(spec.name, spec.kind, rows, sum(r.prediction.core_s for r in rows) / 3600, longest, peak, slurm,
-                law.machine, law.date)
+                law.machine, law.date, cheapest_resolution(spec))
 
 
 def plan_lines(p: Plan) -> list[str]:
@@ -410,4 +433,6 @@ def plan_lines(p: Plan) -> list[str]:
     if any(not r.prediction.priced_by for r in quasistatic):
         lines.append("quasistatic jobs are priced as their first solve, a lower bound: each broken bond costs a "
                      "re-solve and their number is not known before the run")
+    if p.resolution:
+        lines.append(p.resolution)
     return lines
