@@ -142,8 +142,9 @@ if __name__ == "__main__":
         table = resolution()
         RESOLUTION.write_text(json.dumps(table, indent=1) + "\n")
         for row in table["rows"]:
-            print(f"d = {row['diameter_nm']:g} nm: {row['jobs']} jobs, b_E {row['b_E']:.2f} {row['b_E_ci']}, m "
-                  f"{row['m']:.2f} {row['m_ci']}, cost {row['cost_ratio']:.3g} x; inside: {row['inside']}")
+            ci = {k: "[{:.2f}, {:.2f}]".format(*row[f"{k}_ci"]) for k in ("b_E", "m")}
+            print(f"d = {row['diameter_nm']:g} nm: {row['jobs']} jobs, b_E {row['b_E']:.2f} {ci['b_E']}, m "
+                  f"{row['m']:.2f} {ci['m']}, cost {row['cost_ratio']:.3g} x; inside: {row['inside']}")
         print(f"cheapest: d = {table['cheapest_diameter_nm']} nm -> {RESOLUTION}")
         raise SystemExit(0)
     result = record(args.folder)

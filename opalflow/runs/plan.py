@@ -189,12 +189,13 @@ def cheapest_resolution(spec) -> str:
     if st is None or st.type != "porosity" or not st.paper_scale or not RESOLUTION.exists():
         return ""
     table = json.loads(RESOLUTION.read_text())
-    ref, tried = table["reference_diameter_nm"], ", ".join(f"{r['diameter_nm']:g}" for r in table["rows"][1:])
+    ref = table["reference_diameter_nm"]
+    tried = ", ".join(f"{r['diameter_nm']:g} nm: {r['jobs']} jobs" for r in table["rows"][1:])
     if table["cheapest_diameter_nm"] is None:
-        return (f"resolution ({RESOLUTION.name}): no coarser particle diameter measured ({tried} nm) gives the "
+        return (f"resolution ({RESOLUTION.name}): no coarser particle diameter measured ({tried}) gives the "
                 f"d = {ref:g} nm study's b_E and m within their 95 % intervals")
     return (f"resolution ({RESOLUTION.name}): d = {table['cheapest_diameter_nm']:g} nm is the coarsest measured "
-            f"({tried} nm) whose b_E and m fall within the d = {ref:g} nm study's 95 % intervals, at "
+            f"({tried}) whose b_E and m fall within the d = {ref:g} nm study's 95 % intervals, at "
             f"{table['cheapest_cost_ratio']:.2g} of a d = {ref:g} nm job's wall time: --set "
             f"study.diameter_nm={table['cheapest_diameter_nm']:g}")
 
