@@ -19,8 +19,8 @@ time stays as measured; ``--note LABEL=TEXT``: what else ran on the machine duri
 (seed 1 of the d = 15 nm study): whose peak memory a job's ``peak_rss_GiB`` is where it is not the job's own.
 
 ``--resolution``: each recorded resolution's fits of eqs. 22 and 23 (b_E and m with their 95 % intervals, every
-recorded job) against the finest resolution's intervals, and its cost (the mean wall time of a job, over the
-finest's): the coarsest d whose b_E and m both fall inside is the cheapest resolution for the paper's study.
+recorded job) against the finest resolution's intervals, and its cost (the mean wall time of a job, less the time
+it was stopped, over the finest's): the coarsest d whose b_E and m both fall inside is the cheapest resolution for the paper's study.
 """
 from __future__ import annotations
 
@@ -107,7 +107,7 @@ def resolution() -> dict:
     ref = finest["fits_of_recorded_jobs"]["fits"]
 
     def mean_wall(r):
-        return sum(j["last_session_wall_s"] for j in r["jobs"]) / len(r["jobs"])
+        return sum(j["last_session_wall_s"] - j.get("paused_s", 0.0) for j in r["jobs"]) / len(r["jobs"])
 
     rows = []
     for r in studies:
