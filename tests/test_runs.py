@@ -351,7 +351,8 @@ def test_plan_prices_a_study_without_running_it(tmp_path, capsys, monkeypatch):
 
 def test_a_quasistatic_job_is_priced_by_the_runs_measured_with_its_rule():
     """At a measured size the plan gives the measured run (bench/results/quasistatic_scale.json: the paper's
-    sample with the paper's rule, 143 events; with LAMMPS's, 667); between two sizes it lies between them."""
+    sample with the paper's rule, 143 events; with LAMMPS's, 667); between two measured sizes it lies between
+    them."""
     from opalflow.runs.plan import QUASISTATIC, CostFacts, laws, predict
 
     rows = [r for r in json.loads(QUASISTATIC.read_text())["rows"] if r["diameter_nm"] == 15.0 and r.get("complete")
@@ -366,8 +367,12 @@ def test_a_quasistatic_job_is_priced_by_the_runs_measured_with_its_rule():
         paper = predict(facts(run["n_bonds"]), law)
         assert paper.wall_s == pytest.approx(run["wall_s"], rel=1e-6) and paper.events == run["events"] == events
         assert paper.peak_MiB == pytest.approx(1024 * run["peak_memory_GiB"], rel=1e-6)
-        d30, d20 = predict(facts(1810179), law), predict(facts(6_000_000), law)
-        assert d30.wall_s < d20.wall_s < paper.wall_s and d30.events <= d20.events <= events
+        runs = law.quasistatic[f"{rule}, 0.05"]          # (with the paper's rule, the porosity studies' jobs too)
+        assert len(runs) >= 3 and [r.bonds for r in runs] == sorted(r.bonds for r in runs)
+        for a, b in zip(runs, runs[1:]):
+            mid = predict(facts(round((a.bonds * b.bonds) ** 0.5)), law)
+            assert min(a.wall_s, b.wall_s) <= mid.wall_s <= max(a.wall_s, b.wall_s)
+            assert min(a.events, b.events) <= mid.events <= max(a.events, b.events)
 
 
 def test_a_paper_scale_porosity_job_is_priced_by_the_studys_recorded_jobs():
