@@ -20,7 +20,8 @@ time stays as measured; ``--note LABEL=TEXT``: what else ran on the machine duri
 
 ``--resolution``: each recorded resolution's fits of eqs. 22 and 23 (b_E and m with their 95 % intervals, every
 recorded job) against the finest resolution's intervals, and its cost (the mean wall time of a job, less the time
-it was stopped, over the finest's): the coarsest d whose b_E and m both fall inside is the cheapest resolution for the paper's study.
+it was stopped, over the finest's): the coarsest d whose b_E and m both fall inside is the cheapest resolution for
+the paper's study.
 """
 from __future__ import annotations
 
