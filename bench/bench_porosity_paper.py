@@ -103,7 +103,7 @@ def resolution() -> dict:
     """The resolution table (module docstring) of every recorded study (porosity_paper_d*.json)."""
     studies = sorted((r for p in RESULTS.glob("porosity_paper_d*.json")
                       if (r := json.loads(p.read_text())).get("fits_of_recorded_jobs")),     # (3 jobs at least)
-                     key=lambda r: r.get("diameter_nm", 15.0))
+                     key=lambda r: r["diameter_nm"])
     finest = studies[0]
     ref = finest["fits_of_recorded_jobs"]["fits"]
 
@@ -113,7 +113,7 @@ def resolution() -> dict:
     rows = []
     for r in studies:
         fits = r["fits_of_recorded_jobs"]["fits"]
-        row = {"diameter_nm": r.get("diameter_nm", 15.0), "jobs": r["jobs_finished"],
+        row = {"diameter_nm": r["diameter_nm"], "jobs": r["jobs_finished"],
                "mean_job_wall_s": round(mean_wall(r), 1), "cost_ratio": round(mean_wall(r) / mean_wall(finest), 4),
                "mean_particles": round(sum(j["particles"] for j in r["jobs"]) / len(r["jobs"]))}
         for key, law in (("b_E", "E_exponential"), ("m", "E_power"), ("b_sigma", "strength_exponential")):

@@ -251,11 +251,11 @@ def study_jobs() -> list[tuple[str, MeasuredRun]]:
     out = []
     for path in sorted((ROOT / "bench" / "results").glob(STUDY_RECORDS)):
         rec = json.loads(path.read_text())
-        setting = f"{rec.get('breaking', 'musen')}, {rec.get('event_tolerance', 0.05):g}"
+        setting = f"{rec['breaking']}, {rec['event_tolerance']:g}"
         for j in rec["jobs"]:
             if not j["last_session_resumed"] and not j.get("note"):
                 out.append((setting, MeasuredRun(j["bonds"], j["last_session_wall_s"] - j.get("paused_s", 0.0),
-                                                 j["events"], rec.get("diameter_nm", 15.0),
+                                                 j["events"], rec["diameter_nm"],
                                                  None if j.get("peak_rss_of") else 1024 * j["peak_rss_GiB"])))
     return out
 
