@@ -244,29 +244,36 @@ def test_a_process_that_ran_lammps_leaves_no_mpi_shared_memory_behind():
 
 
 def test_a_stale_mpi_segment_under_this_pid_is_cleared_or_named(tmp_path):
-    """A segment a killed process left under the pid this one now has: this user's is removed before MPI starts
-    (left, MPICH's start hangs); another user's (made here where root can give it away) is one line naming the
-    file, not MPICH's "Out of memory" abort."""
+    """A segment a killed process left under the pid this one now has: removed before MPI starts where this process
+    may remove it, this user's (left, MPICH's start hangs) or another user's as root (left, MPICH stops with "Out of
+    memory": CI's failure of 4f83419, a segment of user id 1001); one it may not remove (another user's, this
+    process not root) is one line naming the file, not MPICH's abort."""
     code = ("import os, sys\n"
-            "from opalflow.lammps.engine import EngineError, mpich_segment, new_lammps\n"
+            "from opalflow.lammps.engine import EngineError, clear_stale_segment, mpich_segment, new_lammps\n"
             "stale = mpich_segment()\n"
             "stale.write_bytes(bytes(1061440))\n"
             "if sys.argv[1] != 'mine':\n"
-            "    os.chown(stale, int(sys.argv[1]), -1)\n"
+            "    os.chown(stale, 65534, -1)\n"
             "try:\n"
+            "    if sys.argv[1] == 'not-root':\n"
+            "        os.seteuid(65533)\n"
+            "        clear_stale_segment()\n"     # (what new_lammps calls first; the stdlib is not this uid's to read)
             "    new_lammps().command('units lj')\n"
             "except EngineError as exc:\n"
+            "    os.seteuid(0)\n"
             "    stale.unlink()\n"
             "    print('refused:', exc)\n"
             "    sys.exit(0)\n"
-            "print('ran')\n")
+            "print('ran', stale.exists() and stale.stat().st_uid == os.getuid())\n")     # MPICH's own now
     mine = subprocess.run([sys.executable, "-c", code, "mine"], capture_output=True, text=True, timeout=60)
-    assert mine.returncode == 0 and mine.stdout.strip() == "ran", mine.stderr[-2000:]
+    assert mine.returncode == 0 and mine.stdout.strip() == "ran True", mine.stderr[-2000:]
     if os.geteuid() != 0:
         pytest.skip("another user's segment is made here only as root (chown)")
-    other = subprocess.run([sys.executable, "-c", code, "65534"], capture_output=True, text=True, timeout=60)
-    assert other.returncode == 0, other.stderr[-2000:]
-    assert other.stdout.startswith("refused: /dev/shm/mpich_shm_") and "of user id 65534" in other.stdout
+    other = subprocess.run([sys.executable, "-c", code, "other"], capture_output=True, text=True, timeout=60)
+    assert other.returncode == 0 and other.stdout.strip() == "ran True", other.stderr[-2000:]
+    refused = subprocess.run([sys.executable, "-c", code, "not-root"], capture_output=True, text=True, timeout=60)
+    assert refused.returncode == 0, refused.stderr[-2000:]
+    assert refused.stdout.startswith("refused: /dev/shm/mpich_shm_") and "of user id 65534" in refused.stdout
 
 
 def test_python_m_opalflow_keeps_freed_memory_for_the_next_arrays():

@@ -203,21 +203,20 @@ def mpich_segment(pid: int | None = None) -> Path:
 
 def clear_stale_segment() -> None:
     """Before this process starts MPI: a segment under its pid is a dead process's (killed before
-    ``MPI_Finalize``, the pid since reused).  Measured with the wheel's MPICH: MPI hangs in its start on one of
-    this user's, and stops with "MPIDI_POSIX_comm_bootstrap: Out of memory" on another user's.  This user's is
-    removed; another user's is an :class:`EngineError` naming the file and who can remove it."""
+    ``MPI_Finalize``, the pid since reused: no live process of this pid namespace has this pid).  Measured with the
+    wheel's MPICH: MPI hangs in its start on one of this user's, and stops with "MPIDI_POSIX_comm_bootstrap: Out of
+    memory" on another user's.  It is removed where this process may (this user's, or any as root: /dev/shm is
+    sticky); another user's that it may not remove is an :class:`EngineError` naming the file and who can."""
     path = mpich_segment()
     try:
         owner = path.stat().st_uid
-    except OSError:
+        path.unlink()
+    except FileNotFoundError:
         return
-    if owner == os.getuid():
-        path.unlink(missing_ok=True)
-        return
-    raise EngineError(f"{path} (a stale MPICH segment of user id {owner}, left by a process killed before MPI "
-                      f"ended) keeps MPI from starting in this process (pid {os.getpid()}): ask its owner or root to "
-                      "remove it, or run again (another pid)")
-
+    except PermissionError:
+        raise EngineError(f"{path} (a stale MPICH segment of user id {owner}, left by a process killed before MPI "
+                          f"ended) keeps MPI from starting in this process (pid {os.getpid()}): ask its owner or "
+                          "root to remove it, or run again (another pid)") from None
 
 
 def _finalize_at_exit(lib) -> None:
