@@ -151,6 +151,27 @@ def test_a_structure_reordered_is_the_same_structure(quick_structure):
     assert np.mean(np.abs(np.diff(r.bonds, axis=1))) < np.mean(np.abs(np.diff(s.bonds, axis=1)))
 
 
+def test_the_compiled_bond_kernels_give_numpys_digits(quick_structure, monkeypatch):
+    """Structure.bond_vectors compiled (from KERNEL_MIN_BONDS) and numpy's (below): the same minimum-image vectors
+    to the last digit, across the periodic faces; reordered's bond order by its counting sort is numpy's stable sort
+    of the keys (i n + j), ties (a bond listed twice) as they were."""
+    import opalflow.structure as structure
+
+    s = quick_structure
+    assert s.periodic.any() and 0 < s.n_bonds < structure.KERNEL_MIN_BONDS
+    plain = s.bond_vectors()
+    assert np.max(np.abs(plain)) < 0.5 * s.box_lengths.min()            # minimum image: no box-long vectors
+    wraps = np.abs(s.positions[s.bonds[:, 1]] - s.positions[s.bonds[:, 0]]).max(axis=1) > 0.5 * s.box_lengths.min()
+    assert wraps.any()                                                  # some bonds cross a periodic face
+    monkeypatch.setattr(structure, "KERNEL_MIN_BONDS", 1)
+    assert np.array_equal(s.bond_vectors(), plain)
+    rng = np.random.default_rng(3)
+    n = s.n_particles
+    b = np.concatenate([s.bonds, s.bonds[:50]])[rng.permutation(s.n_bonds + 50)]
+    lo, hi = b.min(axis=1), b.max(axis=1)
+    assert np.array_equal(structure._bond_order(lo, hi, n), np.argsort(lo * n + hi, kind="stable"))
+
+
 def test_a_large_build_is_put_in_cell_order_and_solves_the_same(monkeypatch, tmp_path):
     """A scene's build of ORDER_MIN_PARTICLES or more comes in cell order (not a data file's: its ids kept), and
     the static method gives the same modulus on it to rounding."""

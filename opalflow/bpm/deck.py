@@ -338,8 +338,7 @@ def fundamental_mode(s: Structure, coeffs: list[BondCoefficients], height: float
     network, C = sum_bonds (kr / L0) L0^2 n_z^4 / V, an upper bound of the real one,
     so omega_1 and the damping built on it are on the high side.
     """
-    d = s.minimum_image(s.positions[s.bonds[:, 1]] - s.positions[s.bonds[:, 0]])
-    nz = d[:, 2] / L0
+    nz = s.bond_vectors()[:, 2] / L0
     kr = np.array([c.kr for c in coeffs])[s.bond_types - 1] / L0
     volume = area * height
     modulus = float(np.sum(kr * L0**2 * nz**4) / volume)

@@ -230,7 +230,8 @@ def structure_statistics(s: Structure) -> OpalStatistics:
     phi = m["packing_solid_fraction"]
     n_sample = int(np.count_nonzero(sample))
     bonds_in_sample = int(np.count_nonzero(sample[s.bonds[:, 0]] | sample[s.bonds[:, 1]])) if s.n_bonds else 0
-    r0 = s.bond_lengths() if s.n_bonds else np.zeros(0)
+    d = s.bond_vectors() if s.n_bonds else np.zeros((0, 3))
+    r0 = np.sqrt(np.einsum("ij,ij->i", d, d))
     contact = 0.5 * (s.diameters[s.bonds[:, 0]] + s.diameters[s.bonds[:, 1]]) if s.n_bonds else np.zeros(0)
     overlap = float(max(0.0, np.max((contact - r0) / contact))) if s.n_bonds else 0.0
     n_by_material = {name: int(np.count_nonzero(s.types == t + 1)) for t, name in enumerate(s.type_names)}
@@ -242,8 +243,7 @@ def structure_statistics(s: Structure) -> OpalStatistics:
     in_bulk = (s.positions[:, 2] >= bulk_lo) & (s.positions[:, 2] < bulk_hi)
     bulk_volume = s.box_lengths[0] * s.box_lengths[1] * (bulk_hi - bulk_lo)
     if s.n_bonds:
-        half = s.minimum_image(s.positions[s.bonds[:, 1]] - s.positions[s.bonds[:, 0]])[:, 2] / 2
-        zmid = s.positions[s.bonds[:, 0], 2] + half
+        zmid = s.positions[s.bonds[:, 0], 2] + d[:, 2] / 2
         bonds_in_bulk = int(np.count_nonzero((zmid >= bulk_lo) & (zmid < bulk_hi)))
     else:
         bonds_in_bulk = 0
