@@ -9,11 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from opalflow.jit import njit
-
-#: bonds from which :meth:`Structure.bond_vectors` runs compiled (numba) rather than numpy's gathers: below it
-#: numba's start (0.3 s, :mod:`opalflow.jit`) costs more than the kernel saves; at the paper's sample (17.5 M bonds)
-#: numpy's gathers and minimum image took 0.9 s a call, the kernel 0.1 s
-KERNEL_MIN_BONDS = 1_000_000
+from opalflow.neighbors import separations
 
 
 @dataclass
@@ -85,12 +81,8 @@ class Structure:
         return delta
 
     def bond_vectors(self) -> np.ndarray:
-        """Minimum-image vectors x[j] - x[i] of the bonds (i, j), nm (compiled from :data:`KERNEL_MIN_BONDS`: the
-        same operations in the same order, so the same digits)."""
-        if self.n_bonds >= KERNEL_MIN_BONDS:
-            return _bond_vectors(self.positions, self.bonds, self.box_lengths, self.periodic)
-        i, j = self.bonds.T
-        return self.minimum_image(self.positions[j] - self.positions[i])
+        """Minimum-image vectors x[j] - x[i] of the bonds (i, j), nm (:func:`opalflow.neighbors.separations`)."""
+        return separations(self.positions, self.bonds, self.box_lengths, self.periodic)
 
     def bond_lengths(self) -> np.ndarray:
         """Current (initial, for a fresh build) bond lengths in nm, minimum image."""
@@ -199,20 +191,6 @@ class Structure:
         cell = np.clip(cell, 0, None)
         counts = cell.max(axis=0) + 1
         return np.argsort((cell[:, 2] * counts[1] + cell[:, 1]) * counts[0] + cell[:, 0], kind="stable")
-
-
-@njit(cache=True, nogil=True)
-def _bond_vectors(x, bonds, lengths, periodic):
-    """:meth:`Structure.bond_vectors`, compiled: x[j] - x[i], less L round(d / L) along each periodic direction."""
-    d = np.empty((len(bonds), 3))
-    for k in range(len(bonds)):
-        i, j = bonds[k, 0], bonds[k, 1]
-        for a in range(3):
-            v = x[j, a] - x[i, a]
-            if periodic[a]:
-                v -= lengths[a] * np.round(v / lengths[a])
-            d[k, a] = v
-    return d
 
 
 @njit(cache=True, nogil=True)

@@ -152,18 +152,19 @@ def test_a_structure_reordered_is_the_same_structure(quick_structure):
 
 
 def test_the_compiled_bond_kernels_give_numpys_digits(quick_structure, monkeypatch):
-    """Structure.bond_vectors compiled (from KERNEL_MIN_BONDS) and numpy's (below): the same minimum-image vectors
-    to the last digit, across the periodic faces; reordered's bond order by its counting sort is numpy's stable sort
-    of the keys (i n + j), ties (a bond listed twice) as they were."""
+    """Structure.bond_vectors (neighbors.separations) compiled (from KERNEL_MIN_PAIRS) and numpy's (below): the same
+    minimum-image vectors to the last digit, across the periodic faces; reordered's bond order by its counting sort
+    is numpy's stable sort of the keys (i n + j), ties (a bond listed twice) as they were."""
+    import opalflow.neighbors as neighbors
     import opalflow.structure as structure
 
     s = quick_structure
-    assert s.periodic.any() and 0 < s.n_bonds < structure.KERNEL_MIN_BONDS
+    assert s.periodic.any() and 0 < s.n_bonds < neighbors.KERNEL_MIN_PAIRS
     plain = s.bond_vectors()
     assert np.max(np.abs(plain)) < 0.5 * s.box_lengths.min()            # minimum image: no box-long vectors
     wraps = np.abs(s.positions[s.bonds[:, 1]] - s.positions[s.bonds[:, 0]]).max(axis=1) > 0.5 * s.box_lengths.min()
     assert wraps.any()                                                  # some bonds cross a periodic face
-    monkeypatch.setattr(structure, "KERNEL_MIN_BONDS", 1)
+    monkeypatch.setattr(neighbors, "KERNEL_MIN_PAIRS", 1)
     assert np.array_equal(s.bond_vectors(), plain)
     rng = np.random.default_rng(3)
     n = s.n_particles
