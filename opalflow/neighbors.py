@@ -6,8 +6,8 @@ import numpy as np
 from opalflow.jit import njit
 
 #: pairs from which :func:`separations` runs compiled (numba) rather than numpy's gathers: below it numba's start
-#: (0.3 s, :mod:`opalflow.jit`) costs more than the kernel saves; at the paper's sample (17.5 M bonds) numpy's
-#: gathers and minimum image took 0.9 s a call, the kernel 0.1 s
+#: (0.3 s, :mod:`opalflow.jit`) costs more than the kernel saves; at the paper's sample (17.5 M bonds in cell
+#: order) numpy's gathers and minimum image take 0.7-0.8 s a call, the kernel 0.3 s
 KERNEL_MIN_PAIRS = 1_000_000
 
 

@@ -171,13 +171,11 @@ class Structure:
         n = self.n_particles
         new_index = np.empty(n, np.int64)
         new_index[order] = np.arange(n)
-        b = new_index[self.bonds]
-        lo, hi = b.min(axis=1), b.max(axis=1)
-        sort = _bond_order(lo, hi, n)
+        bonds, sort = _sorted_bonds(new_index[self.bonds], n)
         return Structure(
             positions=self.positions[order], diameters=self.diameters[order], types=self.types[order],
             densities=self.densities[order], box_lo=self.box_lo.copy(), box_hi=self.box_hi.copy(),
-            periodic=self.periodic.copy(), bonds=np.column_stack([lo[sort], hi[sort]]),
+            periodic=self.periodic.copy(), bonds=bonds,
             bond_types=self.bond_types[sort], molecules=self.molecules[order], type_names=list(self.type_names),
             bond_type_names=list(self.bond_type_names), groups={k: v[order] for k, v in self.groups.items()},
             meta=dict(self.meta))
@@ -194,31 +192,34 @@ class Structure:
 
 
 @njit(cache=True, nogil=True)
-def _bond_order(lo, hi, n):
-    """The bonds' order by (lo, hi), ties as they were: ``np.argsort(lo * n + hi, kind="stable")``, by a counting
-    sort on lo (0 <= lo < n) and an insertion sort of each lo's few bonds on hi.  At the paper's sample (17.5 M
-    bonds) 0.4 s where numpy's stable sort of the keys took 4 s."""
-    m = len(lo)
+def _sorted_bonds(b, n):
+    """The bonds ``b`` (M, 2; particles 0 <= i < n) as (lo, hi) rows sorted by lo, then hi, ties as they were, and
+    each row's bond in ``b``: numpy's ``np.argsort(lo * n + hi, kind="stable")`` of ``b.min(1)`` and ``b.max(1)``, by
+    a counting sort on lo and an insertion sort of each lo's few bonds on hi.  At the paper's sample (17.5 M bonds)
+    numpy's reductions and sort took 4.2 s of the build (py-spy); on its bonds and particles shuffled, 5.3 s
+    against this kernel's 1.2 s."""
+    m = len(b)
     start = np.zeros(n + 1, np.int64)
     for k in range(m):
-        start[lo[k] + 1] += 1
+        start[min(b[k, 0], b[k, 1]) + 1] += 1
     for p in range(n):
         start[p + 1] += start[p]
     fill = start[:n].copy()
     order = np.empty(m, np.int64)
-    key = np.empty(m, np.int64)
+    out = np.empty((m, 2), np.int64)
     for k in range(m):
-        q = fill[lo[k]]
-        order[q], key[q] = k, hi[k]
-        fill[lo[k]] += 1
+        lo, hi = min(b[k, 0], b[k, 1]), max(b[k, 0], b[k, 1])
+        q = fill[lo]
+        order[q], out[q, 0], out[q, 1] = k, lo, hi
+        fill[lo] += 1
     for p in range(n):
         for q in range(start[p] + 1, start[p + 1]):
-            kq, oq, r = key[q], order[q], q - 1
-            while r >= start[p] and key[r] > kq:
-                key[r + 1], order[r + 1] = key[r], order[r]
+            hq, oq, r = out[q, 1], order[q], q - 1
+            while r >= start[p] and out[r, 1] > hq:
+                out[r + 1, 1], order[r + 1] = out[r, 1], order[r]
                 r -= 1
-            key[r + 1], order[r + 1] = kq, oq
-    return order
+            out[r + 1, 1], order[r + 1] = hq, oq
+    return out, order
 
 
 #: positions are rounded to this many decimals (nm) so data files round-trip exactly

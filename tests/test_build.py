@@ -170,7 +170,9 @@ def test_the_compiled_bond_kernels_give_numpys_digits(quick_structure, monkeypat
     n = s.n_particles
     b = np.concatenate([s.bonds, s.bonds[:50]])[rng.permutation(s.n_bonds + 50)]
     lo, hi = b.min(axis=1), b.max(axis=1)
-    assert np.array_equal(structure._bond_order(lo, hi, n), np.argsort(lo * n + hi, kind="stable"))
+    sort = np.argsort(lo * n + hi, kind="stable")
+    rows, order = structure._sorted_bonds(b, n)
+    assert np.array_equal(order, sort) and np.array_equal(rows, np.column_stack([lo[sort], hi[sort]]))
 
 
 def test_a_large_build_is_put_in_cell_order_and_solves_the_same(monkeypatch, tmp_path):

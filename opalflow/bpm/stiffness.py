@@ -276,8 +276,8 @@ def _geometry(s: Structure, L0: np.ndarray | None):
     """(i, j, n, L) of ``s``'s bonds, i < j (i and j contiguous copies, not views of the structure's bond
     columns: the bond operator's kernels read them with a unit stride)."""
     i, j = np.minimum(s.bonds[:, 0], s.bonds[:, 1]), np.maximum(s.bonds[:, 0], s.bonds[:, 1])
-    d = s.bond_vectors()                                # x[b1] - x[b0]: x[i] - x[j] where b0 > b1, less it else
-    d[s.bonds[:, 0] < s.bonds[:, 1]] *= -1
+    d = s.bond_vectors()                                # x[b1] - x[b0], so x[i] - x[j] where b1 < b0
+    d[s.bonds[:, 0] < s.bonds[:, 1]] *= -1              # and its negative where b0 < b1
     L = np.linalg.norm(d, axis=1) if L0 is None else L0
     return i, j, d / np.linalg.norm(d, axis=1)[:, None], L
 
