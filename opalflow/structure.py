@@ -111,10 +111,11 @@ class Structure:
             return flags
         i, j = self.bonds.T
         graph = coo_matrix((np.ones(self.n_bonds), (i, j)), shape=(n, n)).tocsr()
-        n_comp, comp = connected_components(graph, directed=False)
+        graph = (graph + graph.T).tocsr()          # undirected once (an undirected search transposes at each call)
+        n_comp, comp = connected_components(graph, directed=True, connection="weak")
         parent = np.arange(n)
         for root in np.unique(comp, return_index=True)[1]:
-            order, pred = breadth_first_order(graph, root, directed=False)
+            order, pred = breadth_first_order(graph, root, directed=True)
             parent[order[1:]] = pred[order[1:]]
         L = self.box_lengths
         shift = np.zeros((n, 3), np.int64)
