@@ -404,19 +404,20 @@ def test_plan_names_the_cheapest_resolution_of_the_papers_porosity_study(tmp_pat
     from opalflow.registry import load_spec
     from opalflow.runs import plan as planning
 
-    table = {"reference_diameter_nm": 15.0, "rows": [{"diameter_nm": d, "jobs": 18} for d in (15.0, 20.0, 25.0, 30.0)],
+    table = {"reference_diameter_nm": 15.0, "rows": [{"diameter_nm": d, "jobs": 18, "inside": d < 30}
+                                                     for d in (15.0, 20.0, 25.0, 30.0)],
              "cheapest_diameter_nm": 25.0, "cheapest_cost_ratio": 0.21}
     monkeypatch.setattr(planning, "RESOLUTION", tmp_path / "porosity_resolution.json")
     planning.RESOLUTION.write_text(json.dumps(table))
     paper = load_spec(WORKFLOWS / "porosity_strength.toml", ["study.paper_scale=true"])
     line = planning.cheapest_resolution(paper)
-    assert "d = 25 nm is the coarsest measured (20 nm: 18 jobs, 25 nm: 18 jobs, 30 nm: 18 jobs)" in line
+    assert "d = 25 nm is the coarsest measured (20 nm: 18 jobs; 25 nm: 18 jobs; 30 nm: 18 jobs, outside)" in line
     assert "0.21 of a d = 15 nm job" in line
     assert line.endswith("--set study.diameter_nm=25")
     assert planning.cheapest_resolution(load_spec(WORKFLOWS / "porosity_strength.toml")) == ""
     assert planning.cheapest_resolution(load_spec(WORKFLOWS / "opal_quick.toml")) == ""
     planning.RESOLUTION.write_text(json.dumps({**table, "cheapest_diameter_nm": None}))
-    assert "no coarser particle diameter measured (20 nm: 18 jobs, 25" in planning.cheapest_resolution(paper)
+    assert "no coarser particle diameter measured (20 nm: 18 jobs; 25" in planning.cheapest_resolution(paper)
 
 
 def test_a_nonlinear_job_is_priced_by_the_strength_study_jobs():

@@ -190,7 +190,8 @@ def cheapest_resolution(spec) -> str:
         return ""
     table = json.loads(RESOLUTION.read_text())
     ref = table["reference_diameter_nm"]
-    tried = ", ".join(f"{r['diameter_nm']:g} nm: {r['jobs']} jobs" for r in table["rows"][1:])
+    tried = "; ".join(f"{r['diameter_nm']:g} nm: {r['jobs']} jobs{'' if r['inside'] else ', outside'}"
+                      for r in table["rows"][1:])
     if table["cheapest_diameter_nm"] is None:
         return (f"resolution ({RESOLUTION.name}): no coarser particle diameter measured ({tried}) gives the "
                 f"d = {ref:g} nm study's b_E and m within their 95 % intervals")
