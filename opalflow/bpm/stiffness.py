@@ -277,9 +277,9 @@ def _geometry(s: Structure, L0: np.ndarray | None):
     columns: the bond operator's kernels read them with a unit stride)."""
     i, j = np.minimum(s.bonds[:, 0], s.bonds[:, 1]), np.maximum(s.bonds[:, 0], s.bonds[:, 1])
     d = s.bond_vectors()                                # x[b1] - x[b0], so x[i] - x[j] where b1 < b0
-    d[s.bonds[:, 0] < s.bonds[:, 1]] *= -1              # and its negative where b0 < b1
-    L = np.linalg.norm(d, axis=1) if L0 is None else L0
-    return i, j, d / np.linalg.norm(d, axis=1)[:, None], L
+    np.negative(d, out=d, where=(s.bonds[:, 0] < s.bonds[:, 1])[:, None])   # and its negative where b0 < b1
+    length = np.linalg.norm(d, axis=1)
+    return i, j, d / length[:, None], length if L0 is None else L0
 
 
 def per_bond(s: Structure, coeffs: list[BondCoefficients], name: str) -> np.ndarray:
