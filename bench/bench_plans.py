@@ -60,7 +60,8 @@ def measured_paper_runs() -> list[dict]:
 
 def markdown(result: dict) -> str:
     lines = [f"# {__doc__.splitlines()[0]}", "", f"Planned {result['date']} on {result['cpus']} cores "
-             "(`python bench/bench_plans.py`). Core-hours on this kind of machine, one core a job.", "",
+             "(`python bench/bench_plans.py`). Core-hours on this kind of machine: a quasi-static job priced by "
+             "measured runs on the cores they ran on (all of the machine's), any other on one core.", "",
              "| study | d (nm) | jobs | particles | events a job (priced) | core-hours | longest job | memory a job |",
              "|---|---|---|---|---|---|---|---|"]
     for c in result["cases"]:

@@ -395,6 +395,13 @@ def test_a_paper_scale_porosity_job_is_priced_by_the_studys_recorded_jobs():
         assert p.priced_by == "measured runs" and p.events == j["events"]
         assert p.wall_s == pytest.approx(j["last_session_wall_s"] - j.get("paused_s", 0.0), rel=1e-9)
         assert p.peak_MiB == pytest.approx(1024 * j["peak_rss_GiB"], rel=1e-9)
+        # the jobs ran on the recording machine's cores (executor.cpus_per_rank=2 on 2 cores): core-seconds count
+        # them, with one rank as with more
+        cores = json.loads((ROOT / "bench" / "results" / "porosity_paper_d15.json").read_text())["machine"]
+        assert p.core_s == pytest.approx(p.wall_s * cores["cpus"], rel=1e-9) and cores["cpus"] >= 2
+        wide = predict(CostFacts("quasistatic", 0, j["bonds"], solver="block-amg", breaking="musen",
+                                 event_tolerance=0.05), law, ranks=8)
+        assert wide.core_s == pytest.approx(8 * wide.wall_s, rel=1e-9)
 
 
 def test_plan_names_the_cheapest_resolution_of_the_papers_porosity_study(tmp_path, monkeypatch):

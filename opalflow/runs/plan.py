@@ -102,6 +102,8 @@ class MeasuredRun:
     events: int
     diameter_nm: float
     peak_MiB: float | None
+    #: the cores the run had (the measuring machine's: a quasi-static run threads its solves over all of them)
+    cores: int = 1
 
 
 @dataclass
@@ -227,14 +229,15 @@ def quasistatic_runs() -> dict[str, list[MeasuredRun]]:
     """"breaking rule, event tolerance" -> the fastest complete quasi-static run at each size, from
     bench/results/quasistatic_scale.json and the paper-scale studies' jobs (:func:`study_jobs`; none: {})."""
     best: dict[tuple, MeasuredRun] = {}
-    rows = json.loads(QUASISTATIC.read_text())["rows"] if QUASISTATIC.exists() else []
-    for r in rows:
+    scale = json.loads(QUASISTATIC.read_text()) if QUASISTATIC.exists() else {"rows": []}
+    cores = int(scale.get("machine", {}).get("cpus", 1))
+    for r in scale["rows"]:
         if not r.get("complete") or not r.get("wall_s"):
             continue
         key = (f"{r.get('breaking', 'lammps')}, {r['tolerance']:g}", r["n_bonds"])
         if key not in best or r["wall_s"] < best[key].wall_s:
             best[key] = MeasuredRun(r["n_bonds"], r["wall_s"], r["events"], r["diameter_nm"],
-                                    1024 * r["peak_memory_GiB"] if r.get("peak_memory_GiB") else None)
+                                    1024 * r["peak_memory_GiB"] if r.get("peak_memory_GiB") else None, cores)
     for setting, run in study_jobs():
         if (setting, run.bonds) not in best or run.wall_s < best[setting, run.bonds].wall_s:
             best[setting, run.bonds] = run
@@ -257,7 +260,8 @@ def study_jobs() -> list[tuple[str, MeasuredRun]]:
             if not j["last_session_resumed"] and not j.get("note"):
                 out.append((setting, MeasuredRun(j["bonds"], j["last_session_wall_s"] - j.get("paused_s", 0.0),
                                                  j["events"], rec["diameter_nm"],
-                                                 None if j.get("peak_rss_of") else 1024 * j["peak_rss_GiB"])))
+                                                 None if j.get("peak_rss_of") else 1024 * j["peak_rss_GiB"],
+                                                 int(rec.get("machine", {}).get("cpus", 1)))))
     return out
 
 
@@ -314,7 +318,8 @@ def predict(facts: CostFacts, law: CostLaws, ranks: int = 1) -> Prediction:
         with_memory = [r for r in runs if r.peak_MiB]
         mem = (_loglog(bonds, [r.bonds for r in with_memory], [r.peak_MiB for r in with_memory]) if with_memory
                else _solve_memory(facts, law, bonds))
-        return Prediction(wall, wall * ranks, mem, "measured runs",
+        # core-seconds: the job as measured, on the cores its runs had (or its ranks, where more)
+        return Prediction(wall, wall * max(ranks, max(r.cores for r in runs)), mem, "measured runs",
                           max(1, round(_loglog(bonds, sizes, [r.events for r in runs]))))
     sv, st = law.solvers[facts.solver], law.static          # a solve (quasi-static: its first, a lower bound)
     wall = facts.build_s + sv.c * bonds ** sv.p + st.rest_s0 + st.rest_s_per_bond * bonds
@@ -428,10 +433,13 @@ def plan_lines(p: Plan) -> list[str]:
                      "slab's own breaks), the longest job (SLURM's time) by the slowest")
     if any(r.prediction.priced_by == "measured runs" for r in quasistatic):
         events = [r.prediction.events for r in quasistatic if r.prediction.events]
+        cores = max(round(r.prediction.core_s / r.prediction.wall_s) for r in quasistatic
+                    if r.prediction.priced_by == "measured runs")
         lines.append("quasistatic jobs are priced by the whole runs measured with their breaking rule and event "
                      f"tolerance ({QUASISTATIC.name}: the standard sample's; {STUDY_RECORDS}: the paper-scale "
                      f"porosity studies' jobs; their events, {min(events)}-{max(events)} here: a study's pores or "
-                     "coatings change how many events a run takes)")
+                     f"coatings change how many events a run takes), on the {cores} cores a job they ran on: the "
+                     "core-hours count them")
     if any(not r.prediction.priced_by for r in quasistatic):
         lines.append("quasistatic jobs are priced as their first solve, a lower bound: each broken bond costs a "
                      "re-solve and their number is not known before the run")
