@@ -86,3 +86,28 @@ def test_estimate_between_half_and_measured_limit(tmp_path, case):
     print(f"{case}: estimate {estimate * 1e-9:.3g} s, measured {measured * 1e-9:.3g} s, "
           f"ratio {estimate / measured:.2f} (stiffest mode: {deck.timestep.stiffest})")
     assert 0.5 * measured <= estimate <= measured
+
+
+def test_the_spectral_limit_of_a_small_network_starts_no_numba(monkeypatch):
+    """Was: every dynamic run's time step came from the compiled bond operator, so the quickstart (19 891 bonds)
+    imported numba (0.5 s, ~110 MiB: its peak memory 150 -> 263 MiB in bench_cost.py). Below KERNEL_MIN_BONDS the
+    products come from the assembled matrices: the same time step to the eigensolver's rounding, and no numba in a
+    fresh process that writes the quickstart's deck."""
+    import subprocess
+    import sys
+
+    from opalflow.bpm import timestep
+
+    spec = load_spec(WORKFLOWS / "quickstart.toml")
+    s = build_structure(spec)
+
+    assembled = compression_deck(spec, s).timestep
+    assert assembled.method == "spectral"
+    monkeypatch.setattr(timestep, "KERNEL_MIN_BONDS", 0)
+    assert compression_deck(spec, s).timestep.limit_ns == pytest.approx(assembled.limit_ns, rel=1e-9)
+    code = ("import sys\nfrom opalflow.registry import load_spec\nfrom opalflow.resources import WORKFLOWS\n"
+            "from opalflow.bpm.deck import compression_deck\nfrom opalflow.bpm.pipeline import build_structure\n"
+            "spec = load_spec(WORKFLOWS / 'quickstart.toml')\ncompression_deck(spec, build_structure(spec))\n"
+            "print('numba' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip().splitlines()[-1] == "False"

@@ -160,6 +160,21 @@ def _damping_rates(coeffs: list[BondCoefficients], t: np.ndarray, L0: np.ndarray
     return np.maximum(both(g_tr / m_i, g_tr / m_j), both(c_rot / inertia_i, c_rot / inertia_j))
 
 
+#: the spectral limit's products by the assembled K and C (scipy) below this many bonds, by the compiled bond
+#: operator (:meth:`opalflow.bpm.stiffness.BondNetwork.matvec`) from it: numba's import and first load (0.5 s and
+#: ~110 MiB, :mod:`opalflow.jit`) cost a small run more than its products save (the quickstart's 19 891 bonds)
+KERNEL_MIN_BONDS = 50_000
+
+
+def _product(net):
+    """x -> the network's matrix times x: assembled below :data:`KERNEL_MIN_BONDS` bonds, else the bond operator."""
+    if len(net.L) >= KERNEL_MIN_BONDS:
+        return net.matvec
+    from opalflow.bpm.static import block_matrix
+
+    return block_matrix(net)[0].tocsr().dot
+
+
 def _largest_eigenvalue(matvec, n: int) -> float:
     from scipy.sparse.linalg import LinearOperator, eigsh
 
@@ -178,11 +193,11 @@ def _spectral_limit(s: Structure, coeffs: list[BondCoefficients], L0: np.ndarray
     extra = np.zeros((s.n_particles, 6))
     extra[:, :3] = contact_k[:, None]
     extra = extra.ravel()
-    K, C = stiffness_network(s, coeffs, L0), damping_network(s, coeffs, L0)
+    K, C = _product(stiffness_network(s, coeffs, L0)), _product(damping_network(s, coeffs, L0))
     n = 6 * s.n_particles
-    w2 = _largest_eigenvalue(lambda x: w * (K.matvec(w * x) + extra * w * x), n)
+    w2 = _largest_eigenvalue(lambda x: w * (K(w * x) + extra * w * x), n)
     damped = any(c.gn or c.gs or c.gr or c.gt for c in coeffs)
-    c = _largest_eigenvalue(lambda x: w * C.matvec(w * x), n) if damped else 0.0
+    c = _largest_eigenvalue(lambda x: w * C(w * x), n) if damped else 0.0
     omega = np.sqrt(w2)
     zeta = c / (2 * omega)
     return float(2 * (np.sqrt(1 + zeta**2) - zeta) / omega)
