@@ -170,9 +170,9 @@ def _product(net):
     """x -> the network's matrix times x: assembled below :data:`KERNEL_MIN_BONDS` bonds, else the bond operator."""
     if len(net.L) >= KERNEL_MIN_BONDS:
         return net.matvec
-    from opalflow.bpm.static import block_matrix
+    from opalflow.bpm.static import assemble
 
-    return block_matrix(net)[0].tocsr().dot
+    return assemble(net).dot
 
 
 def _largest_eigenvalue(matvec, n: int) -> float:
